@@ -1,0 +1,130 @@
+"""The ``datagen`` command line.
+
+Bad input ends with one line per problem on stderr and exit status 2; no
+traceback reaches the user for anything that is the input's fault.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import Annotated, TypeVar
+
+import typer
+
+from datagen import __version__
+from datagen.camera import Intrinsics
+from datagen.config import load_config
+from datagen.errors import ConfigError, DatagenError
+
+app = typer.Typer(
+    name="datagen",
+    help="Physically based synthetic training data for vision-based aerial refueling.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+assets_app = typer.Typer(help="Build and inspect the built-in meshes and feature sets.", no_args_is_help=True)
+app.add_typer(assets_app, name="assets")
+
+#: Exit status for bad input (configs, assets, dataset folders).
+EXIT_BAD_INPUT = 2
+
+F = TypeVar("F", bound=Callable[..., object])
+
+
+def user_errors(func: F) -> F:
+    """Turn :class:`DatagenError` into one line per problem on stderr and exit 2."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except DatagenError as exc:
+            for line in exc.lines():
+                typer.echo(line, err=True)
+            raise typer.Exit(EXIT_BAD_INPUT) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"datagen {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version.")
+    ] = False,
+) -> None:
+    pass
+
+
+@app.command()
+@user_errors
+def validate(
+    configs: Annotated[list[Path], typer.Argument(help="Scene config files (YAML).", show_default=False)],
+) -> None:
+    """Check configs against the schema; print every problem, one line each."""
+    failed = []
+    for path in configs:
+        try:
+            config = load_config(path)
+        except ConfigError as exc:
+            failed.append(exc)
+            continue
+        cam = config.camera
+        k = Intrinsics.from_hfov(cam.width, cam.height, math.radians(cam.hfov_deg))
+        typer.echo(
+            f"{path}: ok ({config.name}: {cam.mount}, {cam.hfov_deg:g} deg hFOV, "
+            f"{cam.width}x{cam.height}, fx=fy={k.fx:.3f} px, {config.dataset.frames} frames, "
+            f"{'corrected' if config.labels.corrected else 'tight'} labels)"
+        )
+    if failed:
+        raise ConfigError([problem for exc in failed for problem in exc.problems])
+
+
+def _not_yet(what: str, issue: int) -> None:
+    typer.echo(f"datagen {what}: not implemented yet (tracked in issue {issue})", err=True)
+    raise typer.Exit(3)
+
+
+@app.command()
+def build(
+    config: Annotated[Path, typer.Option("--config", help="Scene config file (YAML).")],
+) -> None:
+    """Render a sharded, resumable dataset with parquet manifests."""
+    _not_yet("build", 6)
+
+
+@app.command()
+def audit(dataset: Annotated[Path, typer.Argument(help="Dataset folder.")]) -> None:
+    """Check a dataset's labels against the true centre projections."""
+    _not_yet("audit", 7)
+
+
+@app.command()
+def preview(dataset: Annotated[Path, typer.Argument(help="Dataset folder.")]) -> None:
+    """Draw overlays of true centres, tight and corrected boxes."""
+    _not_yet("preview", 7)
+
+
+@assets_app.command("build")
+def assets_build() -> None:
+    """Regenerate every built-in mesh and feature file."""
+    _not_yet("assets build", 3)
+
+
+@assets_app.command("show")
+def assets_show(name: Annotated[str, typer.Argument(help="Object name.")]) -> None:
+    """Print the feature table of an object."""
+    _not_yet("assets show", 3)
+
+
+def main() -> None:
+    app()

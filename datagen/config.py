@@ -1,0 +1,518 @@
+"""The configuration schema: validated once at the boundary, frozen afterwards.
+
+A scene config is a YAML file (see ``scenes/``). :func:`load_config` reads it,
+checks it against :class:`Config` (unknown keys are errors, so typos cannot
+pass silently) and either returns the frozen model or raises
+:class:`~datagen.errors.ConfigError` listing every problem, one line each, with
+the file, the line, the key path, the value and what is wrong.
+
+Angles are degrees in configs and radians in code; lengths are metres; pixel
+quantities are continuous pixels (:mod:`datagen.conventions`).
+"""
+
+from __future__ import annotations
+
+import difflib
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import yaml
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+from datagen.errors import ConfigError, Problem
+
+__all__ = [
+    "ApproachConfig",
+    "CameraConfig",
+    "Config",
+    "DatasetConfig",
+    "FeaturesConfig",
+    "LabelsConfig",
+    "MaterialsConfig",
+    "MountJitterConfig",
+    "ObjectSpec",
+    "ObjectsConfig",
+    "RandomizationConfig",
+    "RenderConfig",
+    "SkyConfig",
+    "load_config",
+    "parse_config",
+]
+
+Mount = Literal["wingcam", "dashcam", "podcam"]
+LabeledObject = Literal["tanker", "receiver", "drogue"]
+
+
+def _ordered(bounds: tuple[float, float]) -> tuple[float, float]:
+    lo, hi = bounds
+    if lo > hi:
+        raise ValueError(f"range must be [low, high] with low <= high, got [{lo}, {hi}]")
+    return bounds
+
+
+#: A closed interval ``[low, high]`` written as a two-element list in YAML.
+Range = Annotated[tuple[float, float], AfterValidator(_ordered)]
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, use_attribute_docstrings=True, validate_default=True
+    )
+
+
+# --- camera --------------------------------------------------------------------
+class MountJitterConfig(_Section):
+    """Per-approach perturbation of the camera mount: extrinsics are unknown and drift."""
+
+    translation_m: float = Field(0.02, ge=0.0, le=1.0)
+    """Each mount offset component is drawn uniformly in [-t, t] metres per approach."""
+
+    rotation_deg: float = Field(1.0, ge=0.0, le=30.0)
+    """Each of yaw, pitch, roll of the mount is drawn uniformly in [-r, r] degrees per approach."""
+
+
+class CameraConfig(_Section):
+    """The pinhole camera (paper Table 1) and where it is mounted."""
+
+    mount: Mount
+    """wingcam: receiver right wing pod, forward; dashcam: receiver cockpit, forward;
+    podcam: tanker hose pod next to the hose port, rearward."""
+
+    hfov_deg: float = Field(gt=0.0, lt=180.0)
+    """Horizontal field of view in degrees; fx = fy = (W/2) / tan(hFOV/2)."""
+
+    width: int = Field(2048, gt=0, le=16384)
+    """Image width in pixels (Table 1: 2048)."""
+
+    height: int = Field(1080, gt=0, le=16384)
+    """Image height in pixels (Table 1: 1080)."""
+
+    mount_jitter: MountJitterConfig = MountJitterConfig()
+    """Bounds of the per-approach mount pose perturbation."""
+
+
+# --- objects and features ------------------------------------------------------
+class ObjectSpec(_Section):
+    """Which mesh and feature file an object uses; null means the built-in asset."""
+
+    mesh: Path | None = None
+    """OBJ, PLY or GLB mesh in the object's body frame (metres); relative to the config file."""
+
+    features: Path | None = None
+    """Feature set file for this object; relative to the config file."""
+
+
+class ObjectsConfig(_Section):
+    """The rigid objects of the scene. The hose is procedural and needs no entry."""
+
+    tanker: ObjectSpec = ObjectSpec()
+    """Tanker aircraft (origin at the average drogue centre)."""
+
+    receiver: ObjectSpec = ObjectSpec()
+    """Receiver aircraft with its probe (origin at the probe tip)."""
+
+    drogue: ObjectSpec = ObjectSpec()
+    """Drogue basket (origin at the drogue centre)."""
+
+
+class FeaturesConfig(_Section):
+    """Which feature sets become YOLO classes."""
+
+    objects: tuple[LabeledObject, ...] = Field(("receiver", "tanker"), min_length=1)
+    """Objects whose features are labeled; class ids follow this order."""
+
+    variant: Literal["baseline", "small", "medium", "large", "random"] = "baseline"
+    """Feature set variant: the paper's baseline, the co-located size variants
+    (models J, K, L) or seeded random surface features (model I)."""
+
+    random_per_object: int = Field(40, ge=3, le=1000)
+    """Number of random surface features per object when variant is 'random'."""
+
+    @field_validator("objects")
+    @classmethod
+    def _unique_objects(cls, objects: tuple[str, ...]) -> tuple[str, ...]:
+        if len(set(objects)) != len(objects):
+            raise ValueError("objects must not repeat")
+        return objects
+
+
+# --- approach ------------------------------------------------------------------
+class ApproachConfig(_Section):
+    """Monte Carlo refueling approaches (paper 3.1)."""
+
+    range_m: Range = (0.0, 120.0)
+    """Probe-to-drogue distance range the dataset covers, metres."""
+
+    yaw_deg: float = Field(10.0, ge=0.0, le=180.0)
+    """Initial receiver yaw perturbation, uniform in [-yaw, yaw] degrees."""
+
+    pitch_deg: float = Field(15.0, ge=0.0, le=90.0)
+    """Initial receiver pitch perturbation, uniform in [-pitch, pitch] degrees."""
+
+    roll_deg: float = Field(45.0, ge=0.0, le=180.0)
+    """Initial receiver roll perturbation, uniform in [-roll, roll] degrees."""
+
+    @model_validator(mode="after")
+    def _non_negative_range(self) -> ApproachConfig:
+        if self.range_m[0] < 0.0:
+            raise ValueError(f"range_m must not be negative, got {list(self.range_m)}")
+        if self.range_m[1] <= 0.0:
+            raise ValueError(f"range_m upper bound must be positive, got {list(self.range_m)}")
+        return self
+
+
+# --- randomization -------------------------------------------------------------
+class SkyConfig(_Section):
+    """Physically based sky (Mitsuba ``sunsky``) and sun."""
+
+    sun_elevation_deg: Range = (15.0, 70.0)
+    """Sun elevation above the horizon, degrees."""
+
+    sun_azimuth_deg: Range = (0.0, 360.0)
+    """Sun azimuth, degrees counter-clockwise from the tanker's initial heading."""
+
+    turbidity: Range = (2.0, 5.0)
+    """Atmospheric turbidity (sunsky accepts 1 to 10)."""
+
+    sun_scale: Range = (0.8, 1.2)
+    """Multiplier on the sun's radiance."""
+
+    sky_scale: Range = (0.8, 1.2)
+    """Multiplier on the sky's radiance."""
+
+    @model_validator(mode="after")
+    def _physical(self) -> SkyConfig:
+        checks = [
+            ("sun_elevation_deg", self.sun_elevation_deg, -90.0, 90.0),
+            ("turbidity", self.turbidity, 1.0, 10.0),
+            ("sun_scale", self.sun_scale, 0.0, 100.0),
+            ("sky_scale", self.sky_scale, 0.0, 100.0),
+        ]
+        for name, (lo, hi), low, high in checks:
+            if lo < low or hi > high:
+                raise ValueError(f"{name} must lie within [{low}, {high}], got [{lo}, {hi}]")
+        return self
+
+
+class MaterialsConfig(_Section):
+    """Per-part principled-BSDF draws."""
+
+    paint_value: Range = (0.25, 0.75)
+    """Brightness (HSV value) of the paint base colour."""
+
+    paint_saturation: Range = (0.0, 0.15)
+    """Saturation of the paint base colour (military greys are nearly neutral)."""
+
+    paint_roughness: Range = (0.25, 0.7)
+    """Principled roughness of painted parts."""
+
+    metal_roughness: Range = (0.1, 0.4)
+    """Principled roughness of bare-metal parts."""
+
+    @model_validator(mode="after")
+    def _unit(self) -> MaterialsConfig:
+        for name in type(self).model_fields:
+            lo, hi = getattr(self, name)
+            if lo < 0.0 or hi > 1.0:
+                raise ValueError(f"{name} must lie within [0, 1], got [{lo}, {hi}]")
+        return self
+
+
+class RandomizationConfig(_Section):
+    """Per-frame appearance randomization; every range is drawn from the frame's RNG."""
+
+    sky: SkyConfig = SkyConfig()
+    """Sky and sun."""
+
+    materials: MaterialsConfig = MaterialsConfig()
+    """Materials of the airframes."""
+
+    exposure_ev: Range = (-0.5, 0.5)
+    """Exposure compensation in stops applied before the sRGB transform."""
+
+    haze: bool = False
+    """Add a homogeneous haze between the camera and the scene."""
+
+
+# --- render --------------------------------------------------------------------
+class RenderConfig(_Section):
+    """Mitsuba rendering settings."""
+
+    variant: Literal["auto", "llvm_ad_rgb", "cuda_ad_rgb", "scalar_rgb"] = "auto"
+    """Mitsuba variant; 'auto' picks cuda_ad_rgb with a GPU, else llvm_ad_rgb, else scalar_rgb."""
+
+    spp: int = Field(16, ge=1, le=65536)
+    """Samples per pixel."""
+
+    max_depth: int = Field(6, ge=1, le=64)
+    """Path tracer maximum depth."""
+
+    image_format: Literal["png", "jpg"] = "png"
+    """8-bit sRGB training image format."""
+
+    jpeg_quality: int = Field(95, ge=1, le=100)
+    """JPEG quality when image_format is 'jpg'."""
+
+    exr: bool = False
+    """Also write a linear EXR with R, G, B, Z (camera depth, metres) and object_id."""
+
+
+# --- labels --------------------------------------------------------------------
+class LabelsConfig(_Section):
+    """How boxes are made (paper 3.2)."""
+
+    corrected: bool = True
+    """Corrected boxes centred on the true 3D centre projection; false gives tight
+    boxes (the paper's uncorrected ablation, model H)."""
+
+    edge_margin_px: float = Field(10.0, ge=0.0)
+    """A feature is labeled only if its box lies at least this far inside every border."""
+
+    min_visible_fraction: float = Field(0.0, ge=0.0, le=1.0)
+    """Drop features whose visible share of points is below this; 0 keeps occluded
+    features (the paper's choice)."""
+
+
+# --- dataset -------------------------------------------------------------------
+class DatasetConfig(_Section):
+    """Size, sharding, split and seed of the dataset."""
+
+    frames: int = Field(ge=1, le=100_000_000)
+    """Number of frames."""
+
+    shard_size: int = Field(500, ge=1)
+    """Frames per shard (a shard is the unit of work, resumption and manifest files)."""
+
+    val_fraction: float = Field(0.2, ge=0.0, lt=1.0)
+    """Share of frames assigned to the validation split, decided per frame from the seed."""
+
+    seed: int = Field(0, ge=0, lt=2**63)
+    """Root seed; frame i draws from SeedSequence(seed, spawn_key=(i,))."""
+
+
+class Config(_Section):
+    """A datagen scene config."""
+
+    name: str = Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]*$", max_length=100)
+    """Short identifier (letters, digits, '_', '-', '.')."""
+
+    description: str = ""
+    """Free text: what the config is for."""
+
+    camera: CameraConfig
+    """The camera."""
+
+    objects: ObjectsConfig = ObjectsConfig()
+    """Meshes and feature sets of the objects."""
+
+    features: FeaturesConfig = FeaturesConfig()
+    """Labeled feature sets."""
+
+    approach: ApproachConfig = ApproachConfig()
+    """Approach sampling."""
+
+    randomization: RandomizationConfig = RandomizationConfig()
+    """Appearance randomization."""
+
+    render: RenderConfig = RenderConfig()
+    """Rendering."""
+
+    labels: LabelsConfig = LabelsConfig()
+    """Label generation."""
+
+    dataset: DatasetConfig
+    """Dataset size, split and seed."""
+
+    @model_validator(mode="after")
+    def _margin_fits(self) -> Config:
+        m = self.labels.edge_margin_px
+        if 2.0 * m >= min(self.camera.width, self.camera.height):
+            raise ValueError(
+                f"labels.edge_margin_px {m} leaves no room inside a "
+                f"{self.camera.width}x{self.camera.height} image"
+            )
+        return self
+
+
+# --- loading -------------------------------------------------------------------
+def load_config(path: str | Path) -> Config:
+    """Read, parse and validate a config file.
+
+    Raises:
+        ConfigError: listing every problem found (missing file, YAML syntax,
+            duplicate keys, unknown keys, bad values, missing asset files).
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError([Problem(path, "", "no such file")]) from None
+    except IsADirectoryError:
+        raise ConfigError([Problem(path, "", "is a directory, expected a YAML config file")]) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError([Problem(path, "", f"not UTF-8 text ({exc.reason})")]) from None
+    except OSError as exc:
+        raise ConfigError([Problem(path, "", f"cannot read: {exc.strerror}")]) from None
+    return parse_config(text, path)
+
+
+def parse_config(text: str, path: Path) -> Config:
+    """Validate config ``text`` read from ``path`` (used in messages and for relative paths)."""
+    data, lines, problems = _parse_yaml(text, path)
+    if problems and data is None:
+        raise ConfigError(problems)
+    if not isinstance(data, dict):
+        kind = "empty" if data is None else f"a {type(data).__name__}"
+        raise ConfigError([Problem(path, "", f"expected a mapping of config sections, got {kind}")])
+    try:
+        config = Config.model_validate(data)
+    except ValidationError as exc:
+        problems += _problems_from_validation(exc, data, lines, path)
+        config = None
+    problems += _missing_asset_files(data, lines, path)
+    if problems or config is None:
+        raise ConfigError(problems)
+    return _resolve_paths(config, path.parent)
+
+
+def _parse_yaml(text: str, path: Path) -> tuple[Any, dict[tuple, int], list[Problem]]:
+    """Parse YAML, recording the line of every key path and flagging duplicate keys."""
+    try:
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+        data = yaml.safe_load(text)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = mark.line + 1 if mark is not None else None
+        what = " ".join(x for x in (exc.context, exc.problem) if x)
+        return None, {}, [Problem(path, "", f"invalid YAML: {what}", line=line)]
+    except yaml.reader.ReaderError as exc:
+        return None, {}, [Problem(path, "", f"invalid YAML: {exc.reason} at character {exc.position}")]
+    except yaml.YAMLError as exc:
+        return None, {}, [Problem(path, "", f"invalid YAML: {exc}")]
+    lines: dict[tuple, int] = {}
+    problems: list[Problem] = []
+
+    def walk(node: yaml.Node, key_path: tuple) -> None:
+        lines[key_path] = node.start_mark.line + 1
+        if isinstance(node, yaml.MappingNode):
+            seen: set[str] = set()
+            for key_node, value_node in node.value:
+                key = key_node.value
+                if key in seen:
+                    problems.append(
+                        Problem(path, _dotted(key_path + (key,)), "duplicate key",
+                                line=key_node.start_mark.line + 1)
+                    )
+                seen.add(key)
+                walk(value_node, key_path + (key,))
+        elif isinstance(node, yaml.SequenceNode):
+            for i, item in enumerate(node.value):
+                walk(item, key_path + (i,))
+
+    if root is not None:
+        walk(root, ())
+    return data, lines, problems
+
+
+def _dotted(loc: tuple) -> str:
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out
+
+
+def _line_of(lines: dict[tuple, int], loc: tuple) -> int | None:
+    while loc:
+        if loc in lines:
+            return lines[loc]
+        loc = loc[:-1]
+    return lines.get(())
+
+
+def _lookup(data: Any, loc: tuple) -> tuple[bool, Any]:
+    for part in loc:
+        try:
+            data = data[part]
+        except (KeyError, IndexError, TypeError):
+            return False, None
+    return True, data
+
+
+def _model_at(loc: tuple) -> type[BaseModel] | None:
+    """The pydantic model that owns the mapping at ``loc`` (for listing allowed keys)."""
+    model: type[BaseModel] | None = Config
+    for part in loc:
+        if model is None or not isinstance(part, str) or part not in model.model_fields:
+            return None
+        annotation = model.model_fields[part].annotation
+        model = annotation if isinstance(annotation, type) and issubclass(annotation, BaseModel) else None
+    return model
+
+
+def _problems_from_validation(
+    exc: ValidationError, data: dict, lines: dict[tuple, int], path: Path
+) -> list[Problem]:
+    problems = []
+    for err in exc.errors(include_url=False):
+        loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and p.startswith("function-")))
+        found, value = _lookup(data, loc)
+        kind = err["type"]
+        message = err["msg"]
+        if kind == "extra_forbidden":
+            owner = _model_at(loc[:-1])
+            allowed = sorted(owner.model_fields) if owner else []
+            close = difflib.get_close_matches(str(loc[-1]), allowed, n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            message = f"unknown key (allowed: {', '.join(allowed)}){hint}"
+            found = False
+        elif kind == "missing":
+            message = "required key is missing"
+        elif kind == "value_error":
+            message = message.removeprefix("Value error, ")
+        problems.append(
+            Problem(path, _dotted(loc), message, line=_line_of(lines, loc), value=value, has_value=found)
+        )
+    return problems
+
+
+def _missing_asset_files(data: dict, lines: dict[tuple, int], path: Path) -> list[Problem]:
+    """Asset paths that name no file, checked on the raw mapping so that they are
+    reported together with schema problems."""
+    problems = []
+    objects = data.get("objects")
+    for name in ObjectsConfig.model_fields:
+        spec = objects.get(name) if isinstance(objects, dict) else None
+        for field in ("mesh", "features"):
+            value = spec.get(field) if isinstance(spec, dict) else None
+            if not isinstance(value, str):
+                continue
+            resolved = path.parent / value
+            if not resolved.is_file():
+                loc = ("objects", name, field)
+                problems.append(
+                    Problem(path, _dotted(loc), f"file not found ({resolved})",
+                            line=_line_of(lines, loc), value=value, has_value=True)
+                )
+    return problems
+
+
+def _resolve_paths(config: Config, base: Path) -> Config:
+    """Make asset paths absolute, so that the config means the same from any directory."""
+    objects = {}
+    for name in ObjectsConfig.model_fields:
+        spec: ObjectSpec = getattr(config.objects, name)
+        update = {
+            field: (base / value).resolve()
+            for field in ("mesh", "features")
+            if (value := getattr(spec, field)) is not None
+        }
+        objects[name] = spec.model_copy(update=update)
+    return config.model_copy(update={"objects": config.objects.model_copy(update=objects)})

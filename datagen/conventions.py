@@ -1,0 +1,116 @@
+"""Every frame, axis and pixel convention datagen uses, written down once.
+
+Nothing else in the package may restate these facts; import them from here.
+
+Body frames (paper, Fig. 7 and Fig. 12)
+    x forward, y left, z up, right-handed.
+
+    =========  =====================================================
+    object     origin
+    =========  =====================================================
+    receiver   the refueling probe tip (receiver and probe are one body)
+    drogue     the drogue (basket) centre
+    tanker     the *average* drogue centre: a fixed offset behind and
+               below the tanker's hose port, not a point on the airframe
+    =========  =====================================================
+
+World frame
+    An inertial frame with the same axis sense as the body frames: z up,
+    x along the tanker's initial heading, y to its left. The approach model's
+    drogue-centred local frame (paper Fig. 7) is a translation of it.
+
+Camera frame (OpenCV)
+    x right, y down, z forward (along the optical axis). A point is in front of
+    the camera iff its z exceeds :data:`NEAR_PLANE_M`.
+
+Mitsuba camera frame
+    Mitsuba's sensors look along local +z with local +y up and local +x *left*
+    (``mi.ScalarTransform4f.look_at`` builds the columns left, up, forward).
+    :data:`CVCAM_FROM_MICAM` converts between the two; it is its own inverse.
+
+Pixels (continuous)
+    The image spans ``[0, W] x [0, H]``; pixel ``(i, j)`` (column i, row j)
+    covers ``[i, i+1) x [j, j+1)``, so its centre is ``(i + 0.5, j + 0.5)``.
+    ``K`` has ``cx = W / 2`` and ``cy = H / 2`` exactly (Table 1: 1024.0, 540.0
+    for 2048x1080). YOLO values are these coordinates divided by W and H.
+    Mitsuba's film uses the same continuous convention: a film position sample
+    ``s`` in ``[0, 1]^2`` lands at ``uv_px = s * (W, H)``.
+
+Transforms
+    A 4x4 homogeneous matrix that maps coordinates in frame ``a`` to frame ``b``
+    is named ``b_from_a``; they compose right to left:
+    ``cam_from_receiver = cam_from_world @ world_from_receiver``.
+    Point arrays are named by their frame (``points_model``, ``points_cam``,
+    ``uv_px``). Units are metres and radians in code, degrees in configs.
+
+Randomness
+    One root seed per config. Frame ``i`` draws everything it needs from
+    :func:`frame_rng` ``(seed, i)``; no module uses a global RNG.
+"""
+
+from __future__ import annotations
+
+from typing import Final
+
+import numpy as np
+
+__all__ = [
+    "BODY_FORWARD",
+    "BODY_LEFT",
+    "BODY_UP",
+    "CVCAM_FROM_MICAM",
+    "CV_DOWN",
+    "CV_FORWARD",
+    "CV_RIGHT",
+    "MICAM_FROM_CVCAM",
+    "NEAR_PLANE_M",
+    "OBJECT_NAMES",
+    "PIXEL_CONVENTION",
+    "frame_rng",
+    "frame_seed_sequence",
+]
+
+# --- body frames -------------------------------------------------------------
+BODY_FORWARD: Final = np.array([1.0, 0.0, 0.0])
+BODY_LEFT: Final = np.array([0.0, 1.0, 0.0])
+BODY_UP: Final = np.array([0.0, 0.0, 1.0])
+
+#: The rigid bodies of a refueling scene, in the order their object ids are
+#: assigned (id = index + 1; id 0 is background).
+OBJECT_NAMES: Final[tuple[str, ...]] = ("tanker", "receiver", "drogue", "hose")
+
+# --- camera frames -----------------------------------------------------------
+CV_RIGHT: Final = np.array([1.0, 0.0, 0.0])
+CV_DOWN: Final = np.array([0.0, 1.0, 0.0])
+CV_FORWARD: Final = np.array([0.0, 0.0, 1.0])
+
+#: Points with camera-frame z at or below this (metres) are "at or behind the
+#: camera plane": they are never projected into a label.
+NEAR_PLANE_M: Final[float] = 1e-6
+
+#: Maps Mitsuba camera-local coordinates (x left, y up, z forward) to OpenCV
+#: camera coordinates (x right, y down, z forward). Self-inverse.
+CVCAM_FROM_MICAM: Final = np.diag([-1.0, -1.0, 1.0, 1.0])
+MICAM_FROM_CVCAM: Final = CVCAM_FROM_MICAM
+
+for _a in (BODY_FORWARD, BODY_LEFT, BODY_UP, CV_RIGHT, CV_DOWN, CV_FORWARD, CVCAM_FROM_MICAM):
+    _a.setflags(write=False)
+
+# --- pixels ------------------------------------------------------------------
+#: Recorded in every dataset so that readers know how to interpret pixel values.
+PIXEL_CONVENTION: Final[str] = "continuous"
+
+
+# --- randomness --------------------------------------------------------------
+def frame_seed_sequence(seed: int, frame_index: int) -> np.random.SeedSequence:
+    """The seed sequence of frame ``frame_index`` under root seed ``seed``."""
+    return np.random.SeedSequence(seed, spawn_key=(frame_index,))
+
+
+def frame_rng(seed: int, frame_index: int) -> np.random.Generator:
+    """The RNG every draw for frame ``frame_index`` comes from.
+
+    A pure function of ``(seed, frame_index)``: a frame can be regenerated
+    alone, on any worker, in any order.
+    """
+    return np.random.default_rng(frame_seed_sequence(seed, frame_index))

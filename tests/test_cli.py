@@ -1,0 +1,56 @@
+"""The command line: exit codes, one-line errors, no tracebacks."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "datagen", *args], cwd=cwd, capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_help_lists_the_commands() -> None:
+    out = run("--help")
+    assert out.returncode == 0
+    for command in ("validate", "build", "audit", "preview", "assets"):
+        assert command in out.stdout
+
+
+def test_validate_ok() -> None:
+    out = run("validate", "scenes/wingcam55.yaml")
+    assert out.returncode == 0, out.stderr
+    assert "scenes/wingcam55.yaml: ok" in out.stdout and "fx=fy=1967.086 px" in out.stdout
+
+
+def test_validate_reports_each_problem_on_one_line(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: t\ncamera: {mount: nosecam, hfov_deg: 0}\ndataset: {frames: 1}\nextra: 1\n")
+    out = run("validate", "scenes/wingcam55.yaml", str(bad))
+    assert out.returncode == 2
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 3
+    assert all(line.startswith(f"{bad}:") for line in lines)
+    assert "Traceback" not in out.stderr + out.stdout
+
+
+@pytest.mark.parametrize("content", [None, "a: [\n", "\x00\x01"])
+def test_bad_files_exit_nonzero_without_traceback(tmp_path: Path, content: str | None) -> None:
+    path = tmp_path / "c.yaml"
+    if content is not None:
+        path.write_text(content)
+    out = run("validate", str(path))
+    assert out.returncode == 2
+    assert len(out.stderr.strip().splitlines()) == 1 and out.stderr.startswith(str(path))
+    assert "Traceback" not in out.stderr
+
+
+def test_unimplemented_commands_say_so() -> None:
+    out = run("build", "--config", "scenes/wingcam55.yaml")
+    assert out.returncode != 0 and "not implemented yet" in out.stderr
