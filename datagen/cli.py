@@ -95,6 +95,35 @@ def _not_yet(what: str, issue: int) -> None:
 
 
 @app.command()
+@user_errors
+def approach(
+    config: Annotated[Path, typer.Option("--config", help="Scene config file (YAML).")],
+    plot: Annotated[Path | None, typer.Option("--plot", help="Write a PNG of the approaches here.")] = None,
+    approaches: Annotated[int, typer.Option("--approaches", min=1, max=50, help="Approaches to draw.")] = 5,
+    frames: Annotated[int, typer.Option("--frames", min=0, help="Also print the state of the first N frames.")] = 0,
+    seed: Annotated[int | None, typer.Option("--seed", min=0, help="Override the config's seed.")] = None,
+) -> None:
+    """Simulate Monte Carlo refueling approaches; plot a few, print frame states."""
+    from datagen.approach import frame_state, trace_approach
+
+    cfg = load_config(config)
+    seed = cfg.dataset.seed if seed is None else seed
+    for a in range(approaches):
+        tr = trace_approach(cfg, seed, a)
+        typer.echo(f"approach {a}: start {tr['distance_m'][0]:7.2f} m, contact after {tr['time_s'][-1]:6.1f} s")
+    for i in range(frames):
+        st = frame_state(cfg, i, seed)
+        x, y, z = st.ptd_receiver_m
+        typer.echo(f"frame {i:5d}: approach {st.approach_index}.{st.approach_number} t={st.time_s:7.2f} s "
+                   f"distance {st.distance_m:8.3f} m  PtD_receiver [{x:8.3f} {y:7.3f} {z:7.3f}] m")
+    if plot is not None:
+        from datagen.plots import plot_approaches
+
+        plot_approaches(cfg, plot, approaches, seed)
+        typer.echo(f"wrote {plot}")
+
+
+@app.command()
 def build(
     config: Annotated[Path, typer.Option("--config", help="Scene config file (YAML).")],
 ) -> None:

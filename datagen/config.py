@@ -34,6 +34,7 @@ __all__ = [
     "CameraConfig",
     "Config",
     "DatasetConfig",
+    "DrogueConfig",
     "FeaturesConfig",
     "LabelsConfig",
     "MaterialsConfig",
@@ -43,6 +44,7 @@ __all__ = [
     "RandomizationConfig",
     "RenderConfig",
     "SkyConfig",
+    "TankerConfig",
     "load_config",
     "parse_config",
 ]
@@ -146,7 +148,7 @@ class FeaturesConfig(_Section):
 
 # --- approach ------------------------------------------------------------------
 class ApproachConfig(_Section):
-    """Monte Carlo refueling approaches (paper 3.1)."""
+    """Monte Carlo refueling approaches (paper 3.1) and how frames are taken from them."""
 
     range_m: Range = (0.0, 120.0)
     """Probe-to-drogue distance range the dataset covers, metres."""
@@ -160,12 +162,112 @@ class ApproachConfig(_Section):
     roll_deg: float = Field(45.0, ge=0.0, le=180.0)
     """Initial receiver roll perturbation, uniform in [-roll, roll] degrees."""
 
+    start_azimuth_deg: float = Field(15.0, ge=0.0, le=90.0)
+    """Start position bearing from the drogue, uniform in [-a, a] degrees off dead astern."""
+
+    start_elevation_deg: Range = (-12.0, 3.0)
+    """Start position elevation from the drogue, degrees (negative: the receiver starts below)."""
+
+    sampling: Literal["distance", "time"] = "distance"
+    """'distance': each approach starts at the range's far end and contributes one frame per
+    distance stratum, so the dataset covers its range evenly; 'time': approaches start at a
+    uniform distance in range and frames are taken every stride_steps simulation steps,
+    through contact and the next approach."""
+
+    frames_per_approach: int = Field(16, ge=1, le=100_000)
+    """Consecutive frames taken from one approach (the unit of simulation)."""
+
+    stride_steps: int = Field(15, ge=1)
+    """Simulation steps between frames in 'time' sampling."""
+
+    dt_s: float = Field(1.0 / 30.0, gt=0.0, le=0.2)
+    """Simulation time step, seconds."""
+
+    forward_gain: float = Field(0.12, gt=0.0, le=10.0)
+    """Convergence rate of the PtD vector's forward (receiver x) component, 1/s."""
+
+    lateral_gain_ratio: float = Field(2.0, gt=0.0, le=10.0)
+    """Lateral and vertical convergence rates relative to the forward one (paper: about 2)."""
+
+    max_closure_mps: float = Field(4.0, gt=0.0)
+    """Speed limit of the receiver relative to the drogue along its x axis, m/s."""
+
+    max_lateral_mps: float = Field(2.0, gt=0.0)
+    """Speed limit of the receiver relative to the drogue along its y and z axes, m/s."""
+
+    attitude_time_constant_s: float = Field(6.0, gt=0.0)
+    """Time constant of the attitude slerp back to the tanker's orientation, s."""
+
+    contact_m: float = Field(0.01, gt=0.0)
+    """PtD distance that counts as contact (paper: 1 cm)."""
+
+    max_steps: int = Field(100_000, ge=100)
+    """Safety limit on the steps of one approach."""
+
     @model_validator(mode="after")
     def _non_negative_range(self) -> ApproachConfig:
         if self.range_m[0] < 0.0:
             raise ValueError(f"range_m must not be negative, got {list(self.range_m)}")
         if self.range_m[1] <= 0.0:
             raise ValueError(f"range_m upper bound must be positive, got {list(self.range_m)}")
+        return self
+
+
+class DrogueConfig(_Section):
+    """Drogue motion about its average position under turbulence.
+
+    Each axis of the tanker frame carries a gust state that is a first-order
+    Gauss-Markov process (the Dryden longitudinal gust filter driven by white
+    noise) with standard deviation ``rms_m * intensity`` and correlation time
+    ``gust_time_s``; the drogue's displacement follows it through a damped
+    second-order hose-drogue response (natural frequency ``natural_hz``,
+    damping ratio ``damping``)."""
+
+    rms_m: tuple[float, float, float] = (0.15, 0.4, 0.3)
+    """Gust-equilibrium RMS displacement along tanker x, y, z at intensity 1, metres."""
+
+    intensity: Range = (0.0, 1.0)
+    """Turbulence intensity multiplier, drawn once per approach."""
+
+    gust_time_s: float = Field(3.0, gt=0.0)
+    """Gust correlation time (Dryden L / V), seconds."""
+
+    natural_hz: float = Field(0.5, gt=0.0, le=10.0)
+    """Natural frequency of the hose-drogue response, Hz."""
+
+    damping: float = Field(0.4, gt=0.0, le=5.0)
+    """Damping ratio of the hose-drogue response."""
+
+    @field_validator("rms_m")
+    @classmethod
+    def _non_negative(cls, rms: tuple[float, float, float]) -> tuple[float, float, float]:
+        if min(rms) < 0.0:
+            raise ValueError("rms_m components must not be negative")
+        return rms
+
+
+class TankerConfig(_Section):
+    """Tanker flight: straight and level, or a coordinated banking turn."""
+
+    speed_mps: float = Field(150.0, gt=0.0, le=400.0)
+    """True airspeed, m/s."""
+
+    altitude_m: Range = (4000.0, 8000.0)
+    """Altitude above the sea surface (world z = 0), metres, drawn per approach."""
+
+    turn_probability: float = Field(0.3, ge=0.0, le=1.0)
+    """Share of approaches flown in a banking turn instead of straight and level."""
+
+    bank_deg: Range = (15.0, 30.0)
+    """Bank angle magnitude of a turn, degrees (left or right with equal odds)."""
+
+    @model_validator(mode="after")
+    def _physical(self) -> TankerConfig:
+        lo, hi = self.bank_deg
+        if lo < 0.0 or hi >= 80.0:
+            raise ValueError(f"bank_deg must lie within [0, 80), got [{lo}, {hi}]")
+        if self.altitude_m[0] <= 0.0:
+            raise ValueError(f"altitude_m must be positive, got {list(self.altitude_m)}")
         return self
 
 
@@ -318,6 +420,12 @@ class Config(_Section):
 
     approach: ApproachConfig = ApproachConfig()
     """Approach sampling."""
+
+    drogue: DrogueConfig = DrogueConfig()
+    """Drogue turbulence response."""
+
+    tanker: TankerConfig = TankerConfig()
+    """Tanker flight."""
 
     randomization: RandomizationConfig = RandomizationConfig()
     """Appearance randomization."""

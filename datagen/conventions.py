@@ -44,8 +44,13 @@ Transforms
     ``uv_px``). Units are metres and radians in code, degrees in configs.
 
 Randomness
-    One root seed per config. Frame ``i`` draws everything it needs from
-    :func:`frame_rng` ``(seed, i)``; no module uses a global RNG.
+    One root seed per config. Frame ``i`` draws everything that is its own
+    (sky, sun, materials, split) from :func:`frame_rng` ``(seed, i)``. Draws
+    shared by the consecutive frames of one approach chain ``a`` (initial pose,
+    turbulence, tanker flight, mount perturbation) come from
+    :func:`approach_rng` ``(seed, a)``, a separate stream (spawn key
+    ``(a, APPROACH_STREAM)``) that can never collide with a frame's. No module
+    uses a global RNG.
 """
 
 from __future__ import annotations
@@ -66,6 +71,7 @@ __all__ = [
     "NEAR_PLANE_M",
     "OBJECT_NAMES",
     "PIXEL_CONVENTION",
+    "approach_rng",
     "frame_rng",
     "frame_seed_sequence",
 ]
@@ -114,3 +120,12 @@ def frame_rng(seed: int, frame_index: int) -> np.random.Generator:
     alone, on any worker, in any order.
     """
     return np.random.default_rng(frame_seed_sequence(seed, frame_index))
+
+
+#: Second spawn-key element of the approach streams (frame streams have one-element keys).
+APPROACH_STREAM: Final[int] = 1
+
+
+def approach_rng(seed: int, approach_index: int) -> np.random.Generator:
+    """The RNG of approach chain ``approach_index``: every draw its frames share."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(approach_index, APPROACH_STREAM)))

@@ -21,7 +21,9 @@ __all__ = [
     "apply_transform",
     "invert_rigid",
     "make_transform",
+    "rotation_from_rotvec",
     "rotation_from_ypr",
+    "rotvec_from_rotation",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -82,6 +84,45 @@ def rotation_from_ypr(yaw: ArrayLike, pitch: ArrayLike, roll: ArrayLike) -> Floa
     out[..., 2, 1] = cp * sr
     out[..., 2, 2] = cp * cr
     return out
+
+
+def rotation_from_rotvec(rotvec: ArrayLike) -> FloatArray:
+    """Rotation matrix ``(3, 3)`` of a rotation vector (axis times angle, radians)."""
+    rotvec = np.asarray(rotvec, dtype=np.float64)
+    angle = float(np.linalg.norm(rotvec))
+    if angle < 1e-12:
+        k = np.array([[0.0, -rotvec[2], rotvec[1]], [rotvec[2], 0.0, -rotvec[0]], [-rotvec[1], rotvec[0], 0.0]])
+        return np.eye(3) + k
+    axis = rotvec / angle
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+
+
+def rotvec_from_rotation(rotation: ArrayLike) -> FloatArray:
+    """Rotation vector ``(3,)`` of a rotation matrix, angle in [0, pi] (via a unit quaternion)."""
+    m = np.asarray(rotation, dtype=np.float64)
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    # Shepperd's method: divide by the largest of the four quaternion components.
+    candidates = [trace, m[0, 0], m[1, 1], m[2, 2]]
+    i = int(np.argmax(candidates))
+    if i == 0:
+        w = 0.5 * np.sqrt(1.0 + trace)
+        xyz = np.array([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]]) / (4.0 * w)
+    else:
+        j, k = (i % 3), ((i + 1) % 3)
+        a = i - 1
+        q = np.empty(3)
+        q[a] = 0.5 * np.sqrt(max(0.0, 1.0 + 2.0 * m[a, a] - trace))
+        q[j] = (m[j, a] + m[a, j]) / (4.0 * q[a])
+        q[k] = (m[k, a] + m[a, k]) / (4.0 * q[a])
+        w = (m[k, j] - m[j, k]) / (4.0 * q[a])
+        xyz = q
+    if w < 0.0:
+        w, xyz = -w, -xyz
+    s = float(np.linalg.norm(xyz))
+    if s < 1e-15:
+        return 2.0 * xyz / max(w, 1e-300)
+    return xyz / s * (2.0 * np.arctan2(s, w))
 
 
 @dataclass(frozen=True)

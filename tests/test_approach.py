@@ -1,0 +1,225 @@
+"""Monte Carlo approaches (paper 3.1): bounds, convergence, contact, PtD truth, purity, sampling."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from datagen import approach as ap
+from datagen.config import Config, load_config
+from datagen.rig import HOSE_ATTACH_DROGUE_M, HOSE_PORT_TANKER_M, MOUNTS
+from datagen.transforms import invert_rigid, rotvec_from_rotation
+
+ROOT = Path(__file__).resolve().parents[1]
+BASE = load_config(ROOT / "scenes" / "wingcam55.yaml")
+
+
+def variant(config: Config = BASE, **sections) -> Config:
+    data = config.model_dump()
+    for section, values in sections.items():
+        data[section].update(values)
+    return Config.model_validate(data)
+
+
+def ypr_of(rotation: np.ndarray) -> tuple[float, float, float]:
+    """Inverse of rotation_from_ypr (R = Rz(yaw) Ry(pitch) Rx(roll))."""
+    return (math.atan2(rotation[1, 0], rotation[0, 0]), math.asin(-rotation[2, 0]),
+            math.atan2(rotation[2, 1], rotation[2, 2]))
+
+
+def convergence_rates(config: Config, seed: int, index: int, lo: float = 0.05, hi: float = 12.0):
+    tr = ap.trace_approach(config, seed, index, every=1)
+    keep = (tr["distance_m"] < hi) & (tr["distance_m"] > lo)
+    t, v = tr["time_s"][keep], np.abs(tr["ptd_receiver_m"][keep])
+    forward = -np.polyfit(t, np.log(v[:, 0]), 1)[0]
+    lateral = np.hypot(v[:, 1], v[:, 2])
+    ok = lateral > 1e-4
+    return forward, -np.polyfit(t[ok], np.log(lateral[ok]), 1)[0]
+
+
+def test_initial_attitude_perturbations_stay_within_bounds_and_cover_them() -> None:
+    # 'time' sampling with stride 1 records each chain's very first step.
+    cfg = variant(approach={"sampling": "time", "frames_per_approach": 1, "range_m": [5.0, 120.0]})
+    k = cfg.approach
+    ypr = []
+    starts = []
+    for a in range(300):
+        st = ap.frame_state(cfg, a)
+        tanker_from_receiver = invert_rigid(st.world_from_tanker) @ st.world_from_receiver
+        ypr.append(np.degrees(ypr_of(tanker_from_receiver[:3, :3])))
+        starts.append(tanker_from_receiver[:3, 3] - (invert_rigid(st.world_from_tanker) @ st.world_from_drogue)[:3, 3])
+    ypr = np.abs(np.array(ypr))
+    bounds = np.array([k.yaw_deg, k.pitch_deg, k.roll_deg])
+    assert (ypr <= bounds + 1e-9).all()
+    assert (ypr.max(axis=0) > 0.95 * bounds).all()  # covered, not just bounded
+    starts = np.array(starts)
+    distance = np.linalg.norm(starts, axis=1)
+    assert distance.min() >= k.range_m[0] and distance.max() <= k.range_m[1]
+    assert distance.min() < 15 and distance.max() > 110
+    azimuth = np.degrees(np.arctan2(starts[:, 1], -starts[:, 0]))
+    elevation = np.degrees(np.arcsin(starts[:, 2] / distance))
+    assert np.abs(azimuth).max() <= k.start_azimuth_deg + 1e-9
+    assert elevation.min() >= k.start_elevation_deg[0] - 1e-9 and elevation.max() <= k.start_elevation_deg[1] + 1e-9
+    assert (starts[:, 0] < 0).all()  # always behind the drogue
+
+
+def test_lateral_and_vertical_converge_twice_as_fast_as_forward() -> None:
+    # No attitude perturbation, no turbulence: the rates are the configured gains.
+    clean = variant(approach={"range_m": [0.0, 10.0], "yaw_deg": 0, "pitch_deg": 0, "roll_deg": 0,
+                              "sampling": "time"}, drogue={"intensity": [0.0, 0.0]})
+    forward, lateral = convergence_rates(clean, 1, 0)
+    assert forward == pytest.approx(clean.approach.forward_gain, rel=0.02)
+    assert lateral / forward == pytest.approx(2.0, abs=0.05)
+    # With the paper's perturbations and turbulence it is "about twice".
+    ratios = [np.divide(*convergence_rates(BASE, 7, a)[::-1]) for a in range(6)]
+    assert 1.7 <= float(np.mean(ratios)) <= 2.3
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "scenes").glob("*.yaml")), ids=lambda p: p.stem)
+def test_approaches_reach_contact_in_every_scene(path: Path) -> None:
+    cfg = load_config(path)
+    for a in range(2):
+        tr = ap.trace_approach(cfg, cfg.dataset.seed, a, every=50)
+        assert tr["distance_m"][-1] < cfg.approach.contact_m
+        assert (tr["distance_m"][:-1] >= cfg.approach.contact_m).all()
+        assert tr["time_s"][-1] < 400.0
+
+
+def test_time_sampling_restarts_after_contact() -> None:
+    cfg = variant(approach={"sampling": "time", "range_m": [2.0, 4.0], "frames_per_approach": 40,
+                            "stride_steps": 90})
+    states = ap.frame_states(cfg, range(40))
+    numbers = [s.approach_number for s in states]
+    assert numbers == sorted(numbers) and numbers[-1] >= 1
+    first_of_second = numbers.index(1)
+    assert states[first_of_second].distance_m > states[first_of_second - 1].distance_m
+
+
+@settings(max_examples=25)
+@given(seed=st.integers(0, 2**32), frame=st.integers(0, 10_000),
+       config=st.sampled_from([BASE, variant(camera={"mount": "podcam", "hfov_deg": 15.0}),
+                               variant(tanker={"turn_probability": 1.0})]))
+def test_recorded_ptd_equals_ptd_recomputed_from_poses(seed, frame, config) -> None:
+    s = ap.frame_state(config, frame, seed)
+    receiver_from_world = invert_rigid(s.world_from_receiver)
+    drogue_in_receiver = receiver_from_world @ s.world_from_drogue[:, 3]
+    np.testing.assert_allclose(s.ptd_receiver_m, drogue_in_receiver[:3], atol=1e-9)
+    assert s.distance_m == pytest.approx(np.linalg.norm(drogue_in_receiver[:3]), abs=1e-9)
+    # The paper's 3.5, through the camera: t_d^p = R_p^c^T (t_d^c - t_p^c), whatever the camera pose.
+    cam_from_receiver = s.cam_from_world @ s.world_from_receiver
+    cam_from_drogue = s.cam_from_world @ s.world_from_drogue
+    via_camera = cam_from_receiver[:3, :3].T @ (cam_from_drogue[:3, 3] - cam_from_receiver[:3, 3])
+    np.testing.assert_allclose(via_camera, s.ptd_receiver_m, atol=1e-6)
+
+
+def test_frame_alone_equals_frame_in_sequence() -> None:
+    cfg = variant(dataset={"seed": 1234})
+    k = cfg.approach.frames_per_approach
+    ap._chain_states.cache_clear()
+    in_sequence = ap.frame_states(cfg, range(3 * k))
+    for i in (0, 5, k - 1, k, 2 * k + 3):
+        ap._chain_states.cache_clear()
+        alone = ap.frame_state(cfg, i)
+        ref = in_sequence[i]
+        assert alone.frame_index == ref.frame_index == i
+        for field in ("world_from_tanker", "world_from_receiver", "world_from_drogue", "world_from_cam",
+                      "hose_points_world", "ptd_receiver_m"):
+            np.testing.assert_array_equal(getattr(alone, field), getattr(ref, field), err_msg=field)
+        assert alone.time_s == ref.time_s and alone.distance_m == ref.distance_m
+
+
+def test_different_seeds_give_different_approaches() -> None:
+    a, b = ap.frame_state(BASE, 3, seed=1), ap.frame_state(BASE, 3, seed=2)
+    assert not np.allclose(a.world_from_receiver, b.world_from_receiver)
+
+
+def test_distance_stratified_sampling_is_flat_and_time_sampling_is_not() -> None:
+    cfg = variant(approach={"range_m": [0.0, 120.0], "frames_per_approach": 16})
+    distances = np.array([s.distance_m for s in ap.frame_states(cfg, range(16 * 40))])
+    assert distances.min() >= 0.0 and distances.max() <= 120.0
+    counts, _ = np.histogram(distances, bins=12, range=(0.0, 120.0))
+    expected = len(distances) / 12
+    assert np.abs(counts - expected).max() <= 0.15 * expected, counts
+    # The same approaches sampled in time crowd near contact: the reason to stratify.
+    timed = variant(cfg, approach={"sampling": "time", "stride_steps": 30, "frames_per_approach": 200})
+    d_time = np.array([s.distance_m for s in ap.frame_states(timed, range(600))])
+    assert np.mean(d_time < 10.0) > 3 * (10.0 / 120.0)
+
+
+def test_range_limited_scenes_stay_in_range() -> None:
+    mid = load_config(ROOT / "scenes" / "wingcam55-mid.yaml")
+    d = np.array([s.distance_m for s in ap.frame_states(mid, range(64))])
+    assert d.min() >= 25.0 - 0.2 and d.max() <= 50.0 + 1e-9
+
+
+@pytest.mark.parametrize("mount", ["wingcam", "dashcam", "podcam"])
+def test_camera_pose_is_mount_plus_bounded_perturbation(mount: str) -> None:
+    cfg = variant(camera={"mount": mount, "hfov_deg": 55.0})
+    jitter = cfg.camera.mount_jitter
+    body = MOUNTS[mount].body
+    nominal = MOUNTS[mount].body_from_cam()
+    shifts, angles = [], []
+    for a in range(40):
+        s = ap.frame_state(cfg, a * cfg.approach.frames_per_approach)
+        body_from_cam = invert_rigid(s.world_from(body)) @ s.world_from_cam
+        shifts.append(body_from_cam[:3, 3] - nominal[:3, 3])
+        angles.append(np.degrees(np.linalg.norm(rotvec_from_rotation(nominal[:3, :3].T @ body_from_cam[:3, :3]))))
+    shifts, angles = np.abs(np.array(shifts)), np.array(angles)
+    assert (shifts <= jitter.translation_m + 1e-12).all() and shifts.max() > 0.8 * jitter.translation_m
+    assert angles.max() <= math.sqrt(3) * jitter.rotation_deg + 1e-9 and angles.max() > 0.5 * jitter.rotation_deg
+
+
+def test_forward_mounts_look_forward_and_podcam_sees_the_drogue() -> None:
+    wing = ap.frame_state(BASE, 0)
+    cam_axis_receiver = (invert_rigid(wing.world_from_receiver) @ wing.world_from_cam)[:3, 2]
+    assert cam_axis_receiver[0] > 0.99
+    pod = ap.frame_state(variant(camera={"mount": "podcam", "hfov_deg": 15.0}), 0)
+    drogue_cam = (pod.cam_from_world @ pod.world_from_drogue)[:3, 3]
+    assert drogue_cam[2] > 15.0
+    # Within the 15 deg field of view (7.5 deg half-angle), allowing for turbulence.
+    assert math.degrees(math.atan2(abs(drogue_cam[0]), drogue_cam[2])) < 7.5
+
+
+def test_hose_runs_from_port_to_drogue_coupling() -> None:
+    s = ap.frame_state(BASE, 9)
+    port = s.world_from_tanker @ np.append(HOSE_PORT_TANKER_M, 1.0)
+    coupling = s.world_from_drogue @ np.append(HOSE_ATTACH_DROGUE_M, 1.0)
+    np.testing.assert_allclose(s.hose_points_world[0], port[:3], atol=1e-9)
+    np.testing.assert_allclose(s.hose_points_world[-1], coupling[:3], atol=1e-9)
+    # In the tanker frame the hose runs steadily aft, and leaves the port downward.
+    hose_tanker = (invert_rigid(s.world_from_tanker) @ np.c_[s.hose_points_world, np.ones(len(s.hose_points_world))].T).T
+    assert (np.diff(hose_tanker[:, 0]) < 0).all()
+    assert hose_tanker[1, 2] < hose_tanker[0, 2]
+
+
+def test_banking_turn_is_coordinated() -> None:
+    cfg = variant(tanker={"turn_probability": 1.0, "bank_deg": [25.0, 25.0]})
+    tanker = ap._Tanker(cfg, np.random.default_rng(0))
+    assert abs(math.degrees(tanker.bank)) == pytest.approx(25.0)
+    a, b = tanker.world_from_tanker(10.0), tanker.world_from_tanker(11.0)
+    yaw_rate = math.atan2(b[1, 0], b[0, 0]) - math.atan2(a[1, 0], a[0, 0])
+    assert yaw_rate == pytest.approx(-9.80665 * math.tan(tanker.bank) / cfg.tanker.speed_mps, rel=1e-6)
+    assert np.linalg.norm(b[:3, 3] - a[:3, 3]) == pytest.approx(cfg.tanker.speed_mps, rel=1e-3)
+    # Right bank (positive roll) means right wing down and a right (clockwise) turn.
+    assert ypr_of(a[:3, :3])[2] == pytest.approx(tanker.bank)
+    assert np.sign(yaw_rate) == -np.sign(tanker.bank)
+
+
+def test_turbulence_amplitude_follows_the_config() -> None:
+    cfg = variant(drogue={"intensity": [1.0, 1.0], "rms_m": [0.2, 0.5, 0.3]})
+    samples = []
+    for seed in range(6):
+        turb = ap._Turbulence(cfg, np.random.default_rng(seed), cfg.approach.dt_s)
+        for _ in range(6000):
+            turb.step()
+            samples.append(turb.position)
+    rms = np.sqrt(np.mean(np.square(samples), axis=0))
+    np.testing.assert_allclose(rms, [0.2, 0.5, 0.3], rtol=0.3)
+    calm = ap._Turbulence(variant(drogue={"intensity": [0.0, 0.0]}), np.random.default_rng(0), 0.03)
+    calm.step()
+    np.testing.assert_array_equal(calm.position, 0.0)
