@@ -54,3 +54,25 @@ def test_bad_files_exit_nonzero_without_traceback(tmp_path: Path, content: str |
 def test_unimplemented_commands_say_so() -> None:
     out = run("build", "--config", "scenes/wingcam55.yaml")
     assert out.returncode != 0 and "not implemented yet" in out.stderr
+
+
+def test_approach_plot_and_frames(tmp_path: Path) -> None:
+    png = tmp_path / "sub" / "approach.png"
+    out = run("approach", "--config", "scenes/podcam15.yaml", "--plot", str(png), "--approaches", "2",
+              "--frames", "3")
+    assert out.returncode == 0, out.stderr
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert [p.name for p in png.parent.iterdir()] == ["approach.png"]  # no temporary left behind
+    lines = out.stdout.splitlines()
+    assert sum(line.startswith("approach ") and "contact after" in line for line in lines) == 2
+    assert sum(line.startswith("frame ") for line in lines) == 3
+
+
+def test_approach_bad_config_is_one_line(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: t\ncamera: {mount: wingcam, hfov_deg: 55}\ndataset: {frames: 1}\n"
+                   "approach: {sampling: sideways}\n")
+    out = run("approach", "--config", str(bad), "--plot", str(tmp_path / "x.png"))
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert out.stderr.strip().startswith(f"{bad}:4: approach.sampling: value 'sideways'")
+    assert not (tmp_path / "x.png").exists()
