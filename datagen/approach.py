@@ -214,9 +214,9 @@ class _Tanker:
         return make_transform(rotation_from_ypr(heading, 0.0, self.bank), [pos[0], pos[1], self.altitude])
 
 
-def _mount_jitter(config: Config, rng: np.random.Generator) -> FloatArray:
-    """``nominal_from_perturbed``-style offset applied to the mount: translation in the
-    body frame, rotation about the camera's own axes."""
+def _mount_jitter(config: Config, rng: np.random.Generator) -> tuple[FloatArray, FloatArray]:
+    """One approach's mount perturbation: a translation ``(3,)`` in the body frame and a
+    rotation ``(3, 3)`` about the camera's own axes, each within the configured bounds."""
     j = config.camera.mount_jitter
     shift = rng.uniform(-j.translation_m, j.translation_m, size=3)
     ypr = np.radians(rng.uniform(-j.rotation_deg, j.rotation_deg, size=3))
@@ -258,7 +258,6 @@ class _Chain:
         self.approach_number += 1
         self.steps_this_approach = 0
         start = draw_start(self.config, self.rng, distance_m)
-        self.start = start
         self.probe = self.turbulence.position + start_offset(start)
         self.rotvec = rotvec_from_rotation(rotation_from_ypr(start.yaw_rad, start.pitch_rad, start.roll_rad))
         shift, rot = _mount_jitter(self.config, self.rng)
