@@ -296,18 +296,30 @@ class _Chain:
                          self.turbulence.intensity)
 
 
+def _start_chain(config: Config, seed: int, approach_index: int) -> tuple[_Chain, FloatArray | None]:
+    """Chain ``approach_index`` with its first approach begun, and for 'distance' sampling
+    its distance targets (far to near). The one place that fixes the order of the chain's
+    first draws, so that a traced approach is the one its frames come from."""
+    a = config.approach
+    k = a.frames_per_approach
+    lo, hi = a.range_m
+    chain = _Chain(config, approach_rng(seed, approach_index))
+    if a.sampling == "distance":
+        # One frame per distance stratum, visited from far to near, on one approach.
+        targets = np.sort(lo + (np.arange(k) + chain.rng.random(k)) * (hi - lo) / k)[::-1]
+        chain.new_approach(hi)
+        return chain, targets
+    chain.new_approach(float(chain.rng.uniform(lo, hi)))
+    return chain, None
+
+
 def simulate_chain(config: Config, seed: int, approach_index: int) -> list[_Snapshot]:
     """Simulate approach chain ``approach_index``; return its ``frames_per_approach`` snapshots."""
     a = config.approach
-    rng = approach_rng(seed, approach_index)
     k = a.frames_per_approach
-    lo, hi = a.range_m
-    chain = _Chain(config, rng)
+    chain, targets = _start_chain(config, seed, approach_index)
     snapshots: list[_Snapshot] = []
-    if a.sampling == "distance":
-        # One frame per distance stratum, visited from far to near, on one approach.
-        targets = np.sort(lo + (np.arange(k) + rng.random(k)) * (hi - lo) / k)[::-1]
-        chain.new_approach(hi)
+    if targets is not None:
         while True:
             distance = chain.distance
             contact = distance < a.contact_m
@@ -317,7 +329,6 @@ def simulate_chain(config: Config, seed: int, approach_index: int) -> list[_Snap
                 return snapshots
             chain.step()
     # 'time': a frame every stride_steps steps, through contact and the next approaches.
-    chain.new_approach(float(rng.uniform(lo, hi)))
     step = 0
     while True:
         if step % a.stride_steps == 0:
@@ -325,7 +336,7 @@ def simulate_chain(config: Config, seed: int, approach_index: int) -> list[_Snap
             if len(snapshots) == k:
                 return snapshots
         if chain.distance < a.contact_m:
-            chain.new_approach(float(rng.uniform(lo, hi)))
+            chain.new_approach(float(chain.rng.uniform(*a.range_m)))
         chain.step()
         step += 1
 
@@ -335,8 +346,7 @@ def trace_approach(config: Config, seed: int, approach_index: int, every: int = 
     steps: ``time_s``, ``distance_m``, ``ptd_receiver_m`` (T, 3) and ``probe_drogue_m``
     (T, 3), the probe tip in the drogue-centred local frame (paper Fig. 7)."""
     a = config.approach
-    chain = _Chain(config, approach_rng(seed, approach_index))
-    chain.new_approach(a.range_m[1] if a.sampling == "distance" else float(chain.rng.uniform(*a.range_m)))
+    chain, _ = _start_chain(config, seed, approach_index)
     rows: list[tuple] = []
     step = 0
     while True:

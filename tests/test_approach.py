@@ -90,6 +90,20 @@ def test_approaches_reach_contact_in_every_scene(path: Path) -> None:
         assert tr["time_s"][-1] < 400.0
 
 
+@pytest.mark.parametrize("sampling", ["distance", "time"])
+def test_traced_approach_is_the_one_the_frames_come_from(sampling: str) -> None:
+    """`datagen approach` plots chain a's first approach: its frames lie on that trace."""
+    cfg = variant(approach={"sampling": sampling, "stride_steps": 3})
+    trace = ap.trace_approach(cfg, 5, 2, every=1)
+    k = cfg.approach.frames_per_approach
+    for s in ap.frame_states(cfg, range(2 * k, 3 * k), seed=5):
+        if s.approach_number:
+            continue
+        step = int(np.argmin(np.abs(trace["time_s"] - s.time_s)))
+        assert trace["time_s"][step] == pytest.approx(s.time_s, abs=1e-9)
+        np.testing.assert_allclose(trace["ptd_receiver_m"][step], s.ptd_receiver_m, atol=1e-9)
+
+
 def test_time_sampling_restarts_after_contact() -> None:
     cfg = variant(approach={"sampling": "time", "range_m": [2.0, 4.0], "frames_per_approach": 40,
                             "stride_steps": 90})
