@@ -70,11 +70,15 @@ def _root(
 def validate(
     configs: Annotated[list[Path], typer.Argument(help="Scene config files (YAML).", show_default=False)],
 ) -> None:
-    """Check configs against the schema; print every problem, one line each."""
+    """Check configs against the schema, and their meshes and feature files;
+    print every problem, one line each."""
+    from datagen.assets import check_assets
+
     failed = []
     for path in configs:
         try:
             config = load_config(path)
+            table = check_assets(config)
         except ConfigError as exc:
             failed.append(exc)
             continue
@@ -83,7 +87,8 @@ def validate(
         typer.echo(
             f"{path}: ok ({config.name}: {cam.mount}, {cam.hfov_deg:g} deg hFOV, "
             f"{cam.width}x{cam.height}, fx=fy={k.fx:.3f} px, {config.dataset.frames} frames, "
-            f"{'corrected' if config.labels.corrected else 'tight'} labels)"
+            f"{'corrected' if config.labels.corrected else 'tight'} labels, {len(table)} classes "
+            f"({config.features.variant} features of {' + '.join(config.features.objects)}))"
         )
     if failed:
         raise ConfigError([problem for exc in failed for problem in exc.problems])
@@ -144,15 +149,78 @@ def preview(dataset: Annotated[Path, typer.Argument(help="Dataset folder.")]) ->
 
 
 @assets_app.command("build")
-def assets_build() -> None:
-    """Regenerate every built-in mesh and feature file."""
-    _not_yet("assets build", 3)
+@user_errors
+def assets_build(
+    out: Annotated[Path | None, typer.Option("--out", help="Assets folder (default: the built-in one).")] = None,
+) -> None:
+    """Regenerate every built-in mesh and feature file, byte for byte."""
+    from datagen.assets import BUILTIN_DIR, build_assets
+
+    for path in build_assets(out or BUILTIN_DIR):
+        typer.echo(f"wrote {path} ({path.stat().st_size:,} bytes)")
+
+
+def _object_name(name: str) -> str:
+    from datagen.assets import RIGID_OBJECTS
+
+    if name not in RIGID_OBJECTS:
+        raise DatagenError(f"unknown object {name!r} (choose from {', '.join(RIGID_OBJECTS)})")
+    return name
+
+
+_VARIANTS = ("baseline", "small", "medium", "large", "random")
 
 
 @assets_app.command("show")
-def assets_show(name: Annotated[str, typer.Argument(help="Object name.")]) -> None:
+@user_errors
+def assets_show(
+    name: Annotated[str, typer.Argument(help="Object: tanker, receiver or drogue.", show_default=False)],
+    variant: Annotated[str, typer.Option("--variant", help="baseline, small, medium, large or random.")] = "baseline",
+    config: Annotated[Path | None, typer.Option("--config", help="Use this config's mesh and feature files "
+                                                "and its seed (default: the built-in assets).")] = None,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of random features without --config.")] = 0,
+    count: Annotated[int, typer.Option("--count", min=3, help="Random features without --config.")] = 40,
+) -> None:
     """Print the feature table of an object."""
-    _not_yet("assets show", 3)
+    from datagen.assets import builtin_paths, describe_features, load_object_features, object_paths
+
+    name = _object_name(name)
+    if variant not in _VARIANTS:
+        raise DatagenError(f"--variant: unknown variant {variant!r} (choose from {', '.join(_VARIANTS)})")
+    mesh_path, features_path = builtin_paths(name)
+    if config is not None:
+        cfg = load_config(config)
+        mesh_path, features_path = object_paths(cfg, name)
+        seed, count = cfg.dataset.seed, cfg.features.random_per_object
+    features = load_object_features(name, variant, mesh_path=mesh_path, features_path=features_path,
+                                    seed=seed, random_count=count)
+    source = f"{mesh_path}, seed {seed}" if variant == "random" else features_path
+    typer.echo(f"{name}: {len(features)} features, variant {variant}, from {source}")
+    typer.echo(describe_features(features))
+
+
+@assets_app.command("preview")
+@user_errors
+def assets_preview(
+    out: Annotated[Path | None, typer.Option("--out", help="Folder for the PNGs (default: assets/previews).")] = None,
+    objects: Annotated[list[str] | None, typer.Option("--object", help="Only this object (repeatable).")] = None,
+    spp: Annotated[int, typer.Option("--spp", min=1, help="Samples per pixel.")] = 64,
+    config: Annotated[Path | None, typer.Option("--config", help="Use this config's mesh and feature files.")] = None,
+) -> None:
+    """Render a contact sheet of each object from six views, feature centres marked."""
+    from datagen.assets import BUILTIN_DIR, RIGID_OBJECTS, builtin_paths, load_features, load_mesh, object_paths
+    from datagen.previews import write_contact_sheet
+
+    cfg = load_config(config) if config is not None else None
+    folder = out or BUILTIN_DIR / "previews"
+    for name in objects or RIGID_OBJECTS:
+        name = _object_name(name)
+        mesh_path, features_path = object_paths(cfg, name) if cfg else builtin_paths(name)
+        mesh = load_mesh(mesh_path, name)
+        features = load_features(features_path, name, "baseline")
+        variant = cfg.render.variant if cfg else "auto"
+        path = write_contact_sheet(folder / f"{name}.png", mesh, features, spp=spp, variant=variant)
+        typer.echo(f"wrote {path}")
 
 
 def main() -> None:

@@ -49,8 +49,10 @@ Randomness
     shared by the consecutive frames of one approach chain ``a`` (initial pose,
     turbulence, tanker flight, mount perturbation) come from
     :func:`approach_rng` ``(seed, a)``, a separate stream (spawn key
-    ``(a, APPROACH_STREAM)``) that can never collide with a frame's. No module
-    uses a global RNG.
+    ``(a, APPROACH_STREAM)``) that can never collide with a frame's. Random
+    surface features (paper model I) come from :func:`random_features_rng`
+    ``(seed, object)``, spawn key ``(object id - 1, RANDOM_FEATURES_STREAM)``.
+    No module uses a global RNG.
 """
 
 from __future__ import annotations
@@ -74,6 +76,7 @@ __all__ = [
     "approach_rng",
     "frame_rng",
     "frame_seed_sequence",
+    "random_features_rng",
 ]
 
 # --- body frames -------------------------------------------------------------
@@ -129,3 +132,13 @@ APPROACH_STREAM: Final[int] = 1
 def approach_rng(seed: int, approach_index: int) -> np.random.Generator:
     """The RNG of approach chain ``approach_index``: every draw its frames share."""
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(approach_index, APPROACH_STREAM)))
+
+
+#: Second spawn-key element of the random-feature streams (paper model I).
+RANDOM_FEATURES_STREAM: Final[int] = 2
+
+
+def random_features_rng(seed: int, object_name: str) -> np.random.Generator:
+    """The RNG that places random surface features (paper model I) on one object."""
+    key = (OBJECT_NAMES.index(object_name), RANDOM_FEATURES_STREAM)
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=key))

@@ -76,3 +76,30 @@ def test_approach_bad_config_is_one_line(tmp_path: Path) -> None:
     assert out.returncode == 2 and "Traceback" not in out.stderr
     assert out.stderr.strip().startswith(f"{bad}:4: approach.sampling: value 'sideways'")
     assert not (tmp_path / "x.png").exists()
+
+
+def test_assets_build_and_show(tmp_path: Path) -> None:
+    out = run("assets", "build", "--out", str(tmp_path))
+    assert out.returncode == 0, out.stderr
+    assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*") if p.is_file()) == [
+        "features/drogue.json", "features/receiver.json", "features/tanker.json",
+        "meshes/drogue.glb", "meshes/receiver.glb", "meshes/tanker.glb"]
+    out = run("assets", "show", "receiver")
+    assert out.returncode == 0, out.stderr
+    rows = [line for line in out.stdout.splitlines() if line[:3].strip().isdigit()]
+    assert len(rows) == 40 and rows[0].split()[:2] == ["0", "probe_tip"]
+    out = run("assets", "show", "hose")
+    assert out.returncode == 2 and out.stderr.strip() == "unknown object 'hose' (choose from tanker, receiver, drogue)"
+
+
+def test_validate_names_a_bad_feature_file(tmp_path: Path) -> None:
+    features = tmp_path / "drogue.json"
+    doc = (ROOT / "assets" / "features" / "drogue.json").read_text()
+    features.write_text(doc.replace('"class_id": 3,', '"class_id": 2,', 1))
+    config = tmp_path / "c.yaml"
+    config.write_text("name: t\ncamera: {mount: podcam, hfov_deg: 15}\ndataset: {frames: 1}\n"
+                      "features: {objects: [receiver, drogue]}\n"
+                      "objects: {drogue: {features: drogue.json}}\n")
+    out = run("validate", str(config))
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert out.stderr.strip() == f"{features}: variants.baseline[3].class_id: value 2: duplicate class id (also at [2])"

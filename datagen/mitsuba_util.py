@@ -1,0 +1,126 @@
+"""Mitsuba 3 plumbing shared by the renderer and the asset previews.
+
+- :func:`select_variant` picks ``cuda_ad_rgb``, ``llvm_ad_rgb`` or ``scalar_rgb``
+  and explains how to install LLVM 19 instead of crashing when it is missing.
+- :func:`mitsuba_mesh` turns triangle arrays into a ``mi.Mesh`` (any file format
+  trimesh reads can thus be rendered, parts kept apart).
+- :func:`sensor_dict` places a perspective sensor whose intrinsics are exactly
+  :class:`datagen.camera.Intrinsics` (``fov_axis='x'``, principal point at the
+  image centre) at an OpenCV-convention ``world_from_cam``.
+- :func:`visible` casts rays to test which 3D points the camera sees.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Final
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from datagen.camera import Intrinsics
+from datagen.conventions import CVCAM_FROM_MICAM
+from datagen.errors import DatagenError
+
+__all__ = ["LLVM_HINT", "mitsuba_mesh", "select_variant", "sensor_dict", "visible"]
+
+VARIANTS: Final = ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
+LLVM_HINT: Final = (
+    "Mitsuba's llvm_ad_rgb variant needs LLVM 19: install it with `apt-get install -y libllvm19` "
+    "(LLVM 15/16 crash and 14 is too old), or set render.variant: scalar_rgb"
+)
+
+
+@functools.cache
+def _has_backend(name: str) -> bool:
+    import drjit as dr
+
+    backend = {"cuda": dr.JitBackend.CUDA, "llvm": dr.JitBackend.LLVM}[name]
+    try:
+        return bool(dr.has_backend(backend))
+    except Exception:  # an unusable driver or library reads as absent
+        return False
+
+
+def select_variant(requested: str = "auto") -> str:
+    """Set and return the Mitsuba variant: ``auto`` prefers CUDA, then LLVM, then scalar."""
+    import mitsuba as mi
+
+    if requested == "auto":
+        chosen = "cuda_ad_rgb" if _has_backend("cuda") else "llvm_ad_rgb" if _has_backend("llvm") else "scalar_rgb"
+    elif requested in VARIANTS:
+        chosen = requested
+        if requested == "llvm_ad_rgb" and not _has_backend("llvm"):
+            raise DatagenError(f"render.variant: llvm_ad_rgb is unavailable: {LLVM_HINT}")
+        if requested == "cuda_ad_rgb" and not _has_backend("cuda"):
+            raise DatagenError("render.variant: cuda_ad_rgb is unavailable: no CUDA GPU or driver found")
+    else:
+        raise DatagenError(f"render.variant: unknown Mitsuba variant {requested!r} (use auto or {', '.join(VARIANTS)})")
+    if mi.variant() != chosen:
+        mi.set_variant(chosen)
+    return chosen
+
+
+def mitsuba_mesh(name: str, vertices: ArrayLike, faces: ArrayLike, bsdf=None):
+    """A ``mi.Mesh`` from ``(V, 3)`` vertices and ``(F, 3)`` faces (current variant)."""
+    import mitsuba as mi
+
+    v = np.ascontiguousarray(vertices, dtype=np.float32)
+    f = np.ascontiguousarray(faces, dtype=np.uint32)
+    props = mi.Properties()
+    if bsdf is not None:
+        props["bsdf"] = bsdf
+    mesh = mi.Mesh(name, len(v), len(f), props=props, has_vertex_normals=False)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = mi.Float(v.ravel())
+    params["faces"] = mi.UInt32(f.ravel())
+    params.update()
+    return mesh
+
+
+def sensor_dict(intrinsics: Intrinsics, world_from_cam: ArrayLike, spp: int, *,
+                rfilter: str = "box", pixel_format: str = "rgb") -> dict:
+    """A perspective sensor matching ``intrinsics`` at the OpenCV ``world_from_cam``."""
+    import mitsuba as mi
+
+    world_from_micam = np.asarray(world_from_cam, dtype=np.float64) @ CVCAM_FROM_MICAM
+    return {
+        "type": "perspective",
+        "fov": float(np.degrees(intrinsics.hfov_rad)),
+        "fov_axis": "x",
+        "near_clip": 0.01,
+        "far_clip": 1.0e6,
+        "to_world": mi.ScalarTransform4f(world_from_micam.tolist()),
+        "sampler": {"type": "independent", "sample_count": int(spp)},
+        "film": {
+            "type": "hdrfilm",
+            "width": int(intrinsics.width),
+            "height": int(intrinsics.height),
+            "rfilter": {"type": rfilter},
+            "pixel_format": pixel_format,
+        },
+    }
+
+
+def visible(scene, origin: ArrayLike, points: ArrayLike, tolerance_m: float = 0.01) -> NDArray[np.bool_]:
+    """Which ``points`` ``(N, 3)`` are seen from ``origin``: nothing is hit on the way
+    to them, up to ``tolerance_m`` before them (the point's own surface)."""
+    import mitsuba as mi
+
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    o = np.asarray(origin, dtype=np.float64)
+    d = p - o
+    dist = np.linalg.norm(d, axis=1)
+    d /= np.maximum(dist, 1e-12)[:, None]
+    n = len(p)
+    if mi.variant().startswith("scalar"):
+        return np.array([not scene.ray_test(mi.Ray3f(mi.Point3f(*map(float, o)), mi.Vector3f(*map(float, di)),
+                                                      float(t - tolerance_m)))
+                         for di, t in zip(d, dist, strict=True)], dtype=bool)
+    ray = mi.Ray3f(
+        mi.Point3f(np.full(n, o[0], np.float32), np.full(n, o[1], np.float32), np.full(n, o[2], np.float32)),
+        mi.Vector3f(d[:, 0].astype(np.float32), d[:, 1].astype(np.float32), d[:, 2].astype(np.float32)),
+    )
+    ray.maxt = mi.Float((dist - tolerance_m).astype(np.float32))
+    hit = np.asarray(scene.ray_test(ray), dtype=bool).reshape(n)
+    return ~hit
