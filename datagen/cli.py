@@ -148,6 +148,53 @@ def preview(dataset: Annotated[Path, typer.Argument(help="Dataset folder.")]) ->
     _not_yet("preview", 7)
 
 
+@app.command()
+@user_errors
+def render(
+    config: Annotated[Path, typer.Option("--config", help="Scene config file (YAML).")],
+    frames: Annotated[str, typer.Option("--frames", help="Frame indices, e.g. 0,5,9 or 0-7.")] = "0",
+    out: Annotated[Path, typer.Option("--out", help="Folder for the images.")] = Path("renders"),
+    spp: Annotated[int | None, typer.Option("--spp", min=1, help="Samples per pixel (default: the config's).")] = None,
+    scale: Annotated[float, typer.Option("--scale", min=0.05, max=1.0, help="Image size relative to the "
+                                         "config's (same hFOV).")] = 1.0,
+    exr: Annotated[bool, typer.Option("--exr", help="Also write linear EXR (R, G, B, Z, object_id).")] = False,
+    seed: Annotated[int | None, typer.Option("--seed", min=0, help="Override the config's seed.")] = None,
+) -> None:
+    """Render single frames of a config (no labels): for looking, not for datasets."""
+    from datagen.render import render_frames
+
+    cfg = load_config(config)
+    for path in render_frames(cfg, _frame_list(frames), out, spp=spp, scale=scale, exr=exr, seed=seed):
+        typer.echo(f"wrote {path}")
+
+
+@app.command()
+@user_errors
+def gallery(
+    out: Annotated[Path, typer.Option("--out", help="Gallery image (JPEG or PNG).")] = Path("docs/gallery.jpg"),
+    spp: Annotated[int, typer.Option("--spp", min=1, help="Samples per pixel.")] = 16,
+) -> None:
+    """Render four frames each of wingcam55, podcam15 and dashcam75 into one sheet."""
+    from datagen.render import write_gallery
+
+    root = Path(__file__).resolve().parent.parent / "scenes"
+    configs = [load_config(root / f"{name}.yaml") for name in ("wingcam55", "podcam15", "dashcam75")]
+    typer.echo(f"wrote {write_gallery(configs, out, spp=spp)}")
+
+
+def _frame_list(text: str) -> list[int]:
+    indices: list[int] = []
+    try:
+        for part in text.split(","):
+            lo, _, hi = part.strip().partition("-")
+            indices += list(range(int(lo), int(hi) + 1)) if hi else [int(lo)]
+    except ValueError:
+        raise DatagenError(f"--frames: {text!r} is not a list of frame indices like 0,5,9 or 0-7") from None
+    if not indices or min(indices) < 0:
+        raise DatagenError(f"--frames: {text!r}: frame indices must be non-negative")
+    return indices
+
+
 @assets_app.command("build")
 @user_errors
 def assets_build(

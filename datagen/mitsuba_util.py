@@ -89,7 +89,7 @@ def sensor_dict(intrinsics: Intrinsics, world_from_cam: ArrayLike, spp: int, *,
         "fov": float(np.degrees(intrinsics.hfov_rad)),
         "fov_axis": "x",
         "near_clip": 0.01,
-        "far_clip": 1.0e6,
+        "far_clip": 1.0e8,  # beyond the sea plane's edge (see datagen.render.SEA_SIZE_M)
         "to_world": mi.ScalarTransform4f(world_from_micam.tolist()),
         "sampler": {"type": "independent", "sample_count": int(spp)},
         "film": {

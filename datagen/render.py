@@ -20,6 +20,7 @@ camera and nothing is hit before it, up to :func:`visibility_tolerance_m`.
 from __future__ import annotations
 
 import colorsys
+import functools
 import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -151,16 +152,27 @@ class RenderResult:
     """One rendered frame: linear RGB, z-depth and object ids at pixel centres."""
 
     rgb: NDArray[np.float32]  # (H, W, 3) linear radiance, exposure applied
-    depth: NDArray[np.float32]  # (H, W) camera z-depth, metres, +inf where nothing is hit
-    object_id: NDArray[np.uint32]  # (H, W)
+    depth: NDArray[np.float32] | None  # (H, W) camera z-depth, metres, +inf where nothing is hit
+    object_id: NDArray[np.uint32] | None  # (H, W); both None unless the geometry pass ran
     render_s: float  # seconds inside mi.render
+
+
+#: Linear values are quantized to 16 bits before the sRGB table: finer than one 8-bit
+#: step everywhere (the steepest part, near black, moves by 0.05 of a step).
+_SRGB_LEVELS: Final = 65536
+
+
+@functools.cache
+def _srgb_table() -> NDArray[np.uint8]:
+    x = np.linspace(0.0, 1.0, _SRGB_LEVELS)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return np.round(srgb * 255.0).astype(np.uint8)
 
 
 def to_srgb8(linear: NDArray[np.floating]) -> NDArray[np.uint8]:
     """8-bit sRGB from linear RGB in [0, 1] (clipped), the IEC 61966-2-1 transfer."""
     x = np.clip(np.asarray(linear, dtype=np.float32), 0.0, 1.0)
-    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    return np.round(srgb * 255.0).astype(np.uint8)
+    return _srgb_table()[np.rint(x * np.float32(_SRGB_LEVELS - 1)).astype(np.int32)]
 
 
 def _principled(m: Material) -> dict:
@@ -294,8 +306,9 @@ class Renderer:
         el = math.radians(look.sun_elevation_deg)
         return np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
 
-    def render(self, state: FrameState, look: FrameLook, seed: int) -> RenderResult:
-        """Pose the scene and render it: exposure-scaled linear RGB plus the geometry pass."""
+    def render(self, state: FrameState, look: FrameLook, seed: int, *, geometry: bool = False) -> RenderResult:
+        """Pose the scene and render it: exposure-scaled linear RGB, plus the geometry
+        pass (depth, object ids) when ``geometry`` is asked for or haze needs it."""
         import time
 
         mi = self._mi
@@ -304,43 +317,47 @@ class Renderer:
         image = mi.render(self.scene, seed=seed, spp=self.spp)
         rgb = np.array(image, dtype=np.float32)[..., :3]
         render_s = time.perf_counter() - start
-        depth, ids = self.geometry_pass()
+        depth = ids = None
+        if geometry or look.haze_visibility_m is not None:
+            depth, ids = self.geometry_pass()
         rgb *= np.float32(2.0 ** look.exposure_ev / WHITE_RADIANCE)
         if look.haze_visibility_m is not None:
             rgb = _haze(rgb, depth, ids, look.haze_visibility_m)
         return RenderResult(rgb, depth, ids, render_s)
 
-    def _pixel_rays(self):
+    @functools.cached_property
+    def _pixel_rays(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        """Unit directions (camera frame) through every pixel centre, and their z
+        components (z-depth per unit of ray length); computed once."""
         k = self.intrinsics
-        u = np.arange(k.width, dtype=np.float64) + 0.5
-        v = np.arange(k.height, dtype=np.float64) + 0.5
-        uu, vv = np.meshgrid(u, v)
+        uu, vv = np.meshgrid(np.arange(k.width) + 0.5, np.arange(k.height) + 0.5)
         d_cam = np.stack([(uu - k.cx) / k.fx, (vv - k.cy) / k.fy, np.ones_like(uu)], axis=-1).reshape(-1, 3)
         norm = np.linalg.norm(d_cam, axis=1)
-        d_cam /= norm[:, None]
-        return d_cam, 1.0 / norm  # unit directions in the camera frame and their z components
+        return (d_cam / norm[:, None]).astype(np.float32), (1.0 / norm).astype(np.float32)
 
     def cast(self, origin_render: NDArray, directions_render: NDArray, max_t=None):
         """Intersect rays (render frame); returns (t, object id) as numpy arrays."""
         mi, dr = self._mi, self._dr
         n = len(directions_render)
-        d = directions_render.astype(np.float32)
+        d = np.asarray(directions_render, dtype=np.float32)
         o = np.broadcast_to(np.asarray(origin_render, dtype=np.float32), (n, 3))
         ray = mi.Ray3f(mi.Point3f(o[:, 0], o[:, 1], o[:, 2]), mi.Vector3f(d[:, 0], d[:, 1], d[:, 2]))
         if max_t is not None:
             ray.maxt = mi.Float(np.asarray(max_t, dtype=np.float32))
         si = self.scene.ray_intersect(ray, ray_flags=mi.RayFlags.Minimal, coherent=True)
-        valid = np.asarray(si.is_valid(), dtype=bool)
+        valid_dr, shape_dr = si.is_valid(), dr.reinterpret_array(mi.UInt32, si.shape)
+        dr.eval(valid_dr, si.t, shape_dr)
+        valid = np.asarray(valid_dr, dtype=bool)
         t = np.where(valid, np.asarray(si.t, dtype=np.float64), np.inf)
-        shape_ids = np.asarray(dr.reinterpret_array(mi.UInt32, si.shape), dtype=np.int64)
+        shape_ids = np.asarray(shape_dr, dtype=np.int64)
         shape_ids = np.where(valid & (shape_ids < len(self._id_table)), shape_ids, 0)
         return t, self._id_table[shape_ids]
 
     def geometry_pass(self) -> tuple[NDArray[np.float32], NDArray[np.uint32]]:
         """Camera z-depth and object id at every pixel centre."""
         k = self.intrinsics
-        d_cam, z_per_t = self._pixel_rays()
-        r = self._world_from_cam[:3, :3]  # render frame shares the world's axes
+        d_cam, z_per_t = self._pixel_rays
+        r = self._world_from_cam[:3, :3].astype(np.float32)  # the render frame shares the world's axes
         t, ids = self.cast(np.zeros(3), d_cam @ r.T)
         depth = (t * z_per_t).reshape(k.height, k.width).astype(np.float32)
         return depth, ids.reshape(k.height, k.width).astype(np.uint32)
@@ -383,7 +400,8 @@ def write_png(path: Path, rgb_linear: NDArray[np.float32], *, quality: int | Non
 
     bgr = to_srgb8(rgb_linear)[..., ::-1]
     ext = Path(path).suffix.lower()
-    params = [cv2.IMWRITE_JPEG_QUALITY, quality or 95] if ext in (".jpg", ".jpeg") else []
+    params = ([cv2.IMWRITE_JPEG_QUALITY, quality or 95] if ext in (".jpg", ".jpeg")
+              else [cv2.IMWRITE_PNG_COMPRESSION, 1])
     ok, data = cv2.imencode(ext, bgr, params)
     if not ok:
         raise RuntimeError(f"image encoding failed for {path}")
@@ -409,3 +427,64 @@ def write_exr(path: Path, result: RenderResult) -> None:
     with atomic_path(path) as tmp:
         with OpenEXR.File(header, channels) as exr:
             exr.write(str(tmp))
+
+
+def render_frames(config: Config, frames, out: Path, *, spp: int | None = None, scale: float = 1.0,
+                  exr: bool = False, seed: int | None = None) -> list[Path]:
+    """Render frames of a config into ``out`` as ``{name}-{frame:06d}.png`` (and ``.exr``)."""
+    from datagen.approach import frame_state
+    from datagen.conventions import frame_rng
+
+    seed = config.dataset.seed if seed is None else seed
+    cam = config.camera
+    renderer = Renderer(config, spp=spp, width=max(1, round(cam.width * scale)),
+                        height=max(1, round(cam.height * scale)))
+    written = []
+    for i in frames:
+        state = frame_state(config, i, seed)
+        result = renderer.render(state, draw_look(config, frame_rng(seed, i)), render_seed(seed, i),
+                                 geometry=exr or config.render.exr)
+        stem = Path(out) / f"{config.name}-{i:06d}"
+        ext = ".jpg" if config.render.image_format == "jpg" else ".png"
+        write_png(stem.with_suffix(ext), result.rgb, quality=config.render.jpeg_quality)
+        written.append(stem.with_suffix(ext))
+        if exr or config.render.exr:
+            write_exr(stem.with_suffix(".exr"), result)
+            written.append(stem.with_suffix(".exr"))
+    return written
+
+
+#: Frames of the gallery: spread over each config's approach chains and distances.
+GALLERY_FRAMES: Final = (0, 7, 21, 45)
+
+
+def write_gallery(configs, out: Path, *, spp: int = 16, tile=(512, 270)) -> Path:
+    """Render :data:`GALLERY_FRAMES` of each config at twice the tile size, scale
+    them down and write one sheet (a row per config) with captions."""
+    import cv2
+
+    from datagen.approach import frame_state
+    from datagen.conventions import frame_rng
+    from datagen.files import atomic_path
+
+    rows = []
+    for config in configs:
+        seed = config.dataset.seed
+        renderer = Renderer(config, spp=spp, width=2 * tile[0], height=2 * tile[1])
+        tiles = []
+        for i in GALLERY_FRAMES:
+            state = frame_state(config, i, seed)
+            result = renderer.render(state, draw_look(config, frame_rng(seed, i)), render_seed(seed, i))
+            image = cv2.resize(to_srgb8(result.rgb)[..., ::-1], tile, interpolation=cv2.INTER_AREA)
+            caption = f"{config.name} #{i}  PtD {state.distance_m:.1f} m"
+            cv2.putText(image, caption, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
+            tiles.append(image)
+        rows.append(np.concatenate(tiles, axis=1))
+    sheet = np.concatenate(rows, axis=0)
+    ext = Path(out).suffix.lower()
+    ok, data = cv2.imencode(ext, sheet, [cv2.IMWRITE_JPEG_QUALITY, 90] if ext in (".jpg", ".jpeg") else [])
+    if not ok:
+        raise RuntimeError(f"image encoding failed for {out}")
+    with atomic_path(out) as tmp:
+        tmp.write_bytes(data.tobytes())
+    return Path(out)

@@ -108,8 +108,8 @@ def test_per_frame_parameters_reproduce_a_fresh_scene_load() -> None:
         first, second = frame_state(config, 0), frame_state(config, 7)
         look0, look7 = (draw_look(config, frame_rng(seed, i)) for i in (0, 7))
         a.render(first, look0, render_seed(seed, 0))  # a: posed and dressed twice
-        again = a.render(second, look7, render_seed(seed, 7))
-        fresh = b.render(second, look7, render_seed(seed, 7))  # b: straight from a fresh load
+        again = a.render(second, look7, render_seed(seed, 7), geometry=True)
+        fresh = b.render(second, look7, render_seed(seed, 7), geometry=True)  # b: from a fresh load
         np.testing.assert_array_equal(again.rgb, fresh.rgb)
         np.testing.assert_array_equal(again.object_id, fresh.object_id)
         np.testing.assert_array_equal(again.depth, fresh.depth)
@@ -178,7 +178,7 @@ def test_exr_has_linear_rgb_depth_and_object_ids(tmp_path: Path) -> None:
 
     renderer, config = _renderer("podcam15.yaml", spp=1)
     state = frame_state(config, 0)
-    result = renderer.render(state, draw_look(config, frame_rng(15, 0)), render_seed(15, 0))
+    result = renderer.render(state, draw_look(config, frame_rng(15, 0)), render_seed(15, 0), geometry=True)
     path = tmp_path / "f.exr"
     write_exr(path, result)
     with OpenEXR.File(str(path), separate_channels=True) as exr:
@@ -202,3 +202,22 @@ def test_missing_llvm_gets_an_install_hint(monkeypatch) -> None:
     monkeypatch.setattr(mitsuba_util, "_has_backend", lambda name: False)
     with pytest.raises(DatagenError, match=r"apt-get install -y libllvm19"):
         mitsuba_util.select_variant("llvm_ad_rgb")
+
+
+def test_render_command_writes_png_and_exr(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    import cv2
+
+    out = subprocess.run([sys.executable, "-m", "datagen", "render", "--config", "scenes/podcam15.yaml",
+                          "--frames", "0-1", "--scale", "0.1", "--spp", "1", "--exr", "--out", str(tmp_path)],
+                         cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["podcam15-000000.exr", "podcam15-000000.png", "podcam15-000001.exr", "podcam15-000001.png"]
+    image = cv2.imread(str(tmp_path / "podcam15-000000.png"), cv2.IMREAD_UNCHANGED)
+    assert image.shape == (108, 205, 3) and image.dtype == np.uint8 and image.std() > 1.0
+    bad = subprocess.run([sys.executable, "-m", "datagen", "render", "--config", "scenes/podcam15.yaml",
+                          "--frames", "x"], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 2 and bad.stderr.strip().startswith("--frames: 'x' is not a list")

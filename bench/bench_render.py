@@ -1,0 +1,64 @@
+"""Rendering cost per frame at the config's full resolution (2048x1080 by default).
+
+    python bench/bench_render.py [--config scenes/wingcam55.yaml] [--spp 4 16 64] [--frames 3]
+                                 [--variant auto]
+
+For each spp: seconds per frame in ``mi.render``; seconds per frame for the
+whole frame (approach state, material draws, posing through ``mi.traverse``,
+render, geometry pass, feature visibility, 8-bit PNG encoding); the share of
+frame time spent outside ``mi.render``; and the process's peak RSS. The first
+frame of each spp is a warm-up (kernel compilation) and is not counted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import resource
+import tempfile
+import time
+from pathlib import Path
+
+from datagen.approach import frame_state
+from datagen.assets import feature_table
+from datagen.config import load_config
+from datagen.conventions import frame_rng
+from datagen.render import Renderer, draw_look, render_seed, write_png
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--config", default="scenes/wingcam55.yaml")
+    parser.add_argument("--spp", type=int, nargs="+", default=[4, 16, 64])
+    parser.add_argument("--frames", type=int, default=3, help="counted frames per spp")
+    parser.add_argument("--variant", default=None)
+    args = parser.parse_args()
+    config = load_config(args.config)
+    features = feature_table(config)
+    seed = config.dataset.seed
+    print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs; config {args.config}, "
+          f"{config.camera.width}x{config.camera.height}")
+    with tempfile.TemporaryDirectory() as tmp:
+        for spp in args.spp:
+            renderer = Renderer(config, spp=spp, variant=args.variant)
+            render_s = total_s = 0.0
+            for n, i in enumerate(range(args.frames + 1)):
+                start = time.perf_counter()
+                state = frame_state(config, i)
+                result = renderer.render(state, draw_look(config, frame_rng(seed, i)), render_seed(seed, i))
+                renderer.feature_visibility(state, features)
+                write_png(Path(tmp) / f"{i}.png", result.rgb)
+                elapsed = time.perf_counter() - start
+                if n > 0:
+                    render_s += result.render_s
+                    total_s += elapsed
+            k = args.frames
+            peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+            print(f"{renderer.variant} spp {spp:3d}: mi.render {render_s / k:6.2f} s/frame, whole frame "
+                  f"{total_s / k:6.2f} s/frame, outside mi.render {100 * (1 - render_s / total_s):4.1f}%, "
+                  f"peak RSS {peak:,.0f} MiB")
+
+
+if __name__ == "__main__":
+    main()
