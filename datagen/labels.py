@@ -24,6 +24,8 @@ exclusion become YOLO lines.
 
 from __future__ import annotations
 
+import dataclasses
+
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -49,6 +51,7 @@ class Exclusion(IntEnum):
     BEHIND_CAMERA = 1
     OFF_FRAME = 2
     EDGE_MARGIN = 3
+    OCCLUDED = 4  # only with labels.min_visible_fraction > 0 and a rendered frame
 
     @property
     def reason(self) -> str | None:
@@ -88,6 +91,17 @@ class FrameLabels:
         if self.corrected:
             return self.center_px
         return 0.5 * (self.label_xyxy[..., :2] + self.label_xyxy[..., 2:])
+
+    def with_visibility(self, visible_fraction: ArrayLike, min_visible_fraction: float) -> FrameLabels:
+        """These labels with features whose visible share of points is below
+        ``min_visible_fraction`` excluded as ``OCCLUDED`` (other exclusions kept).
+        A threshold of 0 changes nothing: occluded features stay labeled."""
+        fraction = np.asarray(visible_fraction, dtype=np.float64)
+        if fraction.shape != self.exclusion.shape:
+            raise ValueError(f"visible_fraction has shape {fraction.shape}, labels {self.exclusion.shape}")
+        occluded = (self.exclusion == Exclusion.NONE) & (fraction < min_visible_fraction)
+        exclusion = np.where(occluded, np.int8(Exclusion.OCCLUDED), self.exclusion).astype(np.int8)
+        return dataclasses.replace(self, exclusion=exclusion)
 
     def frame(self, index: int | tuple[int, ...]) -> FrameLabels:
         """The labels of one frame of a batch."""

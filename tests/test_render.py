@@ -221,3 +221,21 @@ def test_render_command_writes_png_and_exr(tmp_path: Path) -> None:
     bad = subprocess.run([sys.executable, "-m", "datagen", "render", "--config", "scenes/podcam15.yaml",
                           "--frames", "x"], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert bad.returncode == 2 and bad.stderr.strip().startswith("--frames: 'x' is not a list")
+
+
+def test_a_visibility_threshold_excludes_occluded_features() -> None:
+    from datagen.labels import Exclusion, compute_labels
+
+    renderer, config = _renderer("podcam15.yaml")
+    state = frame_state(config, 0)
+    features = feature_table(config)
+    renderer.pose(state, draw_look(config, frame_rng(15, 0)))
+    fraction, _ = renderer.feature_visibility(state, features)
+    cam_from_objects = np.stack([invert_rigid(state.world_from_cam) @ state.world_from(o) for o in features.objects])
+    labels = compute_labels(features, cam_from_objects, renderer.intrinsics, edge_margin_px=2)
+    assert labels.with_visibility(fraction, 0.0).exclusion.tolist() == labels.exclusion.tolist()
+    strict = labels.with_visibility(fraction, 0.5)
+    dropped = labels.labeled & (fraction < 0.5)
+    assert dropped.any() and (labels.labeled & (fraction >= 0.5)).any()
+    np.testing.assert_array_equal(strict.exclusion == Exclusion.OCCLUDED, dropped)
+    np.testing.assert_array_equal(strict.labeled, labels.labeled & (fraction >= 0.5))
