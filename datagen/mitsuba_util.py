@@ -68,14 +68,22 @@ def mitsuba_mesh(name: str, vertices: ArrayLike, faces: ArrayLike, bsdf=None):
     v = np.ascontiguousarray(vertices, dtype=np.float32)
     f = np.ascontiguousarray(faces, dtype=np.uint32)
     props = mi.Properties()
+    props.set_id(name)
     if bsdf is not None:
         props["bsdf"] = bsdf
     mesh = mi.Mesh(name, len(v), len(f), props=props, has_vertex_normals=False)
     params = mi.traverse(mesh)
-    params["vertex_positions"] = mi.Float(v.ravel())
-    params["faces"] = mi.UInt32(f.ravel())
+    set_buffer(params, "vertex_positions", v)
+    set_buffer(params, "faces", f)
     params.update()
     return mesh
+
+
+def set_buffer(params, key: str, array: ArrayLike) -> None:
+    """Assign a flat numpy buffer to a mesh parameter in any variant (scalar
+    variants take their own dynamic array type, vectorized ones mi.Float/UInt32)."""
+    flat = np.ascontiguousarray(array).ravel()
+    params[key] = type(params[key])(flat)
 
 
 def sensor_dict(intrinsics: Intrinsics, world_from_cam: ArrayLike, spp: int, *,

@@ -33,6 +33,7 @@ from datagen.assets import RIGID_OBJECTS, load_mesh, object_paths
 from datagen.camera import Intrinsics
 from datagen.conventions import CVCAM_FROM_MICAM, OBJECT_NAMES, frame_seed_sequence
 from datagen.models import material_class
+from datagen.mitsuba_util import set_buffer
 from datagen.models.drogue import hose_faces, hose_vertices
 from datagen.transforms import make_transform
 
@@ -221,7 +222,7 @@ class Renderer:
             for i, (part, tm) in enumerate(mesh.parts.items()):
                 cls = material_class(part)
                 bsdf = mi.load_dict(_principled(first.materials[obj][cls]))
-                key = f"p{i}"
+                key = f"{obj}_p{i}"  # unique: scalar variants tell objects apart by shape id
                 shape = mitsuba_mesh(f"{obj}.{part}", tm.vertices, tm.faces, bsdf)
                 group[key] = shape
                 meshes[(obj, key)] = shape
@@ -250,7 +251,10 @@ class Renderer:
         self.params = mi.traverse(self.scene)
         self._hose_faces = faces
         self._hose_points = hose_points
-        # Map every shape's registry id to its object id.
+        # Map every shape's registry id to its object id (scalar variants name shapes instead).
+        self._id_table = np.zeros(1, dtype=np.uint32)
+        if self.variant.startswith("scalar"):
+            return
         lookup = {}
         for (obj, _), shape in self._meshes.items():
             lookup[int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0])] = self._ids[obj]
@@ -277,7 +281,7 @@ class Renderer:
                 self._set_material(f"{key}.bsdf", look.materials[obj][cls])
         self._set_material("hose.bsdf", look.materials["hose"]["rubber"])
         hose = hose_vertices(state.hose_points_world - cam_pos)
-        p["hose.vertex_positions"] = mi.Float(np.ascontiguousarray(hose, dtype=np.float32).ravel())
+        set_buffer(p, "hose.vertex_positions", hose.astype(np.float32))
         world_from_micam = render_from_world @ state.world_from_cam @ CVCAM_FROM_MICAM
         p["sensor.to_world"] = mi.Transform4f(world_from_micam.tolist())
         sea = make_transform(np.eye(3), [0.0, 0.0, -cam_pos[2]]) @ np.diag([SEA_SIZE_M / 2, SEA_SIZE_M / 2, 1.0, 1.0])
@@ -339,6 +343,8 @@ class Renderer:
         """Intersect rays (render frame); returns (t, object id) as numpy arrays."""
         mi, dr = self._mi, self._dr
         n = len(directions_render)
+        if self.variant.startswith("scalar"):
+            return self._cast_scalar(origin_render, directions_render, max_t)
         d = np.asarray(directions_render, dtype=np.float32)
         o = np.broadcast_to(np.asarray(origin_render, dtype=np.float32), (n, 3))
         ray = mi.Ray3f(mi.Point3f(o[:, 0], o[:, 1], o[:, 2]), mi.Vector3f(d[:, 0], d[:, 1], d[:, 2]))
@@ -352,6 +358,22 @@ class Renderer:
         shape_ids = np.asarray(shape_dr, dtype=np.int64)
         shape_ids = np.where(valid & (shape_ids < len(self._id_table)), shape_ids, 0)
         return t, self._id_table[shape_ids]
+
+    def _cast_scalar(self, origin, directions, max_t):
+        """:meth:`cast` one ray at a time, for the scalar_rgb fallback (slow)."""
+        mi, dr = self._mi, self._dr
+        o = mi.Point3f(*(float(v) for v in origin))
+        t = np.full(len(directions), np.inf)
+        ids = np.zeros(len(directions), dtype=np.uint32)
+        for i, d in enumerate(directions):
+            ray = mi.Ray3f(o, mi.Vector3f(*(float(v) for v in d)))
+            if max_t is not None:
+                ray.maxt = float(max_t[i])
+            si = self.scene.ray_intersect(ray)
+            if si.is_valid():
+                t[i] = si.t
+                ids[i] = self._ids.get(str(si.shape.id()).split("_")[0], 0)  # ids are object_pN or hose
+        return t, ids
 
     def geometry_pass(self) -> tuple[NDArray[np.float32], NDArray[np.uint32]]:
         """Camera z-depth and object id at every pixel centre."""

@@ -239,3 +239,23 @@ def test_a_visibility_threshold_excludes_occluded_features() -> None:
     assert dropped.any() and (labels.labeled & (fraction >= 0.5)).any()
     np.testing.assert_array_equal(strict.exclusion == Exclusion.OCCLUDED, dropped)
     np.testing.assert_array_equal(strict.labeled, labels.labeled & (fraction >= 0.5))
+
+
+def test_scalar_fallback_agrees_with_the_vectorized_variant() -> None:
+    config = load_config(ROOT / "scenes" / "podcam15.yaml")
+    state = frame_state(config, 45)
+    look = draw_look(config, frame_rng(15, 45))
+    features = feature_table(config)
+    out = {}
+    for name in ("scalar_rgb", "auto"):
+        renderer = Renderer(config, variant=name, width=96, height=51, spp=1)
+        renderer.pose(state, look)
+        out[name] = (*renderer.geometry_pass(), *renderer.feature_visibility(state, features))
+    select_variant("auto")
+    (d_s, id_s, f_s, c_s), (d_v, id_v, f_v, c_v) = out["scalar_rgb"], out["auto"]
+    assert len(set(id_v.ravel().tolist())) >= 3  # sea, drogue, hose and receiver in view
+    assert (id_s == id_v).mean() > 0.998
+    both = np.isfinite(d_s) & np.isfinite(d_v)
+    np.testing.assert_allclose(d_s[both], d_v[both], rtol=1e-4)
+    np.testing.assert_array_equal(c_s, c_v)
+    np.testing.assert_allclose(f_s, f_v)
