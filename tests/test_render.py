@@ -259,3 +259,17 @@ def test_scalar_fallback_agrees_with_the_vectorized_variant() -> None:
     np.testing.assert_allclose(d_s[both], d_v[both], rtol=1e-4)
     np.testing.assert_array_equal(c_s, c_v)
     np.testing.assert_allclose(f_s, f_v)
+
+
+def test_haze_fades_distance_towards_the_sky() -> None:
+    from datagen.render import _haze
+
+    rgb = np.zeros((2, 3, 3), dtype=np.float32)
+    rgb[0, :] = [1.0, 0.5, 0.25]  # sky row (nothing hit)
+    rgb[1, :] = [0.1, 0.1, 0.1]
+    depth = np.array([[np.inf] * 3, [0.0, 20_000.0, 1e9]], dtype=np.float32)
+    out = _haze(rgb, depth, np.zeros((2, 3), np.uint32), 20_000.0)
+    np.testing.assert_allclose(out[0], rgb[0])  # the sky itself is the airlight
+    np.testing.assert_allclose(out[1, 0], rgb[1, 0])  # nothing in between at zero depth
+    np.testing.assert_allclose(out[1, 1], rgb[1, 1] * np.exp(-1) + rgb[0, 0] * (1 - np.exp(-1)), rtol=1e-6)
+    np.testing.assert_allclose(out[1, 2], rgb[0, 0], rtol=1e-6)  # far away: all haze
