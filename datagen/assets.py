@@ -39,7 +39,7 @@ import trimesh
 from numpy.typing import NDArray
 from scipy.optimize import nnls
 
-from datagen.conventions import OBJECT_NAMES, random_features_rng
+from datagen.conventions import random_features_rng
 from datagen.errors import ConfigError, Problem
 from datagen.features import FeatureTable
 from datagen.files import atomic_path

@@ -230,7 +230,6 @@ class Renderer:
             scene[f"{obj}_group"] = group
             scene[obj] = {"type": "instance", "shapegroup": {"type": "ref", "id": f"{obj}_group"}}
         self._hose_points = None
-        self._hose_faces = None
         self.scene = None
         self._scene_dict = scene
         self._meshes = meshes
@@ -249,7 +248,6 @@ class Renderer:
         scene = dict(self._scene_dict, hose=hose)
         self.scene = mi.load_dict(scene, optimize=False)
         self.params = mi.traverse(self.scene)
-        self._hose_faces = faces
         self._hose_points = hose_points
         # Map every shape's registry id to its object id (scalar variants name shapes instead).
         self._id_table = np.zeros(1, dtype=np.uint32)
@@ -259,8 +257,7 @@ class Renderer:
         for (obj, _), shape in self._meshes.items():
             lookup[int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0])] = self._ids[obj]
         lookup[int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(hose))[0])] = self._ids["hose"]
-        size = max(lookup) + 1
-        self._id_table = np.zeros(size + 1, dtype=np.uint32)
+        self._id_table = np.zeros(max(lookup) + 1, dtype=np.uint32)
         for k, v in lookup.items():
             self._id_table[k] = v
 
@@ -273,7 +270,6 @@ class Renderer:
         p = self.params
         cam_pos = state.world_from_cam[:3, 3]
         render_from_world = make_transform(np.eye(3), -cam_pos)
-        self._render_from_world = render_from_world
         self._world_from_cam = state.world_from_cam
         for obj in RIGID_OBJECTS:
             p[f"{obj}.to_world"] = mi.Transform4f((render_from_world @ state.world_from(obj)).tolist())
@@ -361,7 +357,7 @@ class Renderer:
 
     def _cast_scalar(self, origin, directions, max_t):
         """:meth:`cast` one ray at a time, for the scalar_rgb fallback (slow)."""
-        mi, dr = self._mi, self._dr
+        mi = self._mi
         o = mi.Point3f(*(float(v) for v in origin))
         t = np.full(len(directions), np.inf)
         ids = np.zeros(len(directions), dtype=np.uint32)

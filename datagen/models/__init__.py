@@ -8,7 +8,7 @@ around the mounts and hose port of :mod:`datagen.rig`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Final, Literal
 
 import numpy as np
@@ -98,7 +98,6 @@ class Model:
     anchors: tuple[FeatureAnchor, ...]
     internal: tuple[InternalFeature, ...] = ()
     small_radius_m: float = 0.1
-    notes: dict[str, float] = field(default_factory=dict)
 
     def combined(self) -> trimesh.Trimesh:
         """All parts as one mesh."""

@@ -12,7 +12,7 @@ Coordinates are body axes (x forward, y left, z up), metres.
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import trimesh
@@ -22,7 +22,6 @@ __all__ = [
     "Parts",
     "airfoil_ring",
     "box",
-    "circle_ring",
     "ellipsoid",
     "loft",
     "mirror_y",
@@ -91,15 +90,6 @@ def superellipse_ring(x: float, y: float, z: float, half_width: float, half_heig
     yy = y - half_width * np.sign(c) * np.abs(c) ** p
     zz = z + half_height * np.sign(s) * np.abs(s) ** p
     return np.column_stack([np.full_like(t, x), yy, zz])
-
-
-def circle_ring(center: ArrayLike, axis: ArrayLike, radius: float, n: int,
-                phase: float = 0.0) -> NDArray[np.float64]:
-    """``n`` points on a circle around ``axis`` (the sweep direction), counter-clockwise
-    seen looking back along ``axis``; the first point is along the basis' first vector."""
-    e1, e2, a = _basis(axis)
-    t = phase + np.linspace(0.0, 2 * np.pi, n, endpoint=False)
-    return np.asarray(center, dtype=np.float64) + radius * (np.outer(np.cos(t), e1) - np.outer(np.sin(t), e2))
 
 
 def _basis(axis: ArrayLike) -> tuple[NDArray, NDArray, NDArray]:
@@ -227,11 +217,6 @@ class Parts:
         return out
 
 
-def rotation_about(axis: ArrayLike, angle: float) -> NDArray[np.float64]:
-    """3x3 rotation by ``angle`` radians about ``axis``."""
-    return trimesh.transformations.rotation_matrix(angle, axis)[:3, :3]
-
-
 def transformed(mesh: trimesh.Trimesh, rotation: ArrayLike | None = None,
                 translation: ArrayLike = (0.0, 0.0, 0.0)) -> trimesh.Trimesh:
     """A copy of ``mesh`` rotated about the origin, then translated."""
@@ -242,10 +227,6 @@ def transformed(mesh: trimesh.Trimesh, rotation: ArrayLike | None = None,
     out = mesh.copy()
     out.apply_transform(transform)
     return out
-
-
-def concatenate(meshes: Iterable[trimesh.Trimesh]) -> trimesh.Trimesh:
-    return trimesh.util.concatenate(list(meshes))
 
 
 class Panel:
