@@ -10,7 +10,7 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["atomic_path"]
+__all__ = ["atomic_path", "write_image"]
 
 
 @contextlib.contextmanager
@@ -26,3 +26,20 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     finally:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
+
+
+def write_image(path: str | Path, bgr8, *, jpeg_quality: int = 95) -> Path:
+    """Encode an 8-bit BGR image as PNG, or JPEG when the suffix says so, and write
+    it atomically."""
+    import cv2
+
+    path = Path(path)
+    ext = path.suffix.lower()
+    params = ([cv2.IMWRITE_JPEG_QUALITY, jpeg_quality] if ext in (".jpg", ".jpeg")
+              else [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    ok, data = cv2.imencode(ext, bgr8, params)
+    if not ok:
+        raise RuntimeError(f"image encoding failed for {path}")
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data.tobytes())
+    return path

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from datagen.assets import Feature, ObjectMesh
 from datagen.camera import Intrinsics, project_points
-from datagen.files import atomic_path
+from datagen.files import write_image
 from datagen.models import material_class
 from datagen.rig import body_from_cam_looking
 from datagen.transforms import apply_transform, invert_rigid
@@ -131,10 +131,4 @@ def _mark(image: NDArray[np.uint8], uv: NDArray, seen: NDArray[np.bool_], ids: S
 
 def write_contact_sheet(path: Path, mesh: ObjectMesh, features: Sequence[Feature], **kwargs) -> Path:
     """Render :func:`contact_sheet` and write it as PNG, atomically."""
-    sheet = contact_sheet(mesh, features, **kwargs)
-    with atomic_path(path) as tmp:
-        ok, data = cv2.imencode(".png", sheet)
-        if not ok:
-            raise RuntimeError(f"PNG encoding failed for {path}")
-        tmp.write_bytes(data.tobytes())
-    return Path(path)
+    return write_image(path, contact_sheet(mesh, features, **kwargs))

@@ -412,19 +412,9 @@ def _haze(rgb: NDArray[np.float32], depth: NDArray[np.float32], ids: NDArray[np.
 
 def write_png(path: Path, rgb_linear: NDArray[np.float32], *, quality: int | None = None) -> None:
     """Write 8-bit sRGB (PNG, or JPEG when the suffix says so) atomically."""
-    import cv2
+    from datagen.files import write_image
 
-    from datagen.files import atomic_path
-
-    bgr = to_srgb8(rgb_linear)[..., ::-1]
-    ext = Path(path).suffix.lower()
-    params = ([cv2.IMWRITE_JPEG_QUALITY, quality or 95] if ext in (".jpg", ".jpeg")
-              else [cv2.IMWRITE_PNG_COMPRESSION, 1])
-    ok, data = cv2.imencode(ext, bgr, params)
-    if not ok:
-        raise RuntimeError(f"image encoding failed for {path}")
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(data.tobytes())
+    write_image(path, to_srgb8(rgb_linear)[..., ::-1], jpeg_quality=quality or 95)
 
 
 def write_exr(path: Path, result: RenderResult) -> None:
@@ -483,7 +473,7 @@ def write_gallery(configs, out: Path, *, spp: int = 16, tile=(512, 270)) -> Path
 
     from datagen.approach import frame_state
     from datagen.conventions import frame_rng
-    from datagen.files import atomic_path
+    from datagen.files import write_image
 
     rows = []
     for config in configs:
@@ -498,11 +488,4 @@ def write_gallery(configs, out: Path, *, spp: int = 16, tile=(512, 270)) -> Path
             cv2.putText(image, caption, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
             tiles.append(image)
         rows.append(np.concatenate(tiles, axis=1))
-    sheet = np.concatenate(rows, axis=0)
-    ext = Path(out).suffix.lower()
-    ok, data = cv2.imencode(ext, sheet, [cv2.IMWRITE_JPEG_QUALITY, 90] if ext in (".jpg", ".jpeg") else [])
-    if not ok:
-        raise RuntimeError(f"image encoding failed for {out}")
-    with atomic_path(out) as tmp:
-        tmp.write_bytes(data.tobytes())
-    return Path(out)
+    return write_image(out, np.concatenate(rows, axis=0), jpeg_quality=90)
