@@ -110,9 +110,10 @@ def sensor_dict(intrinsics: Intrinsics, world_from_cam: ArrayLike, spp: int, *,
     }
 
 
-def visible(scene, origin: ArrayLike, points: ArrayLike, tolerance_m: float = 0.01) -> NDArray[np.bool_]:
+def visible(scene, origin: ArrayLike, points: ArrayLike, tolerance_m: float | ArrayLike = 0.01) -> NDArray[np.bool_]:
     """Which ``points`` ``(N, 3)`` are seen from ``origin``: nothing is hit on the way
-    to them, up to ``tolerance_m`` before them (the point's own surface)."""
+    to them, up to ``tolerance_m`` (one value, or one per point) before them (the
+    point's own surface)."""
     import mitsuba as mi
 
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
@@ -120,15 +121,19 @@ def visible(scene, origin: ArrayLike, points: ArrayLike, tolerance_m: float = 0.
     d = p - o
     dist = np.linalg.norm(d, axis=1)
     d /= np.maximum(dist, 1e-12)[:, None]
+    max_t = np.maximum(dist - np.broadcast_to(np.asarray(tolerance_m, dtype=np.float64), dist.shape), 0.0)
     n = len(p)
     if mi.variant().startswith("scalar"):
-        return np.array([not scene.ray_test(mi.Ray3f(mi.Point3f(*map(float, o)), mi.Vector3f(*map(float, di)),
-                                                      float(t - tolerance_m)))
-                         for di, t in zip(d, dist, strict=True)], dtype=bool)
+        seen = np.empty(n, dtype=bool)
+        for i, (di, t) in enumerate(zip(d, max_t, strict=True)):
+            ray = mi.Ray3f(mi.Point3f(*map(float, o)), mi.Vector3f(*map(float, di)))
+            ray.maxt = float(t)  # (Ray3f's third positional argument is the time, not maxt)
+            seen[i] = not scene.ray_test(ray)
+        return seen
     ray = mi.Ray3f(
         mi.Point3f(np.full(n, o[0], np.float32), np.full(n, o[1], np.float32), np.full(n, o[2], np.float32)),
         mi.Vector3f(d[:, 0].astype(np.float32), d[:, 1].astype(np.float32), d[:, 2].astype(np.float32)),
     )
-    ray.maxt = mi.Float((dist - tolerance_m).astype(np.float32))
+    ray.maxt = mi.Float(max_t.astype(np.float32))
     hit = np.asarray(scene.ray_test(ray), dtype=bool).reshape(n)
     return ~hit

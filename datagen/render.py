@@ -33,7 +33,7 @@ from datagen.assets import RIGID_OBJECTS, load_mesh, object_paths
 from datagen.camera import Intrinsics
 from datagen.conventions import CVCAM_FROM_MICAM, OBJECT_NAMES, frame_seed_sequence
 from datagen.models import material_class
-from datagen.mitsuba_util import set_buffer
+from datagen.mitsuba_util import set_buffer, visible
 from datagen.models.drogue import hose_faces, hose_vertices
 from datagen.transforms import make_transform
 
@@ -335,17 +335,15 @@ class Renderer:
         norm = np.linalg.norm(d_cam, axis=1)
         return (d_cam / norm[:, None]).astype(np.float32), (1.0 / norm).astype(np.float32)
 
-    def cast(self, origin_render: NDArray, directions_render: NDArray, max_t=None):
+    def cast(self, origin_render: NDArray, directions_render: NDArray):
         """Intersect rays (render frame); returns (t, object id) as numpy arrays."""
         mi, dr = self._mi, self._dr
         n = len(directions_render)
         if self.variant.startswith("scalar"):
-            return self._cast_scalar(origin_render, directions_render, max_t)
+            return self._cast_scalar(origin_render, directions_render)
         d = np.asarray(directions_render, dtype=np.float32)
         o = np.broadcast_to(np.asarray(origin_render, dtype=np.float32), (n, 3))
         ray = mi.Ray3f(mi.Point3f(o[:, 0], o[:, 1], o[:, 2]), mi.Vector3f(d[:, 0], d[:, 1], d[:, 2]))
-        if max_t is not None:
-            ray.maxt = mi.Float(np.asarray(max_t, dtype=np.float32))
         si = self.scene.ray_intersect(ray, ray_flags=mi.RayFlags.Minimal, coherent=True)
         valid_dr, shape_dr = si.is_valid(), dr.reinterpret_array(mi.UInt32, si.shape)
         dr.eval(valid_dr, si.t, shape_dr)
@@ -355,7 +353,7 @@ class Renderer:
         shape_ids = np.where(valid & (shape_ids < len(self._id_table)), shape_ids, 0)
         return t, self._id_table[shape_ids]
 
-    def _cast_scalar(self, origin, directions, max_t):
+    def _cast_scalar(self, origin, directions):
         """:meth:`cast` one ray at a time, for the scalar_rgb fallback (slow)."""
         mi = self._mi
         o = mi.Point3f(*(float(v) for v in origin))
@@ -363,8 +361,6 @@ class Renderer:
         ids = np.zeros(len(directions), dtype=np.uint32)
         for i, d in enumerate(directions):
             ray = mi.Ray3f(o, mi.Vector3f(*(float(v) for v in d)))
-            if max_t is not None:
-                ray.maxt = float(max_t[i])
             si = self.scene.ray_intersect(ray)
             if si.is_valid():
                 t[i] = si.t
@@ -388,13 +384,10 @@ class Renderer:
         world_from_obj = np.stack([state.world_from(o) for o in features.objects])[features.object_index]
         pts = np.concatenate([features.points_model, features.center_model[:, None]], axis=1)  # (F, P+1, 3)
         world = np.einsum("fij,fpj->fpi", world_from_obj[:, :3, :3], pts) + world_from_obj[:, None, :3, 3]
-        rel = world.reshape(-1, 3) - cam_pos
-        dist = np.linalg.norm(rel, axis=1)
-        dirs = rel / np.maximum(dist, 1e-12)[:, None]
-        t, _ = self.cast(np.zeros(3), dirs, max_t=np.maximum(dist - visibility_tolerance_m(dist), 0.0))
-        z_cam = rel @ state.world_from_cam[:3, 2]
-        seen = (~np.isfinite(t)) & (z_cam > 0)
-        seen = seen.reshape(world.shape[:2])
+        rel = world.reshape(-1, 3) - cam_pos  # the render frame: camera at the origin
+        tolerance = visibility_tolerance_m(np.linalg.norm(rel, axis=1))
+        in_front = rel @ state.world_from_cam[:3, 2] > 0
+        seen = (visible(self.scene, np.zeros(3), rel, tolerance) & in_front).reshape(world.shape[:2])
         p = features.points_model.shape[1]
         mask = np.arange(p)[None, :] < features.n_points[:, None]
         fraction = (seen[:, :p] & mask).sum(axis=1) / features.n_points
