@@ -22,7 +22,7 @@ from datagen.camera import Intrinsics
 from datagen.conventions import CVCAM_FROM_MICAM
 from datagen.errors import DatagenError
 
-__all__ = ["LLVM_HINT", "mitsuba_mesh", "select_variant", "sensor_dict", "visible"]
+__all__ = ["LLVM_HINT", "mitsuba_mesh", "select_variant", "sensor_dict", "visible", "world_from_micam"]
 
 VARIANTS: Final = ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
 LLVM_HINT: Final = (
@@ -86,19 +86,23 @@ def set_buffer(params, key: str, array: ArrayLike) -> None:
     params[key] = type(params[key])(flat)
 
 
+def world_from_micam(world_from_cam: ArrayLike) -> NDArray[np.float64]:
+    """A sensor's Mitsuba ``to_world`` for an OpenCV-convention ``world_from_cam``."""
+    return np.asarray(world_from_cam, dtype=np.float64) @ CVCAM_FROM_MICAM
+
+
 def sensor_dict(intrinsics: Intrinsics, world_from_cam: ArrayLike, spp: int, *,
                 rfilter: str = "box", pixel_format: str = "rgb") -> dict:
     """A perspective sensor matching ``intrinsics`` at the OpenCV ``world_from_cam``."""
     import mitsuba as mi
 
-    world_from_micam = np.asarray(world_from_cam, dtype=np.float64) @ CVCAM_FROM_MICAM
     return {
         "type": "perspective",
         "fov": float(np.degrees(intrinsics.hfov_rad)),
         "fov_axis": "x",
         "near_clip": 0.01,
         "far_clip": 1.0e8,  # beyond the sea plane's edge (see datagen.render.SEA_SIZE_M)
-        "to_world": mi.ScalarTransform4f(world_from_micam.tolist()),
+        "to_world": mi.ScalarTransform4f(world_from_micam(world_from_cam).tolist()),
         "sampler": {"type": "independent", "sample_count": int(spp)},
         "film": {
             "type": "hdrfilm",

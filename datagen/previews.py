@@ -89,7 +89,7 @@ def contact_sheet(mesh: ObjectMesh, features: Sequence[Feature], *, spp: int = 6
     8-bit BGR image (3 x 2 tiles)."""
     import mitsuba as mi
 
-    from datagen.mitsuba_util import select_variant, visible
+    from datagen.mitsuba_util import select_variant, visible, world_from_micam
 
     select_variant(variant)
     bounds = mesh.combined.bounds
@@ -98,10 +98,13 @@ def contact_sheet(mesh: ObjectMesh, features: Sequence[Feature], *, spp: int = 6
     # Far enough that the bounding sphere fits the (narrower) vertical field of view.
     distance = 0.5 * float(np.linalg.norm(bounds[1] - bounds[0])) / math.tan(intrinsics.vfov_rad / 2)
     centers = np.array([f.center_m for f in features])
+    poses = [_view_pose(center, distance, az, el) for _, az, el in VIEWS]
+    scene = _scene(mesh, poses[0], intrinsics, spp)  # loaded once; each view only moves the sensor
+    params = mi.traverse(scene)
     tiles = []
-    for title, az, el in VIEWS:
-        world_from_cam = _view_pose(center, distance, az, el)
-        scene = _scene(mesh, world_from_cam, intrinsics, spp)
+    for (title, _, _), world_from_cam in zip(VIEWS, poses, strict=True):
+        params["sensor.to_world"] = mi.Transform4f(world_from_micam(world_from_cam).tolist())
+        params.update()
         image = np.asarray(mi.util.convert_to_bitmap(mi.render(scene, seed=0)))[..., ::-1].copy()
         seen = visible(scene, world_from_cam[:3, 3], centers, tolerance_m=0.01)
         uv = project_points(apply_transform(invert_rigid(world_from_cam), centers), intrinsics)

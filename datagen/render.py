@@ -31,9 +31,9 @@ from numpy.typing import NDArray
 
 from datagen.assets import RIGID_OBJECTS, load_mesh, object_paths
 from datagen.camera import Intrinsics
-from datagen.conventions import CVCAM_FROM_MICAM, OBJECT_NAMES, frame_seed_sequence
+from datagen.conventions import OBJECT_NAMES, frame_seed_sequence
 from datagen.models import material_class
-from datagen.mitsuba_util import set_buffer, visible
+from datagen.mitsuba_util import set_buffer, visible, world_from_micam
 from datagen.models.drogue import hose_faces, hose_vertices
 from datagen.transforms import make_transform
 
@@ -278,8 +278,8 @@ class Renderer:
         self._set_material("hose.bsdf", look.materials["hose"]["rubber"])
         hose = hose_vertices(state.hose_points_world - cam_pos)
         set_buffer(p, "hose.vertex_positions", hose.astype(np.float32))
-        world_from_micam = render_from_world @ state.world_from_cam @ CVCAM_FROM_MICAM
-        p["sensor.to_world"] = mi.Transform4f(world_from_micam.tolist())
+        sensor = world_from_micam(render_from_world @ state.world_from_cam)
+        p["sensor.to_world"] = mi.Transform4f(sensor.tolist())
         sea = make_transform(np.eye(3), [0.0, 0.0, -cam_pos[2]]) @ np.diag([SEA_SIZE_M / 2, SEA_SIZE_M / 2, 1.0, 1.0])
         p["sea.to_world"] = mi.Transform4f(sea.tolist())
         p["sea.bsdf.roughness.value"] = look.sea_roughness
