@@ -25,6 +25,7 @@ __all__ = [
     "ellipsoid",
     "loft",
     "mirror_y",
+    "on_side",
     "superellipse_ring",
     "tube",
     "wing",
@@ -191,6 +192,13 @@ def mirror_y(mesh: trimesh.Trimesh, y0: float) -> trimesh.Trimesh:
     out.vertices = v
     out.invert()
     return out
+
+
+def on_side(point: ArrayLike, side: int, y0: float = 0.0) -> NDArray[np.float64]:
+    """A point given on the right (-y) of the plane y = ``y0``, on ``side``: -1
+    keeps it, +1 mirrors it to the left."""
+    p = np.asarray(point, dtype=np.float64)
+    return p if side < 0 else np.array([p[0], 2 * y0 - p[1], p[2]])
 
 
 class Parts:

@@ -20,6 +20,7 @@ from datagen.models.geometry import (
     ellipsoid,
     loft,
     mirror_y,
+    on_side,
     superellipse_ring,
     tube,
     wing,
@@ -175,7 +176,9 @@ def build_receiver() -> Model:
             FeatureAnchor.at(f"intake_{label}_upper", (intake_front, y_out, intake_z + intake_h / 2)),
         ]
     for side, label in ((-1, "right"), (1, "left")):
-        m = (lambda p: p) if side < 0 else (lambda p: np.array([p[0], 2 * Y0 - p[1], p[2]]))
+        def m(p, side=side):
+            return on_side(p, side, Y0)
+
         anchors += [
             FeatureAnchor.at(f"lex_{label}_edge", m(lex.le(0.55))),
             FeatureAnchor.at(f"wing_{label}_le_inboard", m(wing_r.le(0.2))),

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from datagen.models import FeatureAnchor, Model
-from datagen.models.geometry import Panel, Parts, decal, ellipsoid, loft, superellipse_ring, tube
+from datagen.models.geometry import Panel, Parts, decal, ellipsoid, loft, on_side, superellipse_ring, tube
 from datagen.rig import HOSE_PORT_TANKER_M
 
 __all__ = ["build_tanker"]
@@ -130,8 +130,7 @@ def build_tanker() -> Model:
     ]
     for side, label in ((-1, "right"), (1, "left")):
         def m(p, side=side):
-            p = np.asarray(p, dtype=np.float64)
-            return p if side < 0 else p * np.array([1.0, -1.0, 1.0])
+            return on_side(p, side)
 
         anchors += [
             FeatureAnchor.at(f"stab_{label}_tip_le", m(stab_r.le(1.0))),
