@@ -129,11 +129,44 @@ def approach(
 
 
 @app.command()
+@user_errors
 def build(
     config: Annotated[Path, typer.Option("--config", help="Scene config file (YAML).")],
+    out: Annotated[Path | None, typer.Option("--out", help="Dataset folder (default: datasets/<config name>).")] = None,
+    frames: Annotated[int | None, typer.Option("--frames", min=1, help="Override dataset.frames.")] = None,
+    seed: Annotated[int | None, typer.Option("--seed", min=0, help="Override dataset.seed.")] = None,
+    spp: Annotated[int | None, typer.Option("--spp", min=1, help="Override render.spp.")] = None,
+    workers: Annotated[int | None, typer.Option("--workers", min=1, help="Shards rendered in parallel "
+                                                "(local: processes, default 1; ray: tasks, default one "
+                                                "per node).")] = None,
+    shard_size: Annotated[int | None, typer.Option("--shard-size", min=1, help="Override dataset.shard_size.")] = None,
+    executor: Annotated[str, typer.Option("--executor", help="local (processes) or ray (RAY_ADDRESS, "
+                                          "else a local Ray cluster).")] = "local",
+    exr: Annotated[bool, typer.Option("--exr", help="Also write linear EXR (R, G, B, Z, object_id).")] = False,
+    overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace a dataset of another config in "
+                                            "--out.")] = False,
+    no_render: Annotated[bool, typer.Option("--no-render", help="Labels and manifests only, no images "
+                                            "(for evaluation).")] = False,
 ) -> None:
-    """Render a sharded, resumable dataset with parquet manifests."""
-    _not_yet("build", 6)
+    """Render a sharded, resumable dataset with YOLO labels and parquet manifests.
+
+    Rerunning the same command after an interruption finishes the missing shards."""
+    from datagen.build import BuildProgress, build_dataset
+    from datagen.config import override_config
+
+    if executor not in ("local", "ray"):
+        raise DatagenError(f"--executor: unknown executor {executor!r} (choose local or ray)")
+    cfg = load_config(config)
+    updates = {"dataset.frames": frames, "dataset.seed": seed, "render.spp": spp,
+               "dataset.shard_size": shard_size, "render.exr": True if exr else None}
+    cfg = override_config(cfg, {k: v for k, v in updates.items() if v is not None})
+    out = out if out is not None else Path("datasets") / cfg.name
+    report = build_dataset(cfg, out, workers=workers, executor=executor, overwrite=overwrite,
+                           render=not no_render, progress=BuildProgress(cfg.name))
+    for line in report.lines():
+        typer.echo(line)
+    if report.interrupted:
+        raise typer.Exit(130)
 
 
 @app.command()

@@ -46,6 +46,7 @@ __all__ = [
     "SkyConfig",
     "TankerConfig",
     "load_config",
+    "override_config",
     "parse_config",
 ]
 
@@ -396,6 +397,12 @@ class DatasetConfig(_Section):
     val_fraction: float = Field(0.2, ge=0.0, lt=1.0)
     """Share of frames assigned to the validation split, decided per frame from the seed."""
 
+    split_by: Literal["frame", "approach"] = "frame"
+    """Unit of the train/val split: 'frame' decides every frame on its own; 'approach'
+    keeps the frames of one approach chain (frames_per_approach consecutive frames,
+    which share a trajectory) in the same split, so that validation frames are not
+    near-duplicates of training frames."""
+
     seed: int = Field(0, ge=0, lt=2**63)
     """Root seed; frame i draws from SeedSequence(seed, spawn_key=(i,))."""
 
@@ -624,3 +631,28 @@ def _resolve_paths(config: Config, base: Path) -> Config:
         }
         objects[name] = spec.model_copy(update=update)
     return config.model_copy(update={"objects": config.objects.model_copy(update=objects)})
+
+
+def override_config(config: Config, updates: dict[str, object], source: str = "command line") -> Config:
+    """``config`` with dotted keys replaced (``{"dataset.frames": 8}``), validated again.
+
+    Raises:
+        ConfigError: one problem per bad value, naming ``source`` and the key.
+    """
+    data = config.model_dump()
+    for dotted, value in updates.items():
+        *parents, leaf = dotted.split(".")
+        section = data
+        for part in parents:
+            section = section[part]
+        if leaf not in section:
+            raise KeyError(f"override of unknown config key {dotted!r}")
+        section[leaf] = value
+    try:
+        return Config.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError([
+            Problem(Path(source), _dotted(tuple(err["loc"])), err["msg"].removeprefix("Value error, "),
+                    value=err.get("input"), has_value="input" in err)
+            for err in exc.errors(include_url=False)
+        ]) from None

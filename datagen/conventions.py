@@ -45,13 +45,18 @@ Transforms
 
 Randomness
     One root seed per config. Frame ``i`` draws everything that is its own
-    (sky, sun, materials, split) from :func:`frame_rng` ``(seed, i)``. Draws
+    (sky, sun, materials) from :func:`frame_rng` ``(seed, i)``. Draws
     shared by the consecutive frames of one approach chain ``a`` (initial pose,
     turbulence, tanker flight, mount perturbation) come from
     :func:`approach_rng` ``(seed, a)``, a separate stream (spawn key
     ``(a, APPROACH_STREAM)``) that can never collide with a frame's. Random
     surface features (paper model I) come from :func:`random_features_rng`
     ``(seed, object)``, spawn key ``(object id - 1, RANDOM_FEATURES_STREAM)``.
+    The train/val split of a frame comes from :func:`split_uniform` ``(seed,
+    unit)``, spawn key ``(unit, SPLIT_STREAM)``, where the unit is the frame
+    index (or the approach chain index with ``dataset.split_by: approach``): a
+    stream of its own, so that changing ``val_fraction`` moves frames between
+    splits without changing any frame's sky, materials or pose.
     No module uses a global RNG.
 """
 
@@ -77,6 +82,7 @@ __all__ = [
     "frame_rng",
     "frame_seed_sequence",
     "random_features_rng",
+    "split_uniform",
 ]
 
 # --- body frames -------------------------------------------------------------
@@ -142,3 +148,15 @@ def random_features_rng(seed: int, object_name: str) -> np.random.Generator:
     """The RNG that places random surface features (paper model I) on one object."""
     key = (OBJECT_NAMES.index(object_name), RANDOM_FEATURES_STREAM)
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=key))
+
+
+#: Second spawn-key element of the train/val split streams.
+SPLIT_STREAM: Final[int] = 3
+
+
+def split_uniform(seed: int, unit: int) -> float:
+    """A uniform number in [0, 1) that decides the split of split unit ``unit``
+    (a frame, or an approach chain): the unit goes to ``val`` when it is below
+    ``val_fraction``. 32 bits of the unit's own seed sequence (cheap: no generator)."""
+    state = np.random.SeedSequence(seed, spawn_key=(unit, SPLIT_STREAM)).generate_state(1, dtype=np.uint32)
+    return float(state[0]) / 2.0**32

@@ -1,0 +1,209 @@
+"""Parquet schemas of a dataset: the per-frame manifests and the feature table.
+
+The one place that knows the column names and types. ``manifests/README.md``
+documents every column; a test checks that the two agree.
+
+- ``manifests/{split}-{shard:05d}.parquet``: one row per frame (:func:`manifest_schema`).
+  The schema metadata carries ``datagen.manifest_version`` and the shard's
+  label counts (``datagen.shard_summary``, JSON).
+- ``features.parquet``: one row per class (:func:`features_schema`): the 3D point
+  set and true centre of every feature in its object's frame, which is all
+  that PnP (and a label audit) needs besides the manifest poses.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from datagen.features import FeatureTable
+from datagen.files import atomic_path
+
+__all__ = [
+    "MANIFEST_VERSION",
+    "TIMING_COLUMNS",
+    "features_schema",
+    "manifest_schema",
+    "read_features",
+    "read_manifest_summary",
+    "write_features",
+    "write_manifest",
+]
+
+#: Version of the manifest and feature-table schemas (bumped on any incompatible change).
+MANIFEST_VERSION: Final = "1"
+#: Manifest columns that measure the run rather than describe the frame: they differ
+#: between two builds of the same config; every other column is identical.
+TIMING_COLUMNS: Final = ("render_s", "frame_s", "worker_rss_mib")
+
+_F64 = pa.float64()
+
+
+def _vec(n: int) -> pa.DataType:
+    return pa.list_(_F64, n)
+
+
+#: A 4x4 homogeneous transform, row-major.
+MATRIX: Final = _vec(16)
+
+FEATURE_RECORD: Final = pa.struct([
+    ("class_id", pa.int32()),
+    ("center_px", _vec(2)),
+    ("tight_xyxy", _vec(4)),
+    ("corrected_xyxy", _vec(4)),
+    ("labeled", pa.bool_()),
+    ("exclusion", pa.string()),
+    ("visible_fraction", _F64),
+    ("center_visible", pa.bool_()),
+])
+
+MATERIAL_RECORD: Final = pa.struct([
+    ("object", pa.string()),
+    ("part_class", pa.string()),
+    ("base_color", _vec(3)),
+    ("roughness", _F64),
+    ("metallic", _F64),
+    ("specular", _F64),
+])
+
+
+def manifest_schema() -> pa.Schema:
+    """The schema of a manifest shard (version in the metadata)."""
+    fields = [
+        pa.field("frame_id", pa.int64(), nullable=False),
+        pa.field("split", pa.string(), nullable=False),
+        pa.field("shard", pa.int32(), nullable=False),
+        pa.field("image_path", pa.string()),
+        pa.field("label_path", pa.string(), nullable=False),
+        pa.field("exr_path", pa.string()),
+        pa.field("width", pa.int32(), nullable=False),
+        pa.field("height", pa.int32(), nullable=False),
+        pa.field("fx", _F64, nullable=False),
+        pa.field("fy", _F64, nullable=False),
+        pa.field("cx", _F64, nullable=False),
+        pa.field("cy", _F64, nullable=False),
+        pa.field("cam_from_world", MATRIX, nullable=False),
+        pa.field("world_from_tanker", MATRIX, nullable=False),
+        pa.field("world_from_receiver", MATRIX, nullable=False),
+        pa.field("world_from_drogue", MATRIX, nullable=False),
+        pa.field("ptd_receiver_m", _vec(3), nullable=False),
+        pa.field("distance_m", _F64, nullable=False),
+        pa.field("seed", pa.int64(), nullable=False),
+        pa.field("render_seed", pa.int64(), nullable=False),
+        pa.field("spp", pa.int32()),
+        pa.field("mount", pa.string(), nullable=False),
+        pa.field("approach_index", pa.int64(), nullable=False),
+        pa.field("approach_number", pa.int32(), nullable=False),
+        pa.field("time_s", _F64, nullable=False),
+        pa.field("turbulence_intensity", _F64, nullable=False),
+        pa.field("bank_deg", _F64, nullable=False),
+        pa.field("sun_elevation_deg", _F64, nullable=False),
+        pa.field("sun_azimuth_deg", _F64, nullable=False),
+        pa.field("sun_direction_world", _vec(3), nullable=False),
+        pa.field("turbidity", _F64, nullable=False),
+        pa.field("sun_scale", _F64, nullable=False),
+        pa.field("sky_scale", _F64, nullable=False),
+        pa.field("exposure_ev", _F64, nullable=False),
+        pa.field("sea_roughness", _F64, nullable=False),
+        pa.field("haze_visibility_m", _F64),
+        pa.field("materials", pa.list_(MATERIAL_RECORD), nullable=False),
+        pa.field("n_labeled", pa.int32(), nullable=False),
+        pa.field("features", pa.list_(FEATURE_RECORD), nullable=False),
+        pa.field("render_s", _F64),
+        pa.field("frame_s", _F64),
+        pa.field("worker_rss_mib", _F64),
+    ]
+    return pa.schema(fields, metadata={"datagen.manifest_version": MANIFEST_VERSION})
+
+
+def write_manifest(path: Path, rows: Sequence[dict], summary: dict) -> Path:
+    """Write one shard's manifest atomically; ``summary`` (label counts, JSON-able)
+    goes into the schema metadata."""
+    schema = manifest_schema()
+    meta = dict(schema.metadata)
+    meta[b"datagen.shard_summary"] = json.dumps(summary, sort_keys=True).encode()
+    table = pa.Table.from_pylist(list(rows), schema=schema.with_metadata(meta))
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+    return Path(path)
+
+
+def read_manifest_summary(path: Path) -> dict:
+    """The label counts a shard's manifest carries in its metadata (no row is read)."""
+    meta = pq.read_schema(path).metadata or {}
+    return json.loads(meta.get(b"datagen.shard_summary", b"{}"))
+
+
+# --- features.parquet ----------------------------------------------------------------
+def features_schema() -> pa.Schema:
+    return pa.schema([
+        pa.field("class_id", pa.int32(), nullable=False),
+        pa.field("name", pa.string(), nullable=False),
+        pa.field("object", pa.string(), nullable=False),
+        pa.field("points_m", pa.list_(_vec(3)), nullable=False),
+        pa.field("center_m", _vec(3), nullable=False),
+        pa.field("size", pa.string(), nullable=False),
+    ], metadata={"datagen.manifest_version": MANIFEST_VERSION})
+
+
+def write_features(path: Path, features: FeatureTable) -> Path:
+    """One row per class: the point set (unpadded) and true centre in its object's frame."""
+    rows = [
+        {
+            "class_id": int(features.class_id[i]),
+            "name": features.name[i],
+            "object": features.objects[features.object_index[i]],
+            "points_m": features.point_set(i).tolist(),
+            "center_m": features.center_model[i].tolist(),
+            "size": features.size[i],
+        }
+        for i in range(len(features))
+    ]
+    table = pa.Table.from_pylist(rows, schema=features_schema())
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp)
+    return Path(path)
+
+
+def read_features(path: Path) -> FeatureTable:
+    """The :class:`FeatureTable` a dataset was labeled with, from its ``features.parquet``."""
+    table = pq.read_table(path).to_pylist()
+    table.sort(key=lambda r: r["class_id"])
+    return FeatureTable.from_point_sets(
+        [np.asarray(r["points_m"], dtype=np.float64) for r in table],
+        objects=[r["object"] for r in table],
+        class_ids=[r["class_id"] for r in table],
+        names=[r["name"] for r in table],
+        centers=[np.asarray(r["center_m"], dtype=np.float64) for r in table],
+        sizes=[r["size"] for r in table],
+    )
+
+
+def matrix_field(m: np.ndarray) -> list[float]:
+    """A 4x4 transform as the 16 row-major floats of a manifest column."""
+    return np.asarray(m, dtype=np.float64).reshape(16).tolist()
+
+
+def feature_records(labels, class_ids: Iterable[int], visible_fraction=None, center_visible=None) -> list[dict]:
+    """The ``features`` column of one frame from its :class:`~datagen.labels.FrameLabels`."""
+    from datagen.labels import Exclusion
+
+    records = []
+    for f, cid in enumerate(class_ids):
+        records.append({
+            "class_id": int(cid),
+            "center_px": labels.center_px[f].tolist(),
+            "tight_xyxy": labels.tight_xyxy[f].tolist(),
+            "corrected_xyxy": labels.corrected_xyxy[f].tolist(),
+            "labeled": bool(labels.exclusion[f] == Exclusion.NONE),
+            "exclusion": Exclusion(int(labels.exclusion[f])).reason,
+            "visible_fraction": None if visible_fraction is None else float(visible_fraction[f]),
+            "center_visible": None if center_visible is None else bool(center_visible[f]),
+        })
+    return records

@@ -1,0 +1,401 @@
+"""datagen build: layout, labels recomputed from the manifests, determinism across
+workers and executors, atomic resumption, locking and refusal."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+import yaml
+from hypothesis import given
+from hypothesis import strategies as st
+
+from datagen.assets import feature_table
+from datagen.build import build_dataset
+from datagen.camera import Intrinsics
+from datagen.config import load_config, override_config
+from datagen.dataset import SPLITS, DatasetLock, frame_split, plan_shards
+from datagen.errors import ConfigError, DatagenError
+from datagen.labels import compute_labels
+from datagen.manifest import TIMING_COLUMNS, features_schema, manifest_schema, read_features
+
+ROOT = Path(__file__).resolve().parents[1]
+
+TINY = """\
+name: tiny
+camera: {mount: wingcam, hfov_deg: 55.0, width: 128, height: 68}
+render: {spp: 1, max_depth: 3, exr: %(exr)s}
+labels: {edge_margin_px: 2.0}
+approach: {frames_per_approach: 4}
+dataset: {frames: 8, shard_size: 3, seed: 7}
+"""
+
+
+def tiny_config(tmp: Path, *, exr: bool = False, **overrides):
+    path = tmp / "tiny.yaml"
+    path.write_text(TINY % {"exr": str(exr).lower()})
+    config = load_config(path)
+    return override_config(config, overrides) if overrides else config
+
+
+def run_cli(*args: str, cwd: Path = ROOT, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "datagen", *args], cwd=cwd, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def manifest_rows(root: Path) -> dict[int, dict]:
+    rows = {}
+    for path in sorted((root / "manifests").glob("*.parquet")):
+        for row in pq.read_table(path).to_pylist():
+            rows[row["frame_id"]] = row
+    return rows
+
+
+def comparable(root: Path) -> dict[int, str]:
+    """Manifest rows without the timing columns, as canonical JSON (NaN-safe equality)."""
+    return {i: json.dumps({k: v for k, v in row.items() if k not in TIMING_COLUMNS}, sort_keys=True)
+            for i, row in manifest_rows(root).items()}
+
+
+def label_files(root: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted((root / "labels").rglob("*.txt"))}
+
+
+def temporaries(root: Path) -> list[Path]:
+    return [p for p in root.rglob(".*") if p.name.endswith(".tmp")]
+
+
+# --- the plan --------------------------------------------------------------------------
+@given(frames=st.integers(1, 300), shard_size=st.integers(1, 64), val=st.floats(0.0, 0.9),
+       seed=st.integers(0, 2**63 - 1), by=st.sampled_from(["frame", "approach"]))
+def test_shards_partition_the_frames(tmp_path_factory, frames, shard_size, val, seed, by) -> None:
+    config = override_config(load_config(ROOT / "scenes/wingcam55.yaml"), {
+        "dataset.frames": frames, "dataset.shard_size": shard_size, "dataset.val_fraction": val,
+        "dataset.seed": seed, "dataset.split_by": by})
+    jobs = plan_shards(config)
+    every = sorted(i for job in jobs for i in job.frames)
+    assert every == list(range(frames))
+    for split in SPLITS:
+        mine = [job for job in jobs if job.split == split]
+        assert [job.shard for job in mine] == list(range(len(mine)))
+        assert all(0 < len(job.frames) <= shard_size for job in mine)
+        assert all(len(job.frames) == shard_size for job in mine[:-1])  # only the last shard is short
+        flat = [i for job in mine for i in job.frames]
+        assert flat == sorted(flat)
+        assert all(frame_split(config, i) == split for i in flat)
+    if by == "approach":
+        k = config.approach.frames_per_approach
+        assert all(frame_split(config, i) == frame_split(config, i - i % k) for i in range(frames))
+
+
+def test_split_fraction_and_independence_from_sharding() -> None:
+    config = override_config(load_config(ROOT / "scenes/wingcam55.yaml"), {"dataset.frames": 5000})
+    splits = [frame_split(config, i) for i in range(5000)]
+    share = splits.count("val") / 5000
+    assert abs(share - 0.2) < 4 * math.sqrt(0.2 * 0.8 / 5000)
+    resharded = override_config(config, {"dataset.shard_size": 7})
+    assert [frame_split(resharded, i) for i in range(5000)] == splits
+    # More validation moves frames train -> val only, never the other way.
+    more = override_config(config, {"dataset.val_fraction": 0.3})
+    assert all(frame_split(more, i) == "val" for i, s in enumerate(splits) if s == "val")
+
+
+def test_overrides_are_validated_and_named() -> None:
+    config = load_config(ROOT / "scenes/wingcam55.yaml")
+    assert override_config(config, {"render.spp": 4}).render.spp == 4
+    with pytest.raises(ConfigError) as err:
+        override_config(config, {"dataset.shard_size": 0})
+    assert str(err.value).startswith("command line: dataset.shard_size: value 0:")
+
+
+# --- metadata files -----------------------------------------------------------------------
+def test_manifest_readme_documents_every_column() -> None:
+    text = (ROOT / "manifests" / "README.md").read_text()
+    documented = set()
+    for line in text.splitlines():
+        if line.startswith("| `"):
+            documented.update(re.findall(r"`([a-z_0-9]+)`", line.split("|")[1]))
+    columns = set(manifest_schema().names) | set(features_schema().names)
+    feature_fields = {f.name for f in manifest_schema().field("features").type.value_type}
+    assert columns | feature_fields <= documented, sorted((columns | feature_fields) - documented)
+
+
+def test_features_parquet_round_trips(tmp_path: Path) -> None:
+    from datagen.manifest import write_features
+
+    config = load_config(ROOT / "scenes/wingcam55-random.yaml")
+    table = feature_table(config)
+    back = read_features(write_features(tmp_path / "f.parquet", table))
+    assert back.name == table.name and back.objects == table.objects and back.size == table.size
+    np.testing.assert_array_equal(back.class_id, table.class_id)
+    np.testing.assert_array_equal(back.n_points, table.n_points)
+    np.testing.assert_array_equal(back.points_model, table.points_model)
+    np.testing.assert_array_equal(back.center_model, table.center_model)
+
+
+# Keys every Ultralytics release since 8.0 accepts in a cfg file.
+ULTRALYTICS_KEYS = {
+    "imgsz", "epochs", "batch", "rect", "close_mosaic", "hsv_h", "hsv_s", "hsv_v", "degrees", "translate",
+    "scale", "shear", "perspective", "flipud", "fliplr", "mosaic", "mixup", "copy_paste",
+}
+
+
+def test_labels_only_build_and_its_metadata(tmp_path: Path) -> None:
+    config = tiny_config(tmp_path)
+    report = build_dataset(config, tmp_path / "ds", render=False)
+    root = tmp_path / "ds"
+    assert report.frames == 8 and not report.interrupted and report.rendered == 0
+    data = yaml.safe_load((root / "data.yaml").read_text())
+    assert "path" not in data
+    assert (root / data["train"]).resolve() == root / "images" / "train"
+    assert data["names"] == dict(enumerate(feature_table(config).name)) and data["nc"] == 80
+    hyp = yaml.safe_load((root / "hyp.yaml").read_text())
+    assert set(hyp) <= ULTRALYTICS_KEYS
+    assert hyp["fliplr"] == 0.0 and hyp["mosaic"] == 0.0 and hyp["translate"] == 0.0 and hyp["scale"] == 0.0
+    doc = json.loads((root / "dataset.json").read_text())
+    assert doc["image_width"] == 128 and doc["image_height"] == 68
+    assert doc["edge_margin_px"] == 2.0 and doc["corrected"] is True and doc["pixel_convention"] == "continuous"
+    assert [o["name"] for o in doc["objects"]] == ["tanker", "receiver", "drogue", "hose"]
+    assert [o["id"] for o in doc["objects"]] == [1, 2, 3, 4]
+    assert doc["config"]["dataset"]["frames"] == 8 and doc["manifest_version"] == "1"
+    assert sum(s["frames"] for s in doc["splits"].values()) == 8
+    rows = manifest_rows(root)
+    assert sorted(rows) == list(range(8))
+    assert all(r["image_path"] is None and r["render_s"] is None for r in rows.values())
+    assert all(f["visible_fraction"] is None for r in rows.values() for f in r["features"])
+    assert pq.read_schema(next((root / "manifests").glob("*.parquet"))).metadata[
+        b"datagen.manifest_version"] == b"1"
+    assert not temporaries(root)
+
+
+def test_a_folder_that_is_not_a_dataset_is_never_touched(tmp_path: Path) -> None:
+    config = tiny_config(tmp_path)
+    (tmp_path / "ds").mkdir()
+    precious = tmp_path / "ds" / "thesis.tex"
+    precious.write_text("years of work")
+    for overwrite in (False, True):
+        with pytest.raises(DatagenError, match="not a datagen dataset"):
+            build_dataset(config, tmp_path / "ds", render=False, overwrite=overwrite)
+    assert sorted(p.name for p in (tmp_path / "ds").iterdir()) == [".datagen.lock", "thesis.tex"]
+    assert precious.read_text() == "years of work"
+
+
+def test_another_config_is_refused_unless_overwrite(tmp_path: Path) -> None:
+    root = tmp_path / "ds"
+    build_dataset(tiny_config(tmp_path), root, render=False)
+    before = label_files(root)
+    other = tiny_config(tmp_path, **{"dataset.seed": 8})
+    with pytest.raises(DatagenError, match=r"\(dataset\.seed 7 -> 8\); use --overwrite"):
+        build_dataset(other, root, render=False)
+    assert label_files(root) == before
+    build_dataset(other, root, render=False, overwrite=True)
+    fresh = tmp_path / "fresh"
+    build_dataset(other, fresh, render=False)
+    assert label_files(root) == label_files(fresh) and comparable(root) == comparable(fresh)
+    assert json.loads((root / "dataset.json").read_text())["config"]["dataset"]["seed"] == 8
+
+
+def test_a_running_build_locks_the_folder(tmp_path: Path) -> None:
+    config_path = tmp_path / "tiny.yaml"
+    tiny_config(tmp_path)
+    root = tmp_path / "ds"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time; from pathlib import Path; from datagen.dataset import "
+         "DatasetLock; DatasetLock(Path(sys.argv[1])).acquire(); print('locked', flush=True); time.sleep(120)",
+         str(root)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        out = run_cli("build", "--config", str(config_path), "--out", str(root), "--no-render")
+        assert out.returncode == 2, out.stderr
+        assert out.stderr.strip() == (f"{root}: another datagen build (pid {holder.pid} on {os.uname().nodename}) "
+                                      "is writing this dataset; wait for it to finish or choose another --out")
+        assert [p.name for p in root.iterdir()] == [".datagen.lock"]  # nothing written
+        with pytest.raises(DatagenError):
+            DatasetLock(root).acquire()  # the same refusal in-process
+    finally:
+        holder.kill()
+        holder.wait()
+    with DatasetLock(root):  # released by the kernel when its holder died
+        pass
+
+
+def test_bad_executor_is_one_line(tmp_path: Path) -> None:
+    tiny_config(tmp_path)
+    out = run_cli("build", "--config", str(tmp_path / "tiny.yaml"), "--out", str(tmp_path / "ds"),
+                  "--executor", "spark")
+    assert out.returncode == 2 and out.stderr.strip().splitlines() == [
+        "--executor: unknown executor 'spark' (choose local or ray)"]
+    assert not (tmp_path / "ds").exists()
+
+
+# --- rendered builds ---------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory) -> tuple[Path, object]:
+    """A tiny rendered build (with EXR), one worker, in this process."""
+    tmp = tmp_path_factory.mktemp("reference")
+    config = tiny_config(tmp, exr=True)
+    report = build_dataset(config, tmp / "ds", workers=1)
+    assert report.rendered == 8 and not report.interrupted
+    return tmp / "ds", config
+
+
+def img2label(image: str) -> str:
+    """Ultralytics' rule: last /images/ -> /labels/, extension -> .txt."""
+    sa, sb = f"{os.sep}images{os.sep}", f"{os.sep}labels{os.sep}"
+    return sb.join(image.rsplit(sa, 1)).rsplit(".", 1)[0] + ".txt"
+
+
+@pytest.mark.render
+def test_layout_is_what_ultralytics_reads(reference) -> None:
+    root, config = reference
+    rows = manifest_rows(root)
+    images = sorted((root / "images").rglob("*.png"))
+    assert len(images) == 8 == len(rows)
+    for row in rows.values():
+        image = root / row["image_path"]
+        assert img2label(str(image)) == str(root / row["label_path"])
+        assert row["image_path"].startswith(f"images/{row['split']}/{row['shard']:05d}/")
+        pixels = cv2.imread(str(image), cv2.IMREAD_UNCHANGED)
+        assert pixels.dtype == np.uint8 and pixels.shape == (68, 128, 3)
+        assert (root / row["exr_path"]).is_file()
+    data = yaml.safe_load((root / "data.yaml").read_text())
+    for split in SPLITS:
+        listed = {str(p) for p in (root / data[split]).rglob("*.png")}
+        assert listed == {str(root / r["image_path"]) for r in rows.values() if r["split"] == split}
+    assert not temporaries(root)
+
+
+@pytest.mark.render
+def test_labels_recompute_from_manifest_and_features_alone(reference) -> None:
+    root, config = reference
+    features = read_features(root / "features.parquet")
+    doc = json.loads((root / "dataset.json").read_text())
+    lines_checked = 0
+    for row in manifest_rows(root).values():
+        k = Intrinsics(row["width"], row["height"], row["fx"], row["fy"], row["cx"], row["cy"])
+        cam_from_world = np.reshape(row["cam_from_world"], (4, 4))
+        cam_from_objects = np.stack([cam_from_world @ np.reshape(row[f"world_from_{o}"], (4, 4))
+                                     for o in features.objects])
+        labels = compute_labels(features, cam_from_objects, k, edge_margin_px=doc["edge_margin_px"],
+                                corrected=doc["corrected"])
+        stored = row["features"]
+        assert [f["class_id"] for f in stored] == features.class_id.tolist()
+        for name in ("center_px", "tight_xyxy", "corrected_xyxy"):
+            np.testing.assert_allclose(np.array([f[name] for f in stored], dtype=float),
+                                       getattr(labels, name), rtol=0, atol=1e-6)
+        labeled = np.array([f["labeled"] for f in stored])
+        np.testing.assert_array_equal(labeled, labels.labeled)
+        # The label file holds exactly the labeled features, centred on the true centre.
+        lines = (root / row["label_path"]).read_text().splitlines()
+        assert len(lines) == labeled.sum() == row["n_labeled"]
+        for line in lines:
+            cls, cx, cy, w, h = line.split()
+            f = int(cls)
+            box = labels.corrected_xyxy[f]
+            expected = [labels.center_px[f, 0] / k.width, labels.center_px[f, 1] / k.height,
+                        (box[2] - box[0]) / k.width, (box[3] - box[1]) / k.height]
+            np.testing.assert_allclose([float(cx), float(cy), float(w), float(h)], expected, atol=5e-7)
+            lines_checked += 1
+    assert lines_checked > 100
+
+
+@pytest.mark.render
+def test_label_files_follow_ultralytics_rules(reference) -> None:
+    root, _ = reference
+    nc = yaml.safe_load((root / "data.yaml").read_text())["nc"]
+    for path in (root / "labels").rglob("*.txt"):
+        text = path.read_text()
+        if not text:
+            continue
+        assert text.endswith("\n")
+        rows = np.array([[float(v) for v in line.split()] for line in text.splitlines()])
+        assert rows.shape[1] == 5
+        assert np.all(rows[:, 0] == np.round(rows[:, 0])) and rows[:, 0].max() < nc and rows.min() >= 0
+        assert rows[:, 1:].max() <= 1.0
+        assert np.all(rows[:, 3:] > 0)
+        assert len(np.unique(rows, axis=0)) == len(rows)
+        # Each box lies inside the image.
+        assert np.all(rows[:, 1] - rows[:, 3] / 2 >= -1e-6) and np.all(rows[:, 1] + rows[:, 3] / 2 <= 1 + 1e-6)
+
+
+@pytest.mark.render
+def test_rendered_and_labels_only_builds_label_alike(reference, tmp_path: Path) -> None:
+    root, config = reference
+    build_dataset(config, tmp_path / "ds", render=False)
+    assert label_files(tmp_path / "ds") == label_files(root)
+
+
+@pytest.mark.render
+def test_two_workers_give_the_same_dataset(reference, tmp_path: Path) -> None:
+    root, config = reference
+    report = build_dataset(config, tmp_path / "ds", workers=2)
+    assert report.rendered == 8
+    assert label_files(tmp_path / "ds") == label_files(root)
+    assert comparable(tmp_path / "ds") == comparable(root)
+    pids = {row["worker_rss_mib"] > 0 for row in manifest_rows(tmp_path / "ds").values()}
+    assert pids == {True}
+
+
+@pytest.mark.render
+@pytest.mark.ray
+def test_ray_gives_the_same_dataset(reference, ray_cluster, tmp_path: Path) -> None:
+    root, config = reference
+    report = build_dataset(config, tmp_path / "ds", workers=2, executor="ray")
+    assert report.rendered == 8
+    assert label_files(tmp_path / "ds") == label_files(root)
+    assert comparable(tmp_path / "ds") == comparable(root)
+
+
+@pytest.mark.render
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT], ids=["SIGKILL", "Ctrl-C"])
+def test_resume_after_an_interruption_finishes_only_the_missing_shards(reference, tmp_path: Path, sig) -> None:
+    root, _ = reference
+    config_path = tmp_path / "tiny.yaml"
+    tiny_config(tmp_path, exr=True)
+    out = tmp_path / "ds"
+    args = [sys.executable, "-m", "datagen", "build", "--config", str(config_path), "--out", str(out)]
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        # Wait until a shard has a finished frame (its EXR, written after the PNG) but no
+        # manifest yet: then kill.
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            done = {p.stem for p in (out / "manifests").glob("*.parquet")} if (out / "manifests").is_dir() else set()
+            started = {f"{p.parent.parent.name}-{p.parent.name}" for p in (out / "exr").rglob("*.exr")} \
+                if (out / "exr").is_dir() else set()
+            if done and started - done:
+                break
+            time.sleep(0.005)
+        proc.send_signal(sig)
+        stdout, _ = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+        proc.wait()
+    if sig == signal.SIGINT:
+        assert proc.returncode == 130
+        assert "interrupted:" in stdout and "run the same command again" in stdout
+        assert not temporaries(out)
+    done_before = {p.name: p.stat().st_mtime_ns for p in (out / "manifests").glob("*.parquet")}
+    assert 0 < len(done_before) < len(plan_shards(reference[1]))
+    rerun = run_cli(*args[3:])
+    assert rerun.returncode == 0, rerun.stderr
+    assert f"resumed: {len(done_before)} of" in rerun.stdout
+    # Finished shards were left alone; the rest match an uninterrupted build.
+    assert {name: (out / "manifests" / name).stat().st_mtime_ns for name in done_before} == done_before
+    assert label_files(out) == label_files(root)
+    assert comparable(out) == comparable(root)
+    assert not temporaries(out)
+    rendered = [r for r in manifest_rows(out).values() if r["render_s"] is not None]
+    assert len(rendered) < 8  # frames whose image survived the kill were not rendered again
