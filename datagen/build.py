@@ -26,11 +26,13 @@ import contextlib
 import dataclasses
 import math
 import os
+import platform
 import signal
 import sys
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -85,6 +87,10 @@ def _rss_mib() -> float:
         return math.nan
 
 
+#: Frames whose images may still be in the writer thread while the next one renders.
+MAX_PENDING_WRITES = 1
+
+
 class ShardWriter:
     """Renders and labels whole shards in one process: one scene, one feature table."""
 
@@ -99,6 +105,10 @@ class ShardWriter:
         self.intrinsics = Intrinsics.from_hfov_deg(cam.width, cam.height, cam.hfov_deg)
         self.renderer = None
         self._stop: Callable[[], bool] = lambda: False
+        # Images are encoded and written by one background thread while the next frame
+        # renders; at most MAX_PENDING_WRITES frames wait, so memory stays bounded.
+        self._io = ThreadPoolExecutor(1, thread_name_prefix="datagen-write")
+        self._writes: deque[Future] = deque()
         if render:
             from datagen.render import Renderer
 
@@ -135,6 +145,7 @@ class ShardWriter:
                 render_s += row["render_s"]
             if progress is not None:
                 progress(1)
+        self._wait_for_writes(0)
         summary = ShardSummary(job.name, len(job.frames), labels, dict(excluded), rendered, render_s)
         write_manifest(self.layout.manifest(job), rows, summary.counts())
         summary.wall_s = time.perf_counter() - start
@@ -212,6 +223,7 @@ class ShardWriter:
             "features": feature_records(labels, features.class_id, fraction, center_visible),
             "render_s": render_s,
             "frame_s": time.perf_counter() - started,
+            "worker": f"{platform.node()}:{os.getpid()}",
             "worker_rss_mib": _rss_mib(),
         }
         return row
@@ -228,10 +240,21 @@ class ShardWriter:
         result = renderer.render(state, look, seed, geometry=exr is not None)
         if self._stop():
             raise KeyboardInterrupt
-        write_png(image, result.rgb, quality=self.config.render.jpeg_quality)
-        if exr is not None:
-            write_exr(exr, result)
+        quality = self.config.render.jpeg_quality
+
+        def write() -> None:  # the PNG first: a frame is complete once its last file exists
+            write_png(image, result.rgb, quality=quality)
+            if exr is not None:
+                write_exr(exr, result)
+
+        self._writes.append(self._io.submit(write))
+        self._wait_for_writes(MAX_PENDING_WRITES)
         return result.render_s
+
+    def _wait_for_writes(self, keep: int) -> None:
+        """Wait until at most ``keep`` image writes are pending; re-raise their errors."""
+        while len(self._writes) > keep:
+            self._writes.popleft().result()
 
 
 def _sun_direction(state, look) -> np.ndarray:

@@ -27,7 +27,7 @@ from datagen.files import atomic_path
 
 __all__ = [
     "MANIFEST_VERSION",
-    "TIMING_COLUMNS",
+    "RUN_COLUMNS",
     "features_schema",
     "manifest_schema",
     "read_features",
@@ -38,9 +38,9 @@ __all__ = [
 
 #: Version of the manifest and feature-table schemas (bumped on any incompatible change).
 MANIFEST_VERSION: Final = "1"
-#: Manifest columns that measure the run rather than describe the frame: they differ
-#: between two builds of the same config; every other column is identical.
-TIMING_COLUMNS: Final = ("render_s", "frame_s", "worker_rss_mib")
+#: Manifest columns that describe the run rather than the frame: they differ between
+#: two builds of the same config; every other column is identical.
+RUN_COLUMNS: Final = ("render_s", "frame_s", "worker", "worker_rss_mib")
 
 _F64 = pa.float64()
 
@@ -117,6 +117,7 @@ def manifest_schema() -> pa.Schema:
         pa.field("features", pa.list_(FEATURE_RECORD), nullable=False),
         pa.field("render_s", _F64),
         pa.field("frame_s", _F64),
+        pa.field("worker", pa.string()),
         pa.field("worker_rss_mib", _F64),
     ]
     return pa.schema(fields, metadata={"datagen.manifest_version": MANIFEST_VERSION})

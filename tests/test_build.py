@@ -28,7 +28,7 @@ from datagen.config import load_config, override_config
 from datagen.dataset import SPLITS, DatasetLock, frame_split, plan_shards
 from datagen.errors import ConfigError, DatagenError
 from datagen.labels import compute_labels
-from datagen.manifest import TIMING_COLUMNS, features_schema, manifest_schema, read_features
+from datagen.manifest import RUN_COLUMNS, features_schema, manifest_schema, read_features
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -64,7 +64,7 @@ def manifest_rows(root: Path) -> dict[int, dict]:
 
 def comparable(root: Path) -> dict[int, str]:
     """Manifest rows without the timing columns, as canonical JSON (NaN-safe equality)."""
-    return {i: json.dumps({k: v for k, v in row.items() if k not in TIMING_COLUMNS}, sort_keys=True)
+    return {i: json.dumps({k: v for k, v in row.items() if k not in RUN_COLUMNS}, sort_keys=True)
             for i, row in manifest_rows(root).items()}
 
 
