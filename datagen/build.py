@@ -158,7 +158,7 @@ class ShardWriter:
         from datagen.files import atomic_path
         from datagen.labels import compute_labels, yolo_lines
         from datagen.manifest import feature_records, matrix_field
-        from datagen.render import draw_look, render_seed
+        from datagen.render import Renderer, draw_look, render_seed
 
         started = time.perf_counter()
         cfg, k, features, layout = self.config, self.intrinsics, self.features, self.layout
@@ -183,7 +183,7 @@ class ShardWriter:
         lines = yolo_lines(labels, features.class_id, k.width, k.height)
         with atomic_path(layout.root / label_rel) as tmp:
             tmp.write_text("".join(line + "\n" for line in lines))
-        sun = self.renderer.sun_direction_world(state, look) if self.renderer else _sun_direction(state, look)
+        sun = Renderer.sun_direction_world(state, look)
         row = {
             "frame_id": i,
             "split": job.split,
@@ -257,12 +257,6 @@ class ShardWriter:
             self._writes.popleft().result()
 
 
-def _sun_direction(state, look) -> np.ndarray:
-    from datagen.render import Renderer
-
-    return Renderer.sun_direction_world(state, look)
-
-
 # --- executors ---------------------------------------------------------------------------
 def _cpu_count() -> int:
     with contextlib.suppress(AttributeError):
@@ -333,6 +327,7 @@ def _ctrl_c_flag():
 
 def _run_local(config: Config, root: Path, jobs: list[ShardJob], workers: int, render: bool,
                progress: Progress, done: Callable[[ShardSummary], None]) -> None:
+    workers = min(workers, len(jobs))
     threads = max(1, _cpu_count() // workers)
     if workers == 1:
         writer = ShardWriter(config, root, threads=threads, render=render)
@@ -345,7 +340,7 @@ def _run_local(config: Config, root: Path, jobs: list[ShardJob], workers: int, r
 
     ctx = mp.get_context("spawn")  # never fork a process that may hold Dr.Jit threads
     queue = ctx.Queue()
-    with ctx.Pool(min(workers, len(jobs)), initializer=_pool_init,
+    with ctx.Pool(workers, initializer=_pool_init,
                   initargs=(config, str(root), threads, render, queue)) as pool:
         pending = [pool.apply_async(_pool_run, (job,)) for job in jobs]
         while pending:

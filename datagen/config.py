@@ -286,10 +286,12 @@ class SkyConfig(_Section):
     """Atmospheric turbidity (sunsky accepts 1 to 10)."""
 
     sun_scale: Range = (0.8, 1.2)
-    """Multiplier on the sun's radiance."""
+    """Multiplier on the sun's radiance, drawn from 5 evenly spaced levels across the
+    range (Mitsuba bakes it into the compiled kernel: a continuous draw would compile
+    a new kernel for every frame)."""
 
     sky_scale: Range = (0.8, 1.2)
-    """Multiplier on the sky's radiance."""
+    """Multiplier on the sky's radiance, drawn from 5 evenly spaced levels across the range."""
 
     @model_validator(mode="after")
     def _physical(self) -> SkyConfig:

@@ -43,7 +43,8 @@ from datagen.files import atomic_path
 from datagen.manifest import MANIFEST_VERSION
 
 __all__ = [
-    "DATASET_FORMAT",
+    "DATASET_SCHEMA",
+    "DATASET_SCHEMA_VERSION",
     "SPLITS",
     "DatasetLock",
     "Layout",
@@ -55,7 +56,9 @@ __all__ = [
     "write_dataset_files",
 ]
 
-DATASET_FORMAT: Final = "datagen.dataset/1"
+DATASET_SCHEMA: Final = "datagen.dataset"
+#: Version of dataset.json's layout (bumped on any incompatible change).
+DATASET_SCHEMA_VERSION: Final = 1
 SPLITS: Final = ("train", "val")
 #: Everything datagen writes at the top of a dataset folder (``--overwrite`` removes these only).
 OWNED: Final = ("manifests", "images", "labels", "exr", "data.yaml", "hyp.yaml", "features.parquet",
@@ -185,7 +188,8 @@ def dataset_document(config: Config, jobs: list[ShardJob], fingerprint: str, ass
                 "mesh_sha256": assets[name]["mesh_sha256"] if name in assets else None}
                for i, name in enumerate(OBJECT_NAMES)]
     return {
-        "format": DATASET_FORMAT,
+        "schema": DATASET_SCHEMA,
+        "schema_version": DATASET_SCHEMA_VERSION,
         "manifest_version": MANIFEST_VERSION,
         "name": config.name,
         "fingerprint": fingerprint,

@@ -22,7 +22,16 @@ from datagen.camera import Intrinsics
 from datagen.conventions import CVCAM_FROM_MICAM
 from datagen.errors import DatagenError
 
-__all__ = ["LLVM_HINT", "mitsuba_mesh", "select_variant", "sensor_dict", "visible", "world_from_micam"]
+__all__ = [
+    "LLVM_HINT",
+    "aligned_float32",
+    "jit_vectors",
+    "mitsuba_mesh",
+    "select_variant",
+    "sensor_dict",
+    "visible",
+    "world_from_micam",
+]
 
 VARIANTS: Final = ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
 LLVM_HINT: Final = (
@@ -86,6 +95,28 @@ def set_buffer(params, key: str, array: ArrayLike) -> None:
     params[key] = type(params[key])(flat)
 
 
+def aligned_float32(values: ArrayLike) -> NDArray[np.float32]:
+    """A contiguous float32 copy of ``values`` that starts on a 64-byte boundary.
+
+    Dr.Jit maps numpy memory into a kernel without copying, and compiles the kernel
+    for the buffer's alignment: with numpy's arbitrary alignment every ray-casting
+    kernel would exist in aligned and unaligned variants, compiled anew by chance."""
+    flat = np.asarray(values, dtype=np.float32).ravel()
+    buffer = np.empty(flat.size + 16, dtype=np.float32)
+    start = (-buffer.ctypes.data % 64) // 4
+    out = buffer[start:start + flat.size]
+    out[...] = flat
+    return out
+
+
+def jit_vectors(cls, xyz: ArrayLike):
+    """``cls`` (``mi.Point3f``, ``mi.Vector3f``) of the rows of an ``(N, 3)`` array."""
+    import mitsuba as mi
+
+    xyz = np.asarray(xyz).reshape(-1, 3)
+    return cls(*(mi.Float(aligned_float32(xyz[:, i])) for i in range(3)))
+
+
 def world_from_micam(world_from_cam: ArrayLike) -> NDArray[np.float64]:
     """A sensor's Mitsuba ``to_world`` for an OpenCV-convention ``world_from_cam``."""
     return np.asarray(world_from_cam, dtype=np.float64) @ CVCAM_FROM_MICAM
@@ -134,10 +165,7 @@ def visible(scene, origin: ArrayLike, points: ArrayLike, tolerance_m: float | Ar
             ray.maxt = float(t)  # (Ray3f's third positional argument is the time, not maxt)
             seen[i] = not scene.ray_test(ray)
         return seen
-    ray = mi.Ray3f(
-        mi.Point3f(np.full(n, o[0], np.float32), np.full(n, o[1], np.float32), np.full(n, o[2], np.float32)),
-        mi.Vector3f(d[:, 0].astype(np.float32), d[:, 1].astype(np.float32), d[:, 2].astype(np.float32)),
-    )
-    ray.maxt = mi.Float(max_t.astype(np.float32))
+    ray = mi.Ray3f(jit_vectors(mi.Point3f, np.broadcast_to(o, (n, 3))), jit_vectors(mi.Vector3f, d))
+    ray.maxt = mi.Float(aligned_float32(max_t))
     hit = np.asarray(scene.ray_test(ray), dtype=bool).reshape(n)
     return ~hit

@@ -33,7 +33,7 @@ from datagen.assets import RIGID_OBJECTS, load_mesh, object_paths
 from datagen.camera import Intrinsics
 from datagen.conventions import OBJECT_NAMES, frame_seed_sequence
 from datagen.models import material_class
-from datagen.mitsuba_util import set_buffer, visible, world_from_micam
+from datagen.mitsuba_util import jit_vectors, set_buffer, visible, world_from_micam
 from datagen.models.drogue import hose_faces, hose_vertices
 from datagen.transforms import make_transform
 
@@ -58,6 +58,8 @@ __all__ = [
 SEA_SIZE_M: Final = 2.0e7
 #: Linear radiance that maps to sRGB white at 0 EV (sunsky radiance is in W/(m^2 sr nm)-like units).
 WHITE_RADIANCE: Final = 0.7
+#: Number of distinct values sun_scale and sky_scale take (see :func:`_levels`).
+SKY_SCALE_LEVELS: Final = 5
 #: Haze visibility (distance at which contrast falls to 1/e), metres, when haze is on.
 HAZE_VISIBILITY_M: Final = (15_000.0, 60_000.0)
 
@@ -115,6 +117,18 @@ def _uniform(rng: np.random.Generator, bounds) -> float:
     return float(rng.uniform(lo, hi))
 
 
+def _levels(rng: np.random.Generator, bounds, levels: int | None = None) -> float:
+    """A uniform draw in ``bounds`` rounded to one of :data:`SKY_SCALE_LEVELS` evenly
+    spaced values. Mitsuba's ``sunsky`` keeps its sun and sky scales as scalars that
+    are baked into the compiled kernel: a continuous draw would compile (and keep in
+    memory) a new kernel for every frame; a few levels bound the kernels at
+    ``levels**2`` for the whole dataset."""
+    levels = levels or SKY_SCALE_LEVELS
+    lo, hi = bounds
+    step = round(float(rng.uniform(0.0, 1.0)) * (levels - 1))
+    return lo + (hi - lo) * step / (levels - 1)
+
+
 def _hsv(rng: np.random.Generator, saturation, value) -> tuple[float, float, float]:
     h = float(rng.uniform(0.0, 1.0))
     return tuple(float(c) for c in colorsys.hsv_to_rgb(h, _uniform(rng, saturation), _uniform(rng, value)))
@@ -128,8 +142,8 @@ def draw_look(config: Config, rng: np.random.Generator) -> FrameLook:
         sun_elevation_deg=_uniform(rng, sky.sun_elevation_deg),
         sun_azimuth_deg=_uniform(rng, sky.sun_azimuth_deg),
         turbidity=_uniform(rng, sky.turbidity),
-        sun_scale=_uniform(rng, sky.sun_scale),
-        sky_scale=_uniform(rng, sky.sky_scale),
+        sun_scale=_levels(rng, sky.sun_scale),
+        sky_scale=_levels(rng, sky.sky_scale),
         exposure_ev=_uniform(rng, r.exposure_ev),
         sea_roughness=_uniform(rng, (0.05, 0.25)),
     )
@@ -341,9 +355,8 @@ class Renderer:
         n = len(directions_render)
         if self.variant.startswith("scalar"):
             return self._cast_scalar(origin_render, directions_render)
-        d = np.asarray(directions_render, dtype=np.float32)
         o = np.broadcast_to(np.asarray(origin_render, dtype=np.float32), (n, 3))
-        ray = mi.Ray3f(mi.Point3f(o[:, 0], o[:, 1], o[:, 2]), mi.Vector3f(d[:, 0], d[:, 1], d[:, 2]))
+        ray = mi.Ray3f(jit_vectors(mi.Point3f, o), jit_vectors(mi.Vector3f, directions_render))
         si = self.scene.ray_intersect(ray, ray_flags=mi.RayFlags.Minimal, coherent=True)
         valid_dr, shape_dr = si.is_valid(), dr.reinterpret_array(mi.UInt32, si.shape)
         dr.eval(valid_dr, si.t, shape_dr)

@@ -169,6 +169,8 @@ def test_labels_only_build_and_its_metadata(tmp_path: Path) -> None:
     assert [o["name"] for o in doc["objects"]] == ["tanker", "receiver", "drogue", "hose"]
     assert [o["id"] for o in doc["objects"]] == [1, 2, 3, 4]
     assert doc["config"]["dataset"]["frames"] == 8 and doc["manifest_version"] == "1"
+    assert doc["schema"] == "datagen.dataset" and doc["schema_version"] == 1
+    assert {"datagen", "mitsuba", "drjit", "numpy", "pyarrow"} <= set(doc["versions"])
     assert sum(s["frames"] for s in doc["splits"].values()) == 8
     rows = manifest_rows(root)
     assert sorted(rows) == list(range(8))

@@ -14,7 +14,7 @@ import pytest
 from datagen.approach import frame_state
 from datagen.assets import feature_table, load_mesh, object_paths
 from datagen.camera import Intrinsics, project_points
-from datagen.config import load_config
+from datagen.config import load_config, override_config
 from datagen.conventions import frame_rng
 from datagen.errors import DatagenError
 from datagen.render import Renderer, draw_look, object_ids, render_seed, to_srgb8, write_exr
@@ -171,6 +171,35 @@ def test_looks_are_drawn_from_the_frame_rng_within_the_config() -> None:
     assert sky.turbidity[0] <= a.turbidity <= sky.turbidity[1]
     lo, hi = config.randomization.materials.paint_roughness
     assert all(lo <= m["paint"].roughness <= hi for m in a.materials.values())
+
+
+def test_frames_reuse_compiled_kernels() -> None:
+    """Every per-frame parameter reaches Mitsuba without being baked into a kernel, except
+    the sunsky scales, which take only a few levels: memory and compile time per frame stay
+    flat over long builds (a continuous sun_scale draw compiled a new kernel every frame)."""
+    import drjit as dr
+
+    config = override_config(load_config(ROOT / "scenes" / "wingcam55.yaml"), {
+        "render.spp": 1, "camera.width": 16, "camera.height": 9, "labels.edge_margin_px": 1.0})
+    scales = {(draw_look(config, frame_rng(55, i)).sun_scale, draw_look(config, frame_rng(55, i)).sky_scale)
+              for i in range(300)}
+    assert len(scales) == 25  # 5 levels each, all used
+    renderer = Renderer(config, threads=1)
+    features = feature_table(config)
+    sun, sky = next(iter(scales))
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        seen: set[str] = set()
+        for n, i in enumerate((0, 17, 40, 63, 90)):
+            look = dataclasses.replace(draw_look(config, frame_rng(55, i)), sun_scale=sun, sky_scale=sky)
+            renderer.render(frame_state(config, i), look, render_seed(55, i), geometry=True)
+            renderer.feature_visibility(frame_state(config, i), features)
+            hashes = {k["hash"] for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT}
+            if n >= 2:  # two frames of warm-up, then nothing new
+                assert hashes <= seen, f"frame {i} compiled {len(hashes - seen)} new kernels"
+            seen |= hashes
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
 
 
 def test_exr_has_linear_rgb_depth_and_object_ids(tmp_path: Path) -> None:
