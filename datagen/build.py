@@ -55,7 +55,7 @@ from datagen.dataset import (
 from datagen.errors import DatagenError
 from datagen.labels import Exclusion
 
-__all__ = ["BuildReport", "ShardSummary", "ShardWriter", "build_dataset"]
+__all__ = ["BuildProgress", "BuildReport", "ShardSummary", "ShardWriter", "build_dataset"]
 
 Executor = Literal["local", "ray"]
 Progress = Callable[[int], None]

@@ -49,10 +49,13 @@ __all__ = [
     "DatasetLock",
     "Layout",
     "ShardJob",
+    "asset_files",
     "config_fingerprint",
     "frame_split",
     "plan_shards",
     "prepare_folder",
+    "remove_owned",
+    "sweep_temporaries",
     "write_dataset_files",
 ]
 

@@ -28,8 +28,10 @@ from datagen.files import atomic_path
 __all__ = [
     "MANIFEST_VERSION",
     "RUN_COLUMNS",
+    "feature_records",
     "features_schema",
     "manifest_schema",
+    "matrix_field",
     "read_features",
     "read_manifest_summary",
     "write_features",
