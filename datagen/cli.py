@@ -94,11 +94,6 @@ def validate(
         raise ConfigError([problem for exc in failed for problem in exc.problems])
 
 
-def _not_yet(what: str, issue: int) -> None:
-    typer.echo(f"datagen {what}: not implemented yet (tracked in issue {issue})", err=True)
-    raise typer.Exit(3)
-
-
 @app.command()
 @user_errors
 def approach(
@@ -170,15 +165,54 @@ def build(
 
 
 @app.command()
-def audit(dataset: Annotated[Path, typer.Argument(help="Dataset folder.")]) -> None:
-    """Check a dataset's labels against the true centre projections."""
-    _not_yet("audit", 7)
+@user_errors
+def audit(
+    dataset: Annotated[Path, typer.Argument(help="Dataset folder.", show_default=False)],
+    out: Annotated[Path | None, typer.Option("--out", help="Report folder (default: DATASET/audit).")] = None,
+    overlays: Annotated[int, typer.Option("--overlays", min=0, help="Overlay images in the HTML report.")] = 3,
+) -> None:
+    """Check a dataset's labels against the true centre projections; write
+    report.json, plots and report.html. Exit 1 when a check fails."""
+    from datagen.audit import audit as run_audit
+    from datagen.audit import write_report
+    from datagen.reader import load_dataset
+
+    view = load_dataset(dataset)
+    result = run_audit(view)
+    folder = out if out is not None else Path(dataset) / "audit"
+    written = write_report(result, view, folder, overlays=overlays)
+    for check in result.checks:
+        status = "n/a " if not check.applicable else ("pass" if check.passed else "FAIL")
+        worst = "" if check.worst is None else f", worst {check.worst:.3g}"
+        typer.echo(f"{status}  {check.name}: {check.checked} checked, {check.failures} failed{worst}")
+        for offender in check.offenders[:5]:
+            typer.echo(f"        {offender}")
+    drift = result.stats["tight_drift_px"]
+    if drift["features"]:
+        typer.echo(f"tight-box centre drift from the true centre: median {drift['median']:.3f} px, "
+                   f"p95 {drift['p95']:.3f} px, max {drift['max']:.3f} px over {drift['features']} features")
+    typer.echo(f"{'PASSED' if result.passed else 'FAILED'}: {written['html']}")
+    if not result.passed:
+        raise typer.Exit(1)
 
 
 @app.command()
-def preview(dataset: Annotated[Path, typer.Argument(help="Dataset folder.")]) -> None:
-    """Draw overlays of true centres, tight and corrected boxes."""
-    _not_yet("preview", 7)
+@user_errors
+def preview(
+    dataset: Annotated[Path, typer.Argument(help="Dataset folder.", show_default=False)],
+    frames: Annotated[str | None, typer.Option("--frames", help="Frame ids, e.g. 0,5,9 or 0-7 "
+                                               "(default: the first 4).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", help="Folder for the overlays (default: DATASET/preview).")]
+    = None,
+) -> None:
+    """Draw overlays of true centres, tight and corrected boxes (paper Fig. 11)."""
+    from datagen.preview import write_previews
+    from datagen.reader import load_dataset
+
+    view = load_dataset(dataset)
+    folder = out if out is not None else Path(dataset) / "preview"
+    for path in write_previews(view, _frame_list(frames) if frames else None, folder):
+        typer.echo(f"wrote {path}")
 
 
 @app.command()

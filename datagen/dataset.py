@@ -64,8 +64,8 @@ DATASET_SCHEMA: Final = "datagen.dataset"
 DATASET_SCHEMA_VERSION: Final = 1
 SPLITS: Final = ("train", "val")
 #: Everything datagen writes at the top of a dataset folder (``--overwrite`` removes these only).
-OWNED: Final = ("manifests", "images", "labels", "exr", "data.yaml", "hyp.yaml", "features.parquet",
-                "dataset.json")
+OWNED: Final = ("manifests", "images", "labels", "exr", "audit", "preview", "data.yaml", "hyp.yaml",
+                "features.parquet", "dataset.json")
 LOCK_NAME: Final = ".datagen.lock"
 #: Ultralytics' training image size in the recipe (the paper trained at 864).
 TRAIN_IMGSZ: Final = 864

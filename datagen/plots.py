@@ -13,7 +13,7 @@ from datagen.approach import trace_approach  # noqa: E402
 from datagen.config import Config  # noqa: E402
 from datagen.files import atomic_path  # noqa: E402
 
-__all__ = ["plot_approaches"]
+__all__ = ["plot_approaches", "plot_audit"]
 
 
 def plot_approaches(config: Config, path: Path, approaches: int = 5, seed: int | None = None) -> None:
@@ -42,3 +42,84 @@ def plot_approaches(config: Config, path: Path, approaches: int = 5, seed: int |
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
+
+
+def plot_audit(stats: dict, folder: Path) -> dict[str, Path]:
+    """The audit's figures as PNGs in ``folder``; returns {name: path}."""
+    import numpy as np
+
+    arrays = stats["_arrays"]
+    out: dict[str, Path] = {}
+
+    def save(fig, name: str) -> None:
+        path = Path(folder) / f"{name}.png"
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=100, format="png")
+        plt.close(fig)
+        out[name] = path
+
+    drift, distance = arrays["drift"], arrays["distance"]
+    floor = 1e-4  # a drift of exactly 0 (a symmetric view) still shows on the log axis
+    fig, ax = plt.subplots(figsize=(8, 4.5), constrained_layout=True)
+    if drift.size:
+        pick = np.random.default_rng(0).permutation(drift.size)[:20000]
+        ax.scatter(distance[pick], np.maximum(drift[pick], floor), s=3, alpha=0.25, label="a feature in a frame")
+        bins = [b for b in stats["tight_drift_px"]["by_distance_m"] if b["count"]]
+        mid = [(b["lo"] + b["hi"]) / 2 for b in bins]
+        ax.plot(mid, [max(b["median"], floor) for b in bins], "o-", color="C3", label="median per 10 m")
+        ax.plot(mid, [max(b["p95"], floor) for b in bins], "s--", color="C1", label="95th percentile")
+        ax.legend()
+    ax.set(yscale="log", xlabel="probe-to-drogue distance (m)", ylabel="tight-box centre drift (px)",
+           title="Tight-box (perceived) centre vs true centre projection")
+    ax.grid(True, alpha=0.3)
+    save(fig, "drift_vs_distance")
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+    sizes = sorted(set(arrays["size"].tolist()))
+    if drift.size:
+        axes[0].boxplot([np.maximum(drift[arrays["size"] == s], floor) for s in sizes], showfliers=False)
+        axes[0].set_xticks(range(1, len(sizes) + 1), [s or "untagged" for s in sizes])
+    axes[0].set(yscale="log", xlabel="feature size", ylabel="tight-box centre drift (px)", title="by feature size")
+    bins = [b for b in stats["tight_drift_px"]["by_obliqueness_deg"] if b["count"]]
+    mid = [(b["lo"] + b["hi"]) / 2 for b in bins]
+    axes[1].plot(mid, [max(b["median"], floor) for b in bins], "o-", label="median")
+    axes[1].plot(mid, [max(b["p95"], floor) for b in bins], "s--", label="95th percentile")
+    axes[1].set(yscale="log", xlabel="view obliqueness (deg; 0 = seen head-on)", ylabel="drift (px)",
+                title="by view obliqueness")
+    axes[1].legend()
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+    save(fig, "drift_by_size_and_obliqueness")
+
+    per_class = stats["labels_per_class"]
+    fig, ax = plt.subplots(figsize=(max(8, 0.12 * len(per_class)), 4), constrained_layout=True)
+    ax.bar(range(len(per_class)), list(per_class.values()))
+    ax.set(xlabel="class id", ylabel="labeled (frames)", title="Labels per class")
+    ax.grid(True, axis="y", alpha=0.3)
+    save(fig, "labels_per_class")
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
+    exclusions = stats["exclusions"]
+    axes[0].bar(list(exclusions), list(exclusions.values()), color=["C2"] + ["C7"] * (len(exclusions) - 1))
+    axes[0].set(ylabel="features x frames", title="Labeled and excluded, by reason")
+    axes[0].tick_params(axis="x", rotation=20)
+    hist = stats["visibility"]["visible_fraction_histogram"]
+    axes[1].bar(np.arange(10) / 10 + 0.05, hist, width=0.09)
+    axes[1].set(xlabel="visible fraction of a labeled feature's points", ylabel="count",
+                title="Visibility of labeled features (ray casts)")
+    for ax in axes:
+        ax.grid(True, axis="y", alpha=0.3)
+    save(fig, "exclusions_and_visibility")
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
+    cov = stats["distance_coverage"]
+    edges = np.asarray(cov["edges_m"])
+    axes[0].bar(edges[:-1] + 2.5, cov["frames"], width=4.5)
+    axes[0].set(xlabel="probe-to-drogue distance (m)", ylabel="frames", title="Distance coverage")
+    pnp = stats["pnp_below_3_features"]
+    axes[1].bar(list(pnp), [100 * v["share_below_3"] for v in pnp.values()], color="C3")
+    axes[1].set(ylabel="% of frames", title="Frames where an object has < 3 labeled features (no PnP)")
+    for ax in axes:
+        ax.grid(True, axis="y", alpha=0.3)
+    save(fig, "coverage_and_pnp")
+    return out

@@ -51,9 +51,10 @@ def test_bad_files_exit_nonzero_without_traceback(tmp_path: Path, content: str |
     assert "Traceback" not in out.stderr
 
 
-def test_unimplemented_commands_say_so() -> None:
-    out = run("audit", "datasets/none")
-    assert out.returncode != 0 and "not implemented yet" in out.stderr
+def test_dataset_commands_on_a_missing_folder_are_one_line() -> None:
+    for command in ("audit", "preview"):
+        out = run(command, "datasets/none")
+        assert out.returncode == 2 and out.stderr == "datasets/none: no such dataset folder\n"
 
 
 def test_approach_plot_and_frames(tmp_path: Path) -> None:

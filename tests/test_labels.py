@@ -11,7 +11,7 @@ from hypothesis.extra.numpy import arrays
 
 from datagen.camera import Intrinsics
 from datagen.features import FeatureTable
-from datagen.labels import Exclusion, boxes_from_uv, compute_labels, yolo_lines
+from datagen.labels import YOLO_DECIMALS, Exclusion, boxes_from_uv, compute_labels, yolo_lines
 from datagen.transforms import make_transform, rotation_from_ypr
 
 from .strategies import cam_from_model_in_front, finite, intrinsics, point_sets, rotations
@@ -244,7 +244,7 @@ def test_yolo_line_format_and_order() -> None:
     uv = np.array([[[10.0, 10.0], [30.0, 50.0]], [[100.0, 20.0], [150.0, 60.0]], [[0.0, 0.0], [1.0, 1.0]]])
     labels = boxes_from_uv(uv, uv.mean(1), np.ones(3, bool), width=width, height=height, edge_margin_px=5)
     lines = yolo_lines(labels, np.array([7, 2, 3]), width, height)
-    assert lines == ["2 0.625000 0.400000 0.250000 0.400000", "7 0.100000 0.300000 0.100000 0.400000"]
+    assert lines == ["2 0.6250000 0.4000000 0.2500000 0.4000000", "7 0.1000000 0.3000000 0.1000000 0.4000000"]
 
 
 def test_yolo_lines_round_trip_to_corrected_centre() -> None:
@@ -258,10 +258,10 @@ def test_yolo_lines_round_trip_to_corrected_centre() -> None:
     assert len(lines) > 40
     for line in lines:
         cls, cx, cy, w, h = line.split()
-        assert all(len(v.split(".")[1]) == 6 for v in (cx, cy, w, h))
+        assert all(len(v.split(".")[1]) == YOLO_DECIMALS for v in (cx, cy, w, h))
         c = labels.center_px[int(cls)]
-        assert abs(float(cx) * k.width - c[0]) <= 0.5e-6 * k.width
-        assert abs(float(cy) * k.height - c[1]) <= 0.5e-6 * k.height
+        assert abs(float(cx) * k.width - c[0]) <= 0.5e-7 * k.width
+        assert abs(float(cy) * k.height - c[1]) <= 0.5e-7 * k.height
 
 
 def test_rejects_wrong_object_count() -> None:

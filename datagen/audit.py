@@ -1,0 +1,521 @@
+"""``datagen audit``: prove a dataset's labels are what they claim, and measure the
+parallax that corrected boxes remove.
+
+Every check recomputes from the manifests and ``features.parquet`` alone
+(:meth:`datagen.reader.DatasetView.recompute`) and names its worst offenders by
+file. The statistics show how far the *tight* box centre (the perceived centre)
+lies from the projection of the true 3D centre, as a function of distance,
+feature size and view obliqueness (paper Fig. 8).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections import Counter
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from datagen.labels import Exclusion
+from datagen.reader import DatasetView
+
+__all__ = [
+    "DRIFT_LIMIT_PX",
+    "AuditResult",
+    "Check",
+    "audit",
+    "feature_normals",
+    "obliqueness_deg",
+    "tight_centre_drift_px",
+]
+
+#: The corrected-box centre of a label line may lie this far from the true centre projection.
+DRIFT_LIMIT_PX: Final = 1e-3
+#: Manifest boxes and centres must match the recomputation this closely.
+MANIFEST_TOLERANCE_PX: Final = 1e-6
+#: Offenders listed per check (the worst first).
+MAX_OFFENDERS: Final = 20
+#: PnP needs at least this many labeled features of an object in a frame.
+PNP_MIN_FEATURES: Final = 3
+
+
+@dataclass
+class Check:
+    """One audit check: what it verifies, over how many items, and who failed it."""
+
+    name: str
+    description: str
+    checked: int = 0
+    failures: int = 0
+    worst: float | None = None  # the largest error, where the check measures one
+    offenders: list[str] = field(default_factory=list)  # "file: what", worst first
+    applicable: bool = True
+    _scored: list[tuple[float, str]] = field(default_factory=list, repr=False)
+
+    @property
+    def passed(self) -> bool:
+        return self.failures == 0
+
+    def fail(self, where: str, what: str, score: float = math.inf) -> None:
+        self.failures += 1
+        self._scored.append((score, f"{where}: {what}"))
+
+    def finish(self) -> Check:
+        self._scored.sort(key=lambda s: -s[0])
+        self.offenders = [text for _, text in self._scored[:MAX_OFFENDERS]]
+        self._scored = []
+        return self
+
+    def as_dict(self) -> dict:
+        out = {k: v for k, v in asdict(self).items() if not k.startswith("_")}
+        out["passed"] = self.passed
+        return out
+
+
+@dataclass
+class AuditResult:
+    root: Path
+    name: str
+    frames: int
+    checks: list[Check]
+    stats: dict
+
+    @property
+    def passed(self) -> bool:
+        return all(c.passed for c in self.checks)
+
+
+# --- geometry of the statistics (pure functions) ---------------------------------------
+def tight_centre_drift_px(tight_xyxy: NDArray[np.float64], center_px: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(...)`` distance in pixels between the tight box's centre (the perceived centre)
+    and the projection of the true 3D centre."""
+    tight_centre = 0.5 * (tight_xyxy[..., :2] + tight_xyxy[..., 2:])
+    return np.hypot(*np.moveaxis(tight_centre - center_px, -1, 0))
+
+
+def feature_normals(points_model: NDArray[np.float64], n_points: NDArray[np.int64]) -> NDArray[np.float64]:
+    """``(F, 3)`` unit normal of each feature's point set: the direction of least spread
+    (the ring of a surface feature lies in the surface's tangent plane)."""
+    normals = np.empty((len(points_model), 3))
+    for i, (pts, n) in enumerate(zip(points_model, n_points, strict=True)):
+        p = pts[:n] - pts[:n].mean(axis=0)
+        normals[i] = np.linalg.svd(p, full_matrices=True)[2][-1]
+    return normals
+
+
+def obliqueness_deg(cam_from_model: NDArray[np.float64], normal_model: NDArray[np.float64],
+                    center_model: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Angle between a feature's normal and the line of sight to its centre, degrees:
+    0 when the camera looks straight at the feature, 90 when it is seen edge-on.
+
+    Args:
+        cam_from_model: ``(..., F, 4, 4)``.
+        normal_model, center_model: ``(F, 3)`` in the feature's object frame.
+    """
+    rot = cam_from_model[..., :3, :3]
+    n_cam = np.einsum("...ij,...j->...i", rot, normal_model)
+    c_cam = np.einsum("...ij,...j->...i", rot, center_model) + cam_from_model[..., :3, 3]
+    cos = np.abs(np.sum(n_cam * c_cam, axis=-1)) / np.maximum(np.linalg.norm(c_cam, axis=-1), 1e-12)
+    return np.degrees(np.arccos(np.clip(cos, 0.0, 1.0)))
+
+
+def _binned(values: NDArray, keys: NDArray, edges: NDArray) -> list[dict]:
+    """Count, mean, median, p95 and max of ``values`` per bin of ``keys``."""
+    out = []
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        v = values[(keys >= lo) & (keys < hi)]
+        out.append({"lo": float(lo), "hi": float(hi), "count": int(v.size),
+                    **({"mean": float(v.mean()), "median": float(np.median(v)), "p95": float(np.percentile(v, 95)),
+                        "max": float(v.max())} if v.size else {})})
+    return out
+
+
+# --- label files --------------------------------------------------------------------------
+def _parse_label_file(path: Path) -> tuple[list[list[str]], str | None]:
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        return [], "missing"
+    except (OSError, UnicodeDecodeError) as exc:
+        return [], f"unreadable ({exc})"
+    return [line.split() for line in text.splitlines() if line.strip()], None
+
+
+def _decimals(token: str) -> int:
+    return len(token.partition(".")[2].partition("e")[0]) if "." in token else 0
+
+
+# --- the audit -----------------------------------------------------------------------------
+def audit(view: DatasetView) -> AuditResult:
+    """Run every check and compute every statistic of a loaded dataset."""
+    labels = view.recompute()
+    checks = [
+        _check_manifest(view, labels),
+        *_check_label_files(view, labels),
+        _check_files(view),
+        _check_names(view),
+    ]
+    stats = _statistics(view, labels)
+    return AuditResult(view.root, str(view.doc.get("name", view.root.name)), len(view), [c.finish() for c in checks],
+                       stats)
+
+
+def _check_manifest(view: DatasetView, labels) -> Check:
+    check = Check("manifest_boxes", "manifest centres, tight and corrected boxes and exclusions equal a "
+                  f"recomputation from the poses and features.parquet (to {MANIFEST_TOLERANCE_PX:g} px)")
+    expected_k = np.array([view.intrinsics.width, view.intrinsics.height, view.intrinsics.fx, view.intrinsics.fy,
+                           view.intrinsics.cx, view.intrinsics.cy])
+    worst = 0.0
+    for b in range(len(view)):
+        where = f"{view.manifest_file[b]} frame {view.frame_id[b]}"
+        check.checked += 1
+        if not np.allclose(view.row_intrinsics[b], expected_k, rtol=0, atol=1e-9):
+            check.fail(where, f"intrinsics {view.row_intrinsics[b].tolist()} differ from dataset.json's")
+            continue
+        if not np.array_equal(view.class_id[b], view.features.class_id):
+            check.fail(where, "feature records are not one per class in class-id order")
+            continue
+        errors = []
+        for name in ("center_px", "tight_xyxy", "corrected_xyxy"):
+            stored, fresh = getattr(view, name)[b], getattr(labels, name)[b]
+            both_nan = np.isnan(stored) & np.isnan(fresh)
+            err = np.where(both_nan, 0.0, np.abs(stored - fresh))
+            err = np.where(np.isnan(err), np.inf, err).max(axis=-1)
+            errors.append(err)
+        err = np.max(errors, axis=0)
+        worst = max(worst, float(err[np.isfinite(err)].max(initial=0.0)))
+        reasons = np.array([Exclusion(int(e)).reason for e in labels.exclusion[b]], dtype=object)
+        bad = np.flatnonzero((err > MANIFEST_TOLERANCE_PX) | (reasons != view.exclusion[b])
+                             | (view.labeled[b] != labels.labeled[b]))
+        for f in bad[:3]:
+            what = (f"class {f}: stored exclusion {view.exclusion[b][f]!r}, recomputed {reasons[f]!r}"
+                    if reasons[f] != view.exclusion[b][f] else f"class {f}: box or centre off by {err[f]:.3g} px")
+            check.fail(where, what, float(err[f]))
+    check.worst = worst
+    return check
+
+
+def _check_label_files(view: DatasetView, labels) -> list[Check]:
+    k = view.intrinsics
+    w, h, m = k.width, k.height, view.edge_margin_px
+    nc = len(view.features)
+    lines = Check("label_lines", "every label line equals its manifest box (class, centre, size; to the "
+                  "file's rounding) and every labeled feature has exactly one line")
+    drift = Check("centre_drift", f"label-file box centres lie within {DRIFT_LIMIT_PX:g} px of the projection "
+                  "of the feature's true 3D centre (corrected datasets)", applicable=view.corrected)
+    margin = Check("edge_margin_and_front", f"labeled boxes lie at least edge_margin_px ({m:g} px) inside every "
+                   "border and no labeled feature has a point at or behind the camera plane")
+    rules = Check("ultralytics_rules", "label files follow Ultralytics' rules: 5 columns, integer class < nc, "
+                  "values in [0, 1], positive size, no duplicate rows")
+    label_centre = labels.label_center_px
+    box = labels.label_xyxy
+    worst_drift = worst_line = 0.0
+    for b in range(len(view)):
+        rel = view.label_path[b]
+        rows, problem = _parse_label_file(view.root / rel)
+        if problem:
+            lines.fail(rel, problem)
+            continue
+        seen: Counter = Counter()
+        for n, tokens in enumerate(rows, start=1):
+            where = f"{rel}:{n}"
+            rules.checked += 1
+            lines.checked += 1
+            try:
+                values = [float(t) for t in tokens]
+            except ValueError:
+                rules.fail(where, f"not numbers: {' '.join(tokens)!r}")
+                continue
+            if len(values) != 5:
+                rules.fail(where, f"{len(values)} columns, Ultralytics needs 5")
+                continue
+            cls = values[0]
+            if cls != int(cls) or not 0 <= cls < nc:
+                rules.fail(where, f"class {tokens[0]} is not an integer in [0, {nc})")
+                continue
+            if min(values[1:]) < 0 or max(values[1:]) > 1 or values[3] <= 0 or values[4] <= 0:
+                rules.fail(where, f"values {tokens[1:]} outside [0, 1] or a size not positive")
+            key = tuple(tokens)
+            seen[key] += 1
+            if seen[key] == 2:
+                rules.fail(where, "duplicate row")
+            f = int(cls)
+            if not labels.labeled[b, f]:
+                reason = Exclusion(int(labels.exclusion[b, f])).reason
+                lines.fail(where, f"class {f} has a line but the feature is excluded ({reason})")
+                if labels.exclusion[b, f] == Exclusion.BEHIND_CAMERA:
+                    margin.fail(where, f"class {f} is behind the camera")
+            else:
+                tol = 0.5 * 10.0 ** -min(_decimals(t) for t in tokens[1:]) + 1e-12
+                expected = np.array([label_centre[b, f, 0] / w, label_centre[b, f, 1] / h,
+                                     (box[b, f, 2] - box[b, f, 0]) / w, (box[b, f, 3] - box[b, f, 1]) / h])
+                err = np.abs(np.array(values[1:]) - expected)
+                worst_line = max(worst_line, float((err * [w, h, w, h]).max()))
+                if np.any(err > tol):
+                    lines.fail(where, f"class {f} differs from the manifest box by "
+                               f"{(err * [w, h, w, h]).max():.3g} px", float((err * [w, h, w, h]).max()))
+            cx, cy, bw, bh = (values[1] * w, values[2] * h, values[3] * w, values[4] * h)
+            drift.checked += 1
+            d = math.hypot(cx - labels.center_px[b, f, 0], cy - labels.center_px[b, f, 1])
+            if np.isfinite(d):
+                worst_drift = max(worst_drift, d)
+            if view.corrected and not d <= DRIFT_LIMIT_PX:
+                drift.fail(where, f"class {f} centre is {d:.3g} px from the true centre projection", d)
+            margin.checked += 1
+            x0, y0, x1, y1 = cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2
+            inside = min(x0, y0, w - x1, h - y1)
+            if inside < m - 1e-3:
+                margin.fail(where, f"class {f} box is {inside:.2f} px from the border, margin {m:g} px", m - inside)
+        labeled = set(np.flatnonzero(labels.labeled[b]).tolist())
+        listed = {int(float(t[0])) for t in rows if t and _is_int(t[0])}
+        for f in sorted(labeled - listed):
+            lines.fail(rel, f"class {f} is labeled in the manifest but has no line")
+    lines.worst, drift.worst = worst_line, worst_drift
+    return [lines, drift, margin, rules]
+
+
+def _is_int(token: str) -> bool:
+    try:
+        return float(token) == int(float(token))
+    except ValueError:
+        return False
+
+
+def _check_files(view: DatasetView) -> Check:
+    check = Check("files", "every image, label and EXR a manifest names exists, no file in images/, labels/ "
+                  "or exr/ is unnamed, no temporary file is left, and every planned shard is finished")
+    root = view.root
+    referenced = {p for paths in (view.image_path, view.label_path, view.exr_path) for p in paths if p}
+    for rel in sorted(referenced):
+        check.checked += 1
+        if not (root / rel).is_file():
+            check.fail(rel, "named in a manifest but missing")
+    for tree in ("images", "labels", "exr"):
+        for dirpath, _, files in os.walk(root / tree):
+            for name in files:
+                rel = str((Path(dirpath) / name).relative_to(root))
+                check.checked += 1
+                if name.startswith(".") and name.endswith(".tmp"):
+                    check.fail(rel, "temporary file left by an interrupted writer")
+                elif rel not in referenced:
+                    check.fail(rel, "orphan: no manifest names it")
+    for name in os.listdir(root / "manifests"):
+        if name.startswith("."):
+            check.fail(f"manifests/{name}", "temporary file left by an interrupted writer")
+    for split, planned in view.doc.get("splits", {}).items():
+        have = sum(1 for s in view.split if s == split)
+        check.checked += 1
+        if have != planned.get("frames", have):
+            check.fail("dataset.json", f"splits.{split}: {planned['frames']} frames planned, {have} in the manifests "
+                       "(an unfinished build: rerun it)")
+    return check
+
+
+def _check_names(view: DatasetView) -> Check:
+    check = Check("class_names", "data.yaml's nc and names match features.parquet class for class")
+    names = view.data_yaml.get("names")
+    expected = dict(zip(view.features.class_id.tolist(), view.features.name, strict=True))
+    check.checked = len(expected)
+    if isinstance(names, list):
+        names = dict(enumerate(names))
+    if not isinstance(names, dict):
+        check.fail("data.yaml", f"names: expected a mapping of class ids, got {type(names).__name__}")
+        return check
+    for cid, name in expected.items():
+        if names.get(cid) != name:
+            check.fail("data.yaml", f"names.{cid}: {names.get(cid)!r}, features.parquet says {name!r}")
+    for cid in sorted(set(names) - set(expected), key=str):
+        check.fail("data.yaml", f"names.{cid}: {names[cid]!r} is not a class of features.parquet")
+    if view.data_yaml.get("nc", len(expected)) != len(expected):
+        check.fail("data.yaml", f"nc: {view.data_yaml.get('nc')}, features.parquet has {len(expected)} classes")
+    return check
+
+
+# --- statistics ------------------------------------------------------------------------------
+def _statistics(view: DatasetView, labels) -> dict:
+    features = view.features
+    k = view.intrinsics
+    in_image = labels.exclusion != Exclusion.BEHIND_CAMERA
+    tight = labels.tight_xyxy
+    inside = in_image & (tight[..., 0] >= 0) & (tight[..., 1] >= 0) & (tight[..., 2] <= k.width) \
+        & (tight[..., 3] <= k.height)
+    drift = tight_centre_drift_px(tight, labels.center_px)
+    cam_from_model = view.cam_from_objects()[:, features.object_index]
+    oblique = obliqueness_deg(cam_from_model, feature_normals(features.points_model, features.n_points),
+                              features.center_model)
+    distance = np.broadcast_to(view.distance_m[:, None], drift.shape)
+    d, dist, obl = drift[inside], distance[inside], oblique[inside]
+    size = np.broadcast_to(np.array(features.size, dtype=object)[None, :], drift.shape)[inside]
+    top = max(10.0, float(np.ceil(view.distance_m.max() / 10.0) * 10.0)) if len(view) else 10.0
+    by_size = {}
+    for tag in sorted(set(features.size)):
+        v = d[size == tag]
+        by_size[tag or "untagged"] = {"count": int(v.size), **({"mean": float(v.mean()), "median": float(np.median(v)),
+                                                                 "p95": float(np.percentile(v, 95)),
+                                                                 "max": float(v.max())} if v.size else {})}
+    reasons = Counter(Exclusion(int(e)).reason or "labeled" for e in labels.exclusion.ravel())
+    per_class = labels.labeled.sum(axis=0)
+    pnp = {}
+    for j, obj in enumerate(features.objects):
+        count = labels.labeled[:, features.object_index == j].sum(axis=1)
+        pnp[obj] = {"frames_below_3": int((count < PNP_MIN_FEATURES).sum()),
+                    "share_below_3": float((count < PNP_MIN_FEATURES).mean()) if len(view) else 0.0,
+                    "median_labeled": float(np.median(count)) if len(view) else 0.0}
+    vis = view.visible_fraction[labels.labeled]
+    vis = vis[np.isfinite(vis)]
+    cv = view.center_visible[labels.labeled]
+    cv = cv[np.isfinite(cv)]
+    coverage_edges = np.arange(0.0, top + 5.0, 5.0)
+    return {
+        "tight_drift_px": {
+            "features": int(d.size),
+            "mean": float(d.mean()) if d.size else None,
+            "median": float(np.median(d)) if d.size else None,
+            "p95": float(np.percentile(d, 95)) if d.size else None,
+            "max": float(d.max()) if d.size else None,
+            "by_distance_m": _binned(d, dist, np.arange(0.0, top + 10.0, 10.0)),
+            "by_size": by_size,
+            "by_obliqueness_deg": _binned(d, obl, np.arange(0.0, 91.0, 15.0)),
+        },
+        "labels_per_class": {features.name[i]: int(per_class[i]) for i in range(len(features))},
+        "exclusions": {r.reason or "labeled": int(reasons.get(r.reason or "labeled", 0)) for r in Exclusion},
+        "visibility": {
+            "labeled_features_rendered": int(vis.size),
+            "visible_fraction_histogram": np.histogram(vis, bins=10, range=(0.0, 1.0))[0].tolist(),
+            "share_fully_visible": float((vis >= 1.0).mean()) if vis.size else None,
+            "share_centre_visible": float(cv.mean()) if cv.size else None,
+        },
+        "pnp_below_3_features": pnp,
+        "distance_coverage": {"edges_m": coverage_edges.tolist(),
+                              "frames": np.histogram(view.distance_m, bins=coverage_edges)[0].tolist()},
+        "_arrays": {"drift": d, "distance": dist, "obliqueness": obl, "size": size,
+                    "visible_fraction": vis},
+    }
+
+
+# --- the report --------------------------------------------------------------------------------
+def report_document(result: AuditResult) -> dict:
+    """report.json: machine-readable, for gating in CI (``passed`` and each check's)."""
+    stats = {k: v for k, v in result.stats.items() if not k.startswith("_")}
+    return {
+        "dataset": str(result.root),
+        "name": result.name,
+        "frames": result.frames,
+        "passed": result.passed,
+        "checks": [c.as_dict() for c in result.checks],
+        "stats": stats,
+    }
+
+
+def write_report(result: AuditResult, view: DatasetView, out: Path, *, overlays: int = 3) -> dict[str, Path]:
+    """Write report.json, plots/*.png and a self-contained report.html into ``out``."""
+    import base64
+    import html
+    import json
+
+    import cv2
+
+    from datagen.files import atomic_path
+    from datagen.plots import plot_audit
+    from datagen.preview import draw_overlay
+
+    out = Path(out)
+    doc = report_document(result)
+    with atomic_path(out / "report.json") as tmp:
+        tmp.write_text(json.dumps(doc, indent=2, allow_nan=False, default=_json_default) + "\n")
+    plots = plot_audit(result.stats, out / "plots")
+
+    def data_uri(data: bytes, kind: str) -> str:
+        return f"data:image/{kind};base64,{base64.b64encode(data).decode()}"
+
+    esc = html.escape
+    rows = []
+    for c in result.checks:
+        status = "n/a" if not c.applicable else ("pass" if c.passed else "FAIL")
+        offenders = "".join(f"<li><code>{esc(o)}</code></li>" for o in c.offenders)
+        worst = "" if c.worst is None else f"{c.worst:.3g}"
+        rows.append(f"<tr class='{status.lower().replace('/', '')}'><td>{esc(c.name)}</td><td>{status}</td>"
+                    f"<td>{c.checked}</td><td>{c.failures}</td><td>{worst}</td><td>{esc(c.description)}"
+                    f"{'<ul>' + offenders + '</ul>' if offenders else ''}</td></tr>")
+    drift = result.stats["tight_drift_px"]
+
+    def table(bins: list[dict], label: str) -> str:
+        body = "".join(
+            f"<tr><td>{b['lo']:g}-{b['hi']:g}</td><td>{b['count']}</td>"
+            + "".join(f"<td>{b[k]:.3f}</td>" if k in b else "<td></td>" for k in ("mean", "median", "p95", "max"))
+            + "</tr>" for b in bins)
+        return (f"<table><tr><th>{label}</th><th>features</th><th>mean</th><th>median</th><th>p95</th>"
+                f"<th>max</th></tr>{body}</table>")
+
+    sizes = "".join(f"<tr><td>{esc(s)}</td><td>{v['count']}</td>"
+                    + "".join(f"<td>{v[k]:.3f}</td>" if k in v else "<td></td>"
+                              for k in ("mean", "median", "p95", "max")) + "</tr>"
+                    for s, v in drift["by_size"].items())
+    figures = "".join(f"<figure><img alt='{esc(name)}' src='{data_uri(path.read_bytes(), 'png')}'>"
+                      f"<figcaption>{esc(name)}</figcaption></figure>" for name, path in plots.items())
+    labels = view.recompute()
+    overlay_html = []
+    for b in np.linspace(0, len(view) - 1, min(overlays, len(view))).round().astype(int) if len(view) else []:
+        image = draw_overlay(view, int(b), labels)
+        scale = min(1.0, 1200 / image.shape[1])
+        image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 85])
+        overlay_html.append(f"<figure><img alt='overlay frame {view.frame_id[b]}' "
+                            f"src='{data_uri(data.tobytes(), 'jpeg')}'><figcaption>frame {view.frame_id[b]} "
+                            f"({esc(view.split[b])})</figcaption></figure>")
+    verdict = "PASSED" if result.passed else "FAILED"
+    page = f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>datagen audit: {esc(result.name)}</title>
+<style>
+body {{ font: 14px/1.4 system-ui, sans-serif; margin: 2em; max-width: 1300px; }}
+table {{ border-collapse: collapse; margin: 1em 0; }} td, th {{ border: 1px solid #ccc; padding: 3px 8px; }}
+tr.fail td {{ background: #fdd; }} tr.pass td:nth-child(2) {{ color: #080; }} code {{ font-size: 12px; }}
+figure {{ display: inline-block; margin: 0.5em; }} img {{ max-width: 100%; border: 1px solid #ddd; }}
+.verdict {{ font-weight: bold; color: {'#080' if result.passed else '#c00'}; }}
+</style></head>
+<body>
+<h1>datagen audit: {esc(result.name)}</h1>
+<p><code>{esc(str(result.root))}</code>: {result.frames} frames, {len(view.features)} classes,
+{'corrected' if view.corrected else 'tight (uncorrected)'} boxes, edge margin {view.edge_margin_px:g} px.
+Verdict: <span class="verdict">{verdict}</span></p>
+<h2>Checks</h2>
+<table><tr><th>check</th><th>result</th><th>checked</th><th>failures</th><th>worst</th><th>what (worst offenders)</th></tr>
+{''.join(rows)}</table>
+<h2>Parallax: tight-box centre drift from the true centre projection</h2>
+<p>{drift['features']} features in view; median {_fmt(drift['median'])} px, 95th percentile {_fmt(drift['p95'])} px,
+max {_fmt(drift['max'])} px. Corrected boxes are centred on the true centre; a detector trained on tight
+boxes learns this drift.</p>
+{table(drift['by_distance_m'], 'distance (m)')}
+<table><tr><th>size</th><th>features</th><th>mean</th><th>median</th><th>p95</th><th>max</th></tr>{sizes}</table>
+{table(drift['by_obliqueness_deg'], 'obliqueness (deg)')}
+<h2>Plots</h2>
+{figures}
+<h2>Overlays</h2>
+<p>Magenta crosshair: true centre projection; amber: tight box; green: corrected box (the label); grey: excluded.</p>
+{''.join(overlay_html)}
+<script>
+window.addEventListener("load", () => {{
+  const images = Array.from(document.images);
+  const shown = images.filter(i => i.complete && i.naturalWidth > 0).length;
+  document.body.dataset.images = shown + "/" + images.length;
+}});
+</script>
+</body></html>
+"""
+    with atomic_path(out / "report.html") as tmp:
+        tmp.write_text(page)
+    return {"json": out / "report.json", "html": out / "report.html", **plots}
+
+
+def _fmt(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3f}"
+
+
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"not JSON: {type(value).__name__}")

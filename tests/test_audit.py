@@ -1,0 +1,215 @@
+"""datagen audit and preview: a built dataset passes, each corruption fails naming its
+file, the drift statistics match a hand computation, the HTML report renders."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+from hypothesis import given
+from hypothesis import strategies as st
+
+from datagen.audit import audit, feature_normals, obliqueness_deg, tight_centre_drift_px, write_report
+from datagen.build import build_dataset
+from datagen.camera import Intrinsics
+from datagen.errors import DatagenError
+from datagen.features import FeatureTable
+from datagen.labels import compute_labels
+from datagen.preview import write_previews
+from datagen.reader import load_dataset
+from datagen.transforms import make_transform
+from tests.test_build import tiny_config
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory) -> Path:
+    """A tiny rendered build (the audit's subject; copied before any corruption)."""
+    tmp = tmp_path_factory.mktemp("audited")
+    build_dataset(tiny_config(tmp), tmp / "ds")
+    return tmp / "ds"
+
+
+@pytest.fixture
+def copy(dataset, tmp_path) -> Path:
+    target = tmp_path / "ds"
+    shutil.copytree(dataset, target)
+    return target
+
+
+def checks(root: Path) -> dict:
+    return {c.name: c for c in audit(load_dataset(root)).checks}
+
+
+def first_line(root: Path) -> tuple[Path, list[str]]:
+    for path in sorted((root / "labels").rglob("*.txt")):
+        lines = path.read_text().splitlines()
+        if lines:
+            return path, lines
+    raise AssertionError("no label line")
+
+
+# --- a good dataset ------------------------------------------------------------------------
+@pytest.mark.render
+def test_a_built_dataset_passes_every_check(dataset) -> None:
+    result = audit(load_dataset(dataset))
+    assert result.passed, [(c.name, c.offenders[:3]) for c in result.checks if not c.passed]
+    by_name = {c.name: c for c in result.checks}
+    assert set(by_name) == {"manifest_boxes", "label_lines", "centre_drift", "edge_margin_and_front",
+                            "ultralytics_rules", "files", "class_names"}
+    assert by_name["label_lines"].checked > 100
+    assert by_name["centre_drift"].worst < 1e-3  # seven decimals: under 1.1e-4 px at most
+    stats = result.stats
+    assert stats["tight_drift_px"]["features"] > 0 and stats["tight_drift_px"]["max"] > 0
+    assert sum(stats["exclusions"].values()) == 8 * 80
+    assert stats["exclusions"]["labeled"] == sum(stats["labels_per_class"].values())
+    assert sum(stats["distance_coverage"]["frames"]) == 8
+    assert set(stats["pnp_below_3_features"]) == {"receiver", "tanker"}
+
+
+@pytest.mark.render
+def test_audit_command_writes_the_report(copy) -> None:
+    out = subprocess.run([sys.executable, "-m", "datagen", "audit", str(copy)], capture_output=True, text=True,
+                         timeout=300, cwd=ROOT)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert out.stdout.strip().splitlines()[-1] == f"PASSED: {copy / 'audit' / 'report.html'}"
+    doc = json.loads((copy / "audit" / "report.json").read_text())
+    assert doc["passed"] is True and doc["frames"] == 8 and len(doc["checks"]) == 7
+    assert len(list((copy / "audit" / "plots").glob("*.png"))) == 5
+    # The report is not a dataset file: a second audit still finds no orphan.
+    assert checks(copy)["files"].passed
+
+
+# --- corruptions --------------------------------------------------------------------------------
+@pytest.mark.render
+def test_a_shifted_label_fails_naming_its_line(copy) -> None:
+    path, lines = first_line(copy)
+    cls, cx, *rest = lines[0].split()
+    lines[0] = " ".join([cls, f"{float(cx) + 0.01:.7f}", *rest])
+    path.write_text("\n".join(lines) + "\n")
+    result = checks(copy)
+    where = f"{path.relative_to(copy)}:1"
+    for name in ("label_lines", "centre_drift"):
+        assert not result[name].passed and result[name].offenders[0].startswith(where)
+    assert result["centre_drift"].worst == pytest.approx(0.01 * 128, rel=1e-3)
+    out = subprocess.run([sys.executable, "-m", "datagen", "audit", str(copy)], capture_output=True, text=True,
+                         timeout=300, cwd=ROOT)
+    assert out.returncode == 1 and where in out.stdout and "FAILED" in out.stdout
+
+
+@pytest.mark.render
+def test_a_missing_image_and_an_orphan_fail(copy) -> None:
+    image = sorted((copy / "images").rglob("*.png"))[0]
+    image.rename(copy / "images" / "train" / "stray.png")
+    files = checks(copy)["files"]
+    offenders = "\n".join(files.offenders)
+    assert f"{image.relative_to(copy)}: named in a manifest but missing" in offenders
+    assert "images/train/stray.png: orphan" in offenders
+
+
+@pytest.mark.render
+def test_an_extra_label_line_fails(copy) -> None:
+    view = load_dataset(copy)
+    b, f = next(zip(*np.nonzero(~view.labeled)))  # an excluded feature
+    path = copy / view.label_path[b]
+    path.write_text(path.read_text() + f"{f} 0.5000000 0.5000000 0.0100000 0.0100000\n")
+    lines = checks(copy)["label_lines"]
+    assert not lines.passed and lines.offenders[0].startswith(f"{view.label_path[b]}:")
+    assert f"class {f} has a line but the feature is excluded" in lines.offenders[0]
+
+
+@pytest.mark.render
+def test_a_label_inside_the_edge_margin_fails(copy) -> None:
+    path, lines = first_line(copy)
+    cls = lines[0].split()[0]
+    lines[0] = f"{cls} 0.0050000 0.5000000 0.0080000 0.0100000"  # its left side 0.13 px from the border
+    path.write_text("\n".join(lines) + "\n")
+    margin = checks(copy)["edge_margin_and_front"]
+    assert not margin.passed and margin.offenders[0].startswith(f"{path.relative_to(copy)}:1: class {cls} box is")
+
+
+@pytest.mark.render
+def test_a_class_id_out_of_range_fails(copy) -> None:
+    path, lines = first_line(copy)
+    lines.append("80 0.5000000 0.5000000 0.0100000 0.0100000")
+    path.write_text("\n".join(lines) + "\n")
+    rules = checks(copy)["ultralytics_rules"]
+    assert not rules.passed
+    assert rules.offenders == [f"{path.relative_to(copy)}:{len(lines)}: class 80 is not an integer in [0, 80)"]
+
+
+@pytest.mark.render
+def test_data_yaml_names_must_match_the_features(copy) -> None:
+    data = yaml.safe_load((copy / "data.yaml").read_text())
+    data["names"][3] = "receiver.something_else"
+    (copy / "data.yaml").write_text(yaml.safe_dump(data))
+    names = checks(copy)["class_names"]
+    true_name = load_dataset(copy).features.name[3]
+    assert names.offenders == [f"data.yaml: names.3: 'receiver.something_else', features.parquet says {true_name!r}"]
+
+
+def test_not_a_dataset_is_one_line(tmp_path: Path) -> None:
+    with pytest.raises(DatagenError, match=r"dataset\.json: no such file; not a datagen dataset folder"):
+        load_dataset(tmp_path)
+    out = subprocess.run([sys.executable, "-m", "datagen", "audit", str(tmp_path)], capture_output=True, text=True,
+                         timeout=120, cwd=ROOT)
+    assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1
+
+
+# --- statistics -------------------------------------------------------------------------------------
+@given(a=st.floats(0.05, 2.0), depth=st.floats(5.0, 150.0), theta_deg=st.floats(-75.0, 75.0))
+def test_tight_drift_and_obliqueness_match_a_hand_computation(a, depth, theta_deg) -> None:
+    """A square of half-size a, tilted by theta about the camera's y axis, centred on the
+    optical axis at depth D. Its corners project to u = fx x cos(t) / (D - x sin(t)), so
+    the tight box's centre lies fx a^2 sin(t) cos(t) / (D^2 - a^2 sin^2(t)) px off the
+    true centre, and the view is theta off the square's normal."""
+    k = Intrinsics.from_hfov_deg(2048, 1080, 55.0)
+    square = np.array([[a, a, 0.0], [a, -a, 0.0], [-a, a, 0.0], [-a, -a, 0.0]])
+    table = FeatureTable.from_point_sets([square], objects=["tanker"], centers=[np.zeros(3)])
+    t = math.radians(theta_deg)
+    rot = np.array([[math.cos(t), 0, math.sin(t)], [0, 1, 0], [-math.sin(t), 0, math.cos(t)]])
+    cam_from_model = make_transform(rot, [0.0, 0.0, depth])
+    labels = compute_labels(table, cam_from_model[None, None], k, edge_margin_px=0.0)
+    drift = tight_centre_drift_px(labels.tight_xyxy, labels.center_px)[0, 0]
+    s, c = math.sin(t), math.cos(t)
+    expected = k.fx * a * a * abs(s) * c / (depth**2 - (a * s) ** 2)
+    assert drift == pytest.approx(expected, rel=1e-9, abs=1e-9)
+    normal = feature_normals(table.points_model, table.n_points)
+    assert obliqueness_deg(cam_from_model[None], normal, table.center_model)[0] == pytest.approx(
+        abs(theta_deg), abs=1e-6)
+
+
+# --- preview and the HTML report ---------------------------------------------------------------------
+@pytest.mark.render
+def test_previews_draw_on_the_frames(dataset, tmp_path: Path) -> None:
+    view = load_dataset(dataset)
+    paths = write_previews(view, [int(view.frame_id[0])], tmp_path)
+    overlay = cv2.imread(str(paths[0]))
+    original = cv2.imread(str(dataset / view.image_path[0]))
+    assert overlay.shape == original.shape
+    assert np.abs(overlay.astype(int) - original.astype(int)).max() > 100  # boxes and crosshairs drawn
+    with pytest.raises(DatagenError, match="--frames: frame 999 is not in"):
+        write_previews(view, [999], tmp_path)
+
+
+@pytest.mark.render
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="needs Chromium (apt-get install -y chromium)")
+def test_html_report_renders_in_headless_chromium(dataset, tmp_path: Path) -> None:
+    view = load_dataset(dataset)
+    written = write_report(audit(view), view, tmp_path, overlays=3)
+    out = subprocess.run(["chromium", "--headless=new", "--no-sandbox", "--disable-gpu", "--enable-logging=stderr",
+                          "--v=0", "--dump-dom", written["html"].as_uri()], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0
+    assert 'data-images="8/8"' in out.stdout  # 5 plots + 3 overlays, every one decoded
+    console = [line for line in out.stderr.splitlines() if "CONSOLE" in line]
+    assert not [line for line in console if "Error" in line or "Uncaught" in line], console
