@@ -263,6 +263,6 @@ def yolo_lines(labels: FrameLabels, class_ids: ArrayLike, width: int, height: in
 
 
 #: Decimals of the normalized values in a label line. Seven keep the rounding under
-#: 1.1e-4 px at 2048 px wide (six would allow 1.02e-3 px, above the audit's drift bound).
+#: 1.2e-4 px at 2048x1080 (six would allow 1.02e-3 px, above the audit's drift bound).
 YOLO_DECIMALS = 7
 _YOLO_LINE = "%d" + f" %.{YOLO_DECIMALS}f" * 4 + "\n"

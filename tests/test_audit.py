@@ -67,7 +67,7 @@ def test_a_built_dataset_passes_every_check(dataset) -> None:
     assert set(by_name) == {"manifest_boxes", "label_lines", "centre_drift", "edge_margin_and_front",
                             "ultralytics_rules", "files", "class_names"}
     assert by_name["label_lines"].checked > 100
-    assert by_name["centre_drift"].worst < 1e-3  # seven decimals: under 1.1e-4 px at most
+    assert by_name["centre_drift"].worst < 1e-3  # seven decimals: under 1.2e-4 px at most
     stats = result.stats
     assert stats["tight_drift_px"]["features"] > 0 and stats["tight_drift_px"]["max"] > 0
     assert sum(stats["exclusions"].values()) == 8 * 80
