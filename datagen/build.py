@@ -139,7 +139,7 @@ class ShardWriter:
             row = self.frame(job, frame)
             rows.append(row)
             labels += row["n_labeled"]
-            excluded.update(f["exclusion"] for f in row["features"] if f["exclusion"])
+            excluded.update(row["features"].exclusion_counts())
             if row["render_s"] is not None:
                 rendered += 1
                 render_s += row["render_s"]
@@ -213,7 +213,7 @@ class ShardWriter:
             "turbulence_intensity": state.turbulence_intensity,
             "bank_deg": state.bank_deg,
             "sun_direction_world": np.asarray(sun, dtype=np.float64).tolist(),
-            **{k_: v for k_, v in dataclasses.asdict(look).items() if k_ != "materials"},
+            **{f.name: getattr(look, f.name) for f in dataclasses.fields(look) if f.name != "materials"},
             "materials": [
                 {"object": obj, "part_class": cls, "base_color": list(m.base_color), "roughness": m.roughness,
                  "metallic": m.metallic, "specular": m.specular}

@@ -79,6 +79,7 @@ __all__ = [
     "OBJECT_NAMES",
     "PIXEL_CONVENTION",
     "approach_rng",
+    "evaluation_rng",
     "frame_rng",
     "frame_seed_sequence",
     "random_features_rng",
@@ -160,3 +161,13 @@ def split_uniform(seed: int, unit: int) -> float:
     ``val_fraction``. 32 bits of the unit's own seed sequence (cheap: no generator)."""
     state = np.random.SeedSequence(seed, spawn_key=(unit, SPLIT_STREAM)).generate_state(1, dtype=np.uint32)
     return float(state[0]) / 2.0**32
+
+
+#: Second spawn-key element of the evaluation's pixel-noise streams.
+EVALUATION_STREAM: Final[int] = 4
+
+
+def evaluation_rng(seed: int, frame_index: int, run: int) -> np.random.Generator:
+    """The RNG of the pixel noise ``datagen evaluate`` adds to frame ``frame_index`` in
+    its ``run``-th noise setting (spawn key ``(frame, EVALUATION_STREAM, run)``)."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(frame_index, EVALUATION_STREAM, run)))

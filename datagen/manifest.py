@@ -14,19 +14,22 @@ documents every column; a test checks that the two agree.
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
+from numpy.typing import NDArray
 
 from datagen.features import FeatureTable
 from datagen.files import atomic_path
 
 __all__ = [
     "MANIFEST_VERSION",
+    "FeatureColumns",
     "RUN_COLUMNS",
     "feature_records",
     "features_schema",
@@ -131,7 +134,11 @@ def write_manifest(path: Path, rows: Sequence[dict], summary: dict) -> Path:
     schema = manifest_schema()
     meta = dict(schema.metadata)
     meta[b"datagen.shard_summary"] = json.dumps(summary, sort_keys=True).encode()
-    table = pa.Table.from_pylist(list(rows), schema=schema.with_metadata(meta))
+    index = schema.get_field_index("features")
+    scalars = pa.Table.from_pylist([{k: v for k, v in row.items() if k != "features"} for row in rows],
+                                   schema=schema.remove(index))
+    table = scalars.add_column(index, schema.field("features"), _features_column([r["features"] for r in rows]))
+    table = table.replace_schema_metadata(meta)
     with atomic_path(path) as tmp:
         pq.write_table(table, tmp, compression="zstd")
     return Path(path)
@@ -193,20 +200,85 @@ def matrix_field(m: np.ndarray) -> list[float]:
     return np.asarray(m, dtype=np.float64).reshape(16).tolist()
 
 
-def feature_records(labels, class_ids: Iterable[int], visible_fraction=None, center_visible=None) -> list[dict]:
+@dataclass(frozen=True)
+class FeatureColumns:
+    """The ``features`` column of one frame as arrays (``F`` records, class-id order):
+    a manifest row carries this until its shard is written in one columnar pass."""
+
+    class_id: NDArray[np.int64]
+    center_px: NDArray[np.float64]  # (F, 2)
+    tight_xyxy: NDArray[np.float64]  # (F, 4)
+    corrected_xyxy: NDArray[np.float64]  # (F, 4)
+    exclusion: NDArray[np.int8]  # Exclusion codes
+    visible_fraction: NDArray[np.float64] | None  # None: not rendered
+    center_visible: NDArray[np.bool_] | None
+
+    @property
+    def labeled(self) -> NDArray[np.bool_]:
+        return self.exclusion == 0
+
+    def exclusion_counts(self) -> dict[str, int]:
+        from datagen.labels import Exclusion
+
+        codes, counts = np.unique(self.exclusion[self.exclusion != 0], return_counts=True)
+        return {Exclusion(int(c)).reason: int(n) for c, n in zip(codes, counts, strict=True)}
+
+
+def feature_records(labels, class_ids, visible_fraction=None, center_visible=None) -> FeatureColumns:
     """The ``features`` column of one frame from its :class:`~datagen.labels.FrameLabels`."""
+    return FeatureColumns(
+        class_id=np.asarray(class_ids, dtype=np.int64),
+        center_px=np.asarray(labels.center_px, dtype=np.float64),
+        tight_xyxy=np.asarray(labels.tight_xyxy, dtype=np.float64),
+        corrected_xyxy=np.asarray(labels.corrected_xyxy, dtype=np.float64),
+        exclusion=np.asarray(labels.exclusion, dtype=np.int8),
+        visible_fraction=None if visible_fraction is None else np.asarray(visible_fraction, dtype=np.float64),
+        center_visible=None if center_visible is None else np.asarray(center_visible, dtype=bool),
+    )
+
+
+def _features_column(frames: Sequence[FeatureColumns]) -> pa.Array:
+    """One ``list<struct>`` column from per-frame arrays, without a Python object per record."""
     from datagen.labels import Exclusion
 
-    records = []
-    for f, cid in enumerate(class_ids):
-        records.append({
-            "class_id": int(cid),
-            "center_px": labels.center_px[f].tolist(),
-            "tight_xyxy": labels.tight_xyxy[f].tolist(),
-            "corrected_xyxy": labels.corrected_xyxy[f].tolist(),
-            "labeled": bool(labels.exclusion[f] == Exclusion.NONE),
-            "exclusion": Exclusion(int(labels.exclusion[f])).reason,
-            "visible_fraction": None if visible_fraction is None else float(visible_fraction[f]),
-            "center_visible": None if center_visible is None else bool(center_visible[f]),
-        })
-    return records
+    counts = np.array([len(f.class_id) for f in frames], dtype=np.int32)
+    offsets = pa.array(np.concatenate([[0], np.cumsum(counts)]).astype(np.int32))
+    n = int(counts.sum())
+
+    def cat(name: str, width: int = 0) -> NDArray:
+        arrays = [getattr(f, name) for f in frames]
+        if not arrays:
+            return np.zeros((0, width) if width else 0)
+        return np.concatenate(arrays) if width == 0 else np.concatenate(arrays).reshape(-1, width)
+
+    def fixed(values: NDArray, width: int) -> pa.Array:
+        return pa.FixedSizeListArray.from_arrays(pa.array(values.reshape(-1), _F64), width)
+
+    def optional(name: str, dtype) -> pa.Array:
+        values = np.zeros(n, dtype=dtype)
+        mask = np.ones(n, dtype=bool)
+        start = 0
+        for f, c in zip(frames, counts, strict=True):
+            v = getattr(f, name)
+            if v is not None:
+                values[start:start + c] = v
+                mask[start:start + c] = False
+            start += c
+        return pa.array(values, mask=mask)
+
+    reasons = np.array([None] + [e.reason for e in list(Exclusion)[1:]], dtype=object)
+    codes = cat("exclusion").astype(np.int64)
+    struct = pa.StructArray.from_arrays(
+        [
+            pa.array(cat("class_id").astype(np.int32)),
+            fixed(cat("center_px", 2), 2),
+            fixed(cat("tight_xyxy", 4), 4),
+            fixed(cat("corrected_xyxy", 4), 4),
+            pa.array(codes == 0),
+            pa.array(reasons[codes].tolist(), pa.string()),
+            optional("visible_fraction", np.float64),
+            optional("center_visible", bool),
+        ],
+        fields=list(FEATURE_RECORD),
+    )
+    return pa.ListArray.from_arrays(offsets, struct).cast(pa.list_(FEATURE_RECORD))

@@ -13,7 +13,7 @@ from datagen.approach import trace_approach  # noqa: E402
 from datagen.config import Config  # noqa: E402
 from datagen.files import atomic_path  # noqa: E402
 
-__all__ = ["plot_approaches", "plot_audit"]
+__all__ = ["plot_approaches", "plot_audit", "plot_evaluation"]
 
 
 def plot_approaches(config: Config, path: Path, approaches: int = 5, seed: int | None = None) -> None:
@@ -122,4 +122,58 @@ def plot_audit(stats: dict, folder: Path) -> dict[str, Path]:
     for ax in axes:
         ax.grid(True, axis="y", alpha=0.3)
     save(fig, "coverage_and_pnp")
+    return out
+
+
+def _label(source: dict) -> str:
+    return (f"truth + {source['noise_px']:g} px noise" if source["source"] == "truth"
+            else f"predictions ({source.get('predictions', '')})")
+
+
+def plot_evaluation(runs, summaries, folder: Path, *, name: str = "") -> dict[str, Path]:
+    """PtD error magnitude against distance, one panel per run with the mean and +-2 sigma
+    per distance bin (paper Figs 14-17), and reliability against distance."""
+    import numpy as np
+
+    out: dict[str, Path] = {}
+    n = len(runs)
+    cols = min(n, 2)
+    rows = (n + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(7 * cols, 4.2 * rows), squeeze=False, constrained_layout=True)
+    for ax, (source, result), summary in zip(axes.ravel(), runs, summaries):
+        ok = result["success"]
+        d, e = result["distance_m"], result["error_m"]
+        ax.scatter(d[ok], np.maximum(e[ok], 1e-6), s=2, alpha=0.3, color="C0", label="prediction error")
+        bins = [b for b in summary["by_distance"] if b["mean_m"] is not None]
+        mid = [(b["lo_m"] + b["hi_m"]) / 2 for b in bins]
+        ax.plot(mid, [b["mean_m"] for b in bins], "-", color="C3", label="mean")
+        ax.plot(mid, [b["plus_2sigma_m"] for b in bins], "--", color="C1", label="mean + 2 sigma")
+        ax.axhline(0.07, color="k", lw=0.8, ls=":", label="7 cm (acceptable at contact)")
+        ax.set(xscale="symlog", xlim=(0, 125), yscale="log", xlabel="probe-to-drogue distance (m)",
+               ylabel="PtD error magnitude (m)", title=f"{_label(source)}: target {summary['target']}")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7)
+    for ax in axes.ravel()[n:]:
+        ax.axis("off")
+    fig.suptitle(f"{name}: PtD vector error vs distance")
+    path = Path(folder) / "error_vs_distance.png"
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
+    plt.close(fig)
+    out["error_vs_distance"] = path
+
+    fig, ax = plt.subplots(figsize=(8, 4), constrained_layout=True)
+    for (source, _), summary in zip(runs, summaries):
+        bins = [b for b in summary["by_distance"] if b["attempts"]]
+        ax.plot([(b["lo_m"] + b["hi_m"]) / 2 for b in bins], [100 * b["reliability"] for b in bins], "o-",
+                ms=3, label=_label(source))
+    ax.set(xlabel="probe-to-drogue distance (m)", ylabel="reliability (%)", ylim=(0, 102),
+           title=f"{name}: successful PtD predictions / attempts")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    path = Path(folder) / "reliability_vs_distance.png"
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
+    plt.close(fig)
+    out["reliability_vs_distance"] = path
     return out

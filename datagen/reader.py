@@ -49,6 +49,9 @@ class DatasetView:
     cam_from_world: NDArray[np.float64]  # (B, 4, 4)
     world_from: dict[str, NDArray[np.float64]]  # object -> (B, 4, 4)
     distance_m: NDArray[np.float64]
+    ptd_receiver_m: NDArray[np.float64]  # (B, 3)
+    approach_index: NDArray[np.int64]
+    approach_number: NDArray[np.int64]
     class_id: NDArray[np.int64]  # (B, F)
     center_px: NDArray[np.float64]  # (B, F, 2)
     tight_xyxy: NDArray[np.float64]  # (B, F, 4)
@@ -175,6 +178,9 @@ def load_dataset(root: str | Path) -> DatasetView:
         cam_from_world=matrices("cam_from_world"),
         world_from={o: matrices(f"world_from_{o}") for o in ("tanker", "receiver", "drogue")},
         distance_m=np.asarray(table.column("distance_m"), dtype=np.float64),
+        ptd_receiver_m=_floats(table.column("ptd_receiver_m").combine_chunks(), (b, 3)),
+        approach_index=np.asarray(table.column("approach_index"), dtype=np.int64),
+        approach_number=np.asarray(table.column("approach_number"), dtype=np.int64),
         class_id=np.asarray(_column(flat, "class_id"), dtype=np.int64).reshape(b, f),
         center_px=_floats(_column(flat, "center_px"), (b, f, 2)),
         tight_xyxy=_floats(_column(flat, "tight_xyxy"), (b, f, 4)),

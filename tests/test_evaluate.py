@@ -1,0 +1,156 @@
+"""datagen evaluate: dual-object PnP PtD vectors, the paper's metrics, prediction files,
+and the extrinsic independence of the method."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from datagen.approach import frame_state
+from datagen.assets import feature_table
+from datagen.build import build_dataset
+from datagen.camera import Intrinsics, project_points
+from datagen.config import load_config, override_config
+from datagen.errors import DatagenError
+from datagen.evaluate import evaluate, parse_predictions, ptd_from_points, summarize
+from datagen.reader import load_dataset
+from datagen.transforms import apply_transform, invert_rigid, make_transform, rotation_from_ypr
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def labels_only(tmp: Path, scene: str, frames: int):
+    config = override_config(load_config(ROOT / "scenes" / f"{scene}.yaml"),
+                             {"dataset.frames": frames, "dataset.shard_size": 100})
+    build_dataset(config, tmp / scene, render=False)
+    return load_dataset(tmp / scene)
+
+
+@pytest.fixture(scope="module")
+def wingcam(tmp_path_factory):
+    return labels_only(tmp_path_factory.mktemp("eval"), "wingcam55", 160)
+
+
+@pytest.fixture(scope="module")
+def podcam(tmp_path_factory):
+    return labels_only(tmp_path_factory.mktemp("eval"), "podcam15", 64)
+
+
+def test_noise_free_points_give_the_true_vector_within_a_millimetre(wingcam) -> None:
+    result = evaluate(wingcam, noise_px=0.0)
+    ok = result["success"]
+    assert ok.mean() > 0.9
+    assert result["error_m"][ok].max() < 1e-3
+    summary = summarize(result)
+    for b in summary["by_distance"]:
+        assert b["max_m"] is None or b["max_m"] < 1e-3
+    # Frames without a vector have a reason, and it is the right one.
+    few = (result["matches_receiver"] < 3) | (result["matches_target"] < 3)
+    assert np.array_equal(result["reason"] == 1, few)
+
+
+def test_the_drogue_vector_is_the_manifests_true_ptd(podcam) -> None:
+    result = evaluate(podcam, noise_px=0.0)
+    assert result["target"] == "drogue"
+    ok = result["success"]
+    assert ok.sum() >= 32
+    np.testing.assert_allclose(result["truth_m"], podcam.ptd_receiver_m, atol=1e-9)
+    assert result["error_to_drogue_m"][ok].max() < 1e-3
+
+
+def test_error_grows_with_the_noise_radius(wingcam) -> None:
+    means = [summarize(evaluate(wingcam, noise_px=r, run=i))["overall"]["mean_m"]
+             for i, r in enumerate((0.0, 0.5, 1.0, 2.5))]
+    assert means == sorted(means) and means[0] < 1e-3 < means[1] and means[3] > 2 * means[1]
+    # The noise is seeded: the same run gives the same vectors.
+    a, b = evaluate(wingcam, noise_px=1.0, run=2), evaluate(wingcam, noise_px=1.0, run=2)
+    np.testing.assert_array_equal(a["ptd_m"], b["ptd_m"])
+
+
+def test_predictions_are_parsed_and_matched_by_stem(wingcam, tmp_path: Path) -> None:
+    k = wingcam.intrinsics
+    folder = tmp_path / "pred" / "labels"
+    folder.mkdir(parents=True)
+    dropped = 0
+    for b in range(len(wingcam)):
+        lines = []
+        for f in np.flatnonzero(wingcam.labeled[b]):
+            u, v = wingcam.center_px[b, f]
+            if f % 7 == 0:
+                dropped += 1
+                continue  # a missing class
+            good = f"{f} {u / k.width:.9f} {v / k.height:.9f} 0.01 0.01 0.90"
+            worse = f"{f} {(u + 40) / k.width:.9f} {v / k.height:.9f} 0.01 0.01 0.60"  # duplicate, lower conf
+            lines += [worse, good] if f % 2 else [good, worse]
+            lines.append(f"{f} 0.5 0.5 0.01 0.01 0.10")  # below the confidence threshold
+        (folder / Path(wingcam.label_path[b]).name).write_text("\n".join(lines) + "\n")
+    found = parse_predictions(tmp_path / "pred", k.width, k.height, len(wingcam.features))
+    assert dropped and len(found) == len(wingcam)
+    b = 0
+    stem = Path(wingcam.label_path[b]).stem
+    kept = {f for f in np.flatnonzero(wingcam.labeled[b]) if f % 7}
+    assert set(found[stem]) == kept
+    for f in kept:
+        assert found[stem][f][2] == 0.9
+        np.testing.assert_allclose(found[stem][f][:2], wingcam.center_px[b, f], atol=1e-5)
+    result = evaluate(wingcam, predictions=found)
+    ok = result["success"]
+    assert ok.mean() > 0.8 and result["error_m"][ok].max() < 5e-3
+
+
+def test_a_bad_prediction_line_names_its_file(tmp_path: Path) -> None:
+    (tmp_path / "00000001.txt").write_text("3 0.5 0.5 0.1 0.1 0.9\n81 0.5 0.5 0.1 0.1 0.9\n")
+    with pytest.raises(DatagenError, match=r"00000001\.txt:2: expected 'class cx cy w h \[conf\]' with class < 80"):
+        parse_predictions(tmp_path, 2048, 1080, 80)
+
+
+@settings(max_examples=25)
+@given(frame=st.integers(0, 63), yaw=st.floats(-8, 8), pitch=st.floats(-8, 8), roll=st.floats(-20, 20),
+       shift=st.tuples(*[st.floats(-0.5, 0.5)] * 3))
+def test_the_ptd_vector_does_not_depend_on_the_camera_mount(frame, yaw, pitch, roll, shift) -> None:
+    """Paper 3.5: the same frame seen through a differently mounted camera gives the same
+    vector, because it only uses the two objects' poses relative to one another."""
+    config = load_config(ROOT / "scenes" / "podcam15.yaml")
+    features = feature_table(config)
+    state = frame_state(config, frame)
+    k = Intrinsics.from_hfov_deg(2048, 1080, 15.0)
+    mount = make_transform(rotation_from_ypr(*(math.radians(a) for a in (yaw, pitch, roll))), list(shift))
+    cam_from_world = invert_rigid(state.world_from_cam @ mount)
+    points = {}
+    for obj in ("receiver", "drogue"):
+        sel = np.array([features.objects[i] == obj for i in features.object_index])
+        centres = features.center_model[sel]
+        in_cam = apply_transform(cam_from_world @ state.world_from(obj), centres)
+        front = in_cam[:, 2] > 0.1
+        points[obj] = (centres[front], project_points(in_cam[front], k))
+    if min(len(p[0]) for p in points.values()) < 4:
+        return  # an object behind this camera: nothing to compare
+    ptd = ptd_from_points(*points["receiver"], *points["drogue"], k)
+    assert ptd is not None
+    np.testing.assert_allclose(ptd, state.ptd_receiver_m, atol=1e-4)
+
+
+def test_evaluate_command_writes_json_parquet_and_plots(wingcam, tmp_path: Path) -> None:
+    out = subprocess.run([sys.executable, "-m", "datagen", "evaluate", str(wingcam.root), "--noise-px", "0,1",
+                          "--out", str(tmp_path / "ev")], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    doc = json.loads((tmp_path / "ev" / "evaluation.json").read_text())
+    assert [r["noise_px"] for r in doc["runs"]] == [0.0, 1.0]
+    assert doc["settings"]["iterations"] == 500 and doc["settings"]["reprojection_px"] == 4.0
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(tmp_path / "ev" / "results.parquet")
+    assert table.num_rows == 2 * len(wingcam)
+    assert {p.name for p in (tmp_path / "ev" / "plots").iterdir()} == {"error_vs_distance.png",
+                                                                       "reliability_vs_distance.png"}
+    bad = subprocess.run([sys.executable, "-m", "datagen", "evaluate", str(wingcam.root), "--noise-px", "a,b"],
+                         capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "--noise-px" in bad.stderr
