@@ -216,13 +216,18 @@ def dataset_document(config: Config, jobs: list[ShardJob], fingerprint: str, ass
     }
 
 
-def data_yaml(class_names: list[str]) -> str:
+def data_yaml(class_names: list[str], splits: tuple[str, ...] = SPLITS) -> str:
     """Ultralytics' dataset file. No ``path:``: Ultralytics then resolves ``train``
-    and ``val`` against the folder of data.yaml itself, so the dataset can move."""
-    doc = {"train": "images/train", "val": "images/val",
+    and ``val`` against the folder of data.yaml itself, so the dataset can move.
+    ``splits`` are the splits that have frames: Ultralytics needs both folders, so a
+    split without frames (``val_fraction: 0``, or a tiny build) borrows the other's."""
+    have = [s for s in SPLITS if s in splits] or ["train"]
+    folder = {s: f"images/{s if s in have else have[0]}" for s in SPLITS}
+    note = "".join(f"# no {s} frames in this build: {s} uses {folder[s]}\n" for s in SPLITS if s not in have)
+    doc = {"train": folder["train"], "val": folder["val"],
            "nc": len(class_names), "names": dict(enumerate(class_names))}
-    return "# Ultralytics dataset (datagen). Train: yolo detect train data=<this file> cfg=hyp.yaml\n" + \
-        yaml.safe_dump(doc, sort_keys=False)
+    return ("# Ultralytics dataset (datagen). Train: yolo detect train data=<this file> cfg=hyp.yaml\n" + note
+            + yaml.safe_dump(doc, sort_keys=False))
 
 
 def hyp_yaml(config: Config) -> str:
@@ -271,7 +276,8 @@ def write_dataset_files(layout: Layout, config: Config, jobs: list[ShardJob], fi
         document = dataset_document(config, jobs, fingerprint, assets, names)
         with atomic_path(layout.dataset_json) as tmp:
             tmp.write_text(json.dumps(document, indent=2) + "\n")
-    for name, text in (("data.yaml", data_yaml(names)), ("hyp.yaml", hyp_yaml(config))):
+    splits = tuple(sorted({job.split for job in jobs}))
+    for name, text in (("data.yaml", data_yaml(names, splits)), ("hyp.yaml", hyp_yaml(config))):
         with atomic_path(root / name) as tmp:
             tmp.write_text(text)
     write_features(root / "features.parquet", features)

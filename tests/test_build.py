@@ -193,6 +193,14 @@ def test_a_folder_that_is_not_a_dataset_is_never_touched(tmp_path: Path) -> None
     assert precious.read_text() == "years of work"
 
 
+def test_a_split_without_frames_borrows_the_other_in_data_yaml(tmp_path: Path) -> None:
+    config = tiny_config(tmp_path, **{"dataset.val_fraction": 0.0})
+    build_dataset(config, tmp_path / "ds", render=False)
+    data = yaml.safe_load((tmp_path / "ds" / "data.yaml").read_text())
+    assert data["train"] == data["val"] == "images/train"
+    assert "# no val frames in this build: val uses images/train" in (tmp_path / "ds" / "data.yaml").read_text()
+
+
 def test_another_config_is_refused_unless_overwrite(tmp_path: Path) -> None:
     root = tmp_path / "ds"
     build_dataset(tiny_config(tmp_path), root, render=False)
