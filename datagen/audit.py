@@ -20,7 +20,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.labels import Exclusion
+from datagen.labels import YOLO_DECIMALS, Exclusion
 from datagen.reader import DatasetView
 
 __all__ = [
@@ -37,6 +37,9 @@ __all__ = [
 DRIFT_LIMIT_PX: Final = 1e-3
 #: Manifest boxes and centres must match the recomputation this closely.
 MANIFEST_TOLERANCE_PX: Final = 1e-6
+#: A label line's values may differ from the manifest box by the rounding of
+#: :data:`datagen.labels.YOLO_DECIMALS` decimals (normalized units).
+LINE_TOLERANCE: Final = 0.5 * 10.0 ** -YOLO_DECIMALS + 1e-12
 #: Offenders listed per check (the worst first).
 MAX_OFFENDERS: Final = 20
 #: PnP needs at least this many labeled features of an object in a frame.
@@ -145,8 +148,6 @@ def _parse_label_file(path: Path) -> tuple[list[list[str]], str | None]:
     return [line.split() for line in text.splitlines() if line.strip()], None
 
 
-def _decimals(token: str) -> int:
-    return len(token.partition(".")[2].partition("e")[0]) if "." in token else 0
 
 
 # --- the audit -----------------------------------------------------------------------------
@@ -221,6 +222,7 @@ def _check_label_files(view: DatasetView, labels) -> list[Check]:
             lines.fail(rel, problem)
             continue
         seen: Counter = Counter()
+        per_class: Counter = Counter()
         for n, tokens in enumerate(rows, start=1):
             where = f"{rel}:{n}"
             rules.checked += 1
@@ -229,6 +231,9 @@ def _check_label_files(view: DatasetView, labels) -> list[Check]:
                 values = [float(t) for t in tokens]
             except ValueError:
                 rules.fail(where, f"not numbers: {' '.join(tokens)!r}")
+                continue
+            if not all(math.isfinite(v) for v in values):
+                rules.fail(where, f"not finite: {' '.join(tokens)!r}")
                 continue
             if len(values) != 5:
                 rules.fail(where, f"{len(values)} columns, Ultralytics needs 5")
@@ -244,18 +249,22 @@ def _check_label_files(view: DatasetView, labels) -> list[Check]:
             if seen[key] == 2:
                 rules.fail(where, "duplicate row")
             f = int(cls)
+            per_class[f] += 1
+            if per_class[f] == 2:
+                lines.fail(where, f"class {f} has more than one line")
             if not labels.labeled[b, f]:
                 reason = Exclusion(int(labels.exclusion[b, f])).reason
                 lines.fail(where, f"class {f} has a line but the feature is excluded ({reason})")
                 if labels.exclusion[b, f] == Exclusion.BEHIND_CAMERA:
                     margin.fail(where, f"class {f} is behind the camera")
             else:
-                tol = 0.5 * 10.0 ** -min(_decimals(t) for t in tokens[1:]) + 1e-12
+                tol = LINE_TOLERANCE
                 expected = np.array([label_centre[b, f, 0] / w, label_centre[b, f, 1] / h,
                                      (box[b, f, 2] - box[b, f, 0]) / w, (box[b, f, 3] - box[b, f, 1]) / h])
                 err = np.abs(np.array(values[1:]) - expected)
-                worst_line = max(worst_line, float((err * [w, h, w, h]).max()))
-                if np.any(err > tol):
+                if np.all(np.isfinite(err)):
+                    worst_line = max(worst_line, float((err * [w, h, w, h]).max()))
+                if not np.all(err <= tol):
                     lines.fail(where, f"class {f} differs from the manifest box by "
                                f"{(err * [w, h, w, h]).max():.3g} px", float((err * [w, h, w, h]).max()))
             cx, cy, bw, bh = (values[1] * w, values[2] * h, values[3] * w, values[4] * h)
@@ -271,18 +280,13 @@ def _check_label_files(view: DatasetView, labels) -> list[Check]:
             if inside < m - 1e-3:
                 margin.fail(where, f"class {f} box is {inside:.2f} px from the border, margin {m:g} px", m - inside)
         labeled = set(np.flatnonzero(labels.labeled[b]).tolist())
-        listed = {int(float(t[0])) for t in rows if t and _is_int(t[0])}
-        for f in sorted(labeled - listed):
+        for f in sorted(labeled - set(per_class)):
             lines.fail(rel, f"class {f} is labeled in the manifest but has no line")
     lines.worst, drift.worst = worst_line, worst_drift
     return [lines, drift, margin, rules]
 
 
-def _is_int(token: str) -> bool:
-    try:
-        return float(token) == int(float(token))
-    except ValueError:
-        return False
+
 
 
 def _check_files(view: DatasetView) -> Check:

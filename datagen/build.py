@@ -337,23 +337,40 @@ def _run_local(config: Config, root: Path, jobs: list[ShardJob], workers: int, r
         return
     import multiprocessing as mp
     import queue as queue_module
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
 
     ctx = mp.get_context("spawn")  # never fork a process that may hold Dr.Jit threads
     queue = ctx.Queue()
-    with ctx.Pool(workers, initializer=_pool_init,
-                  initargs=(config, str(root), threads, render, queue)) as pool:
-        pending = [pool.apply_async(_pool_run, (job,)) for job in jobs]
-        while pending:
-            with contextlib.suppress(queue_module.Empty):
-                progress(queue.get(timeout=0.2))
-                while True:
-                    progress(queue.get_nowait())
-            for result in [r for r in pending if r.ready()]:
-                pending.remove(result)
-                done(result.get())  # re-raises a worker's exception here
+
+    def drain() -> None:
         with contextlib.suppress(queue_module.Empty):
             while True:
                 progress(queue.get_nowait())
+
+    executor = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_pool_init,
+                                   initargs=(config, str(root), threads, render, queue))
+    try:
+        pending = {executor.submit(_pool_run, job): job for job in jobs}
+        while pending:
+            finished, _ = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+            drain()
+            for future in finished:
+                job = pending.pop(future)
+                try:
+                    done(future.result())  # re-raises a worker's exception here
+                except BrokenProcessPool:
+                    raise DatagenError(f"shard {job.name}: a worker process died (out of memory, or killed); "
+                                       "rerun the same command to finish the missing shards") from None
+        drain()
+    except BaseException:
+        # Ctrl-C or a failed shard: stop every worker now (their files are atomic, the
+        # temporaries they leave are swept) instead of waiting for their shards.
+        for process in list(getattr(executor, "_processes", {}).values()):
+            process.terminate()
+        executor.shutdown(wait=True, cancel_futures=True)
+        raise
+    executor.shutdown(wait=True)
 
 
 def _ray_run(config: Config, root: str, job: ShardJob, threads: int, render: bool, queue) -> ShardSummary:
@@ -379,9 +396,11 @@ def _run_ray(config: Config, root: Path, jobs: list[ShardJob], workers: int | No
         started = True
     try:
         cpus = int(ray.cluster_resources().get("CPU", 1))
-        nodes = sum(1 for n in ray.nodes() if n.get("Alive"))
-        workers = workers or max(1, nodes)
-        per_task = max(1, cpus // workers)
+        alive = [n for n in ray.nodes() if n.get("Alive")]
+        largest = max((int(n.get("Resources", {}).get("CPU", 0)) for n in alive), default=1) or 1
+        workers = workers or max(1, len(alive))
+        # A task that asks for more CPUs than any one node has would never be scheduled.
+        per_task = max(1, min(cpus // workers, largest))
         task = ray.remote(num_cpus=per_task, max_retries=0)(_ray_run)
         queue = Queue()
         refs = {task.remote(config, str(root), job, per_task, render, queue): job for job in jobs}
@@ -495,6 +514,8 @@ def build_dataset(config: Config, out: Path, *, workers: int | None = None, exec
     started = time.perf_counter()
     check_assets(config)
     root = Path(out).resolve()
+    if root.exists() and not root.is_dir():
+        raise DatagenError(f"{out}: --out is a file, not a folder")
     layout = Layout(root, ".jpg" if config.render.image_format == "jpg" else ".png")
     jobs = plan_shards(config)
     assets = asset_files(config)
@@ -509,7 +530,11 @@ def build_dataset(config: Config, out: Path, *, workers: int | None = None, exec
             if manifest.is_file():
                 from datagen.manifest import read_manifest_summary
 
-                counts = read_manifest_summary(manifest)
+                try:
+                    counts = read_manifest_summary(manifest)
+                except Exception as exc:  # damaged outside datagen: manifests are written atomically
+                    raise DatagenError(f"{manifest}: unreadable manifest ({type(exc).__name__}); delete it to "
+                                       "render its shard again") from None
                 report.shards[job.name] = ShardSummary(job.name, counts.get("frames", len(job.frames)),
                                                        counts.get("labels", 0), counts.get("excluded", {}))
                 report.resumed.append(job.name)
@@ -535,6 +560,10 @@ def build_dataset(config: Config, out: Path, *, workers: int | None = None, exec
         except KeyboardInterrupt:
             report.interrupted = True
             sweep_temporaries(leftovers)
+        except OSError as exc:  # disk full, permissions: the file and the reason, on one line
+            sweep_temporaries(leftovers)
+            raise DatagenError(f"{exc.filename or root}: {exc.strerror or exc}; the finished shards are kept, "
+                               "rerun the same command to finish the others") from None
         finally:
             if progress is not None:
                 progress.close()

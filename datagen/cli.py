@@ -226,6 +226,7 @@ def evaluate(
                                                      "detections (cls cx cy w h conf), by image stem; replaces "
                                                      "the truth runs.")] = None,
     conf: Annotated[float, typer.Option("--conf", min=0.0, max=1.0, help="Minimum detection confidence.")] = 0.25,
+    split: Annotated[str, typer.Option("--split", help="Frames to attempt: all, train or val.")] = "all",
     seed: Annotated[int | None, typer.Option("--seed", min=0, help="Noise seed (default: the dataset's).")] = None,
     out: Annotated[Path | None, typer.Option("--out", help="Output folder (default: DATASET/evaluation).")] = None,
 ) -> None:
@@ -235,23 +236,30 @@ def evaluate(
     from datagen.evaluate import parse_predictions, summarize, write_evaluation
     from datagen.reader import load_dataset
 
+    if split not in ("all", "train", "val"):
+        raise DatagenError(f"--split: {split!r}: choose all, train or val")
+    only = None if split == "all" else split
     view = load_dataset(dataset)
     runs = []
     if predictions is not None:
         k = view.intrinsics
         found = parse_predictions(predictions, k.width, k.height, len(view.features), min_conf=conf)
-        runs.append(({"source": "predictions", "predictions": str(predictions), "conf": conf},
-                     run_evaluate(view, predictions=found)))
+        result = run_evaluate(view, predictions=found, split=only)
+        runs.append(({"source": "predictions", "predictions": str(predictions), "conf": conf, "split": split},
+                     result))
+        if result["missing_predictions"]:
+            typer.echo(f"{result['missing_predictions']} of {len(result['frame_id'])} frames have no prediction "
+                       "file (no detection, or not predicted: see --split); they count as failed attempts")
     else:
         try:
             radii = [float(r) for r in noise_px.split(",")]
         except ValueError:
             raise DatagenError(f"--noise-px: {noise_px!r} is not a list of radii like 0,0.5,1,2.5") from None
-        if any(r < 0 for r in radii):
-            raise DatagenError(f"--noise-px: {noise_px!r}: radii must not be negative")
+        if not all(math.isfinite(r) and r >= 0 for r in radii):
+            raise DatagenError(f"--noise-px: {noise_px!r}: radii must be finite and not negative")
         for run, radius in enumerate(radii):
-            runs.append(({"source": "truth", "noise_px": radius},
-                         run_evaluate(view, noise_px=radius, run=run, seed=seed)))
+            runs.append(({"source": "truth", "noise_px": radius, "split": split},
+                         run_evaluate(view, noise_px=radius, run=run, seed=seed, split=only)))
     written = write_evaluation(view, runs, out if out is not None else Path(dataset) / "evaluation")
     for source, result in runs:
         s = summarize(result)

@@ -64,8 +64,8 @@ DATASET_SCHEMA: Final = "datagen.dataset"
 DATASET_SCHEMA_VERSION: Final = 1
 SPLITS: Final = ("train", "val")
 #: Everything datagen writes at the top of a dataset folder (``--overwrite`` removes these only).
-OWNED: Final = ("manifests", "images", "labels", "exr", "audit", "preview", "data.yaml", "hyp.yaml",
-                "features.parquet", "dataset.json")
+OWNED: Final = ("manifests", "images", "labels", "exr", "audit", "preview", "evaluation", "data.yaml",
+                "hyp.yaml", "features.parquet", "dataset.json")
 LOCK_NAME: Final = ".datagen.lock"
 #: Ultralytics' training image size in the recipe (the paper trained at 864).
 TRAIN_IMGSZ: Final = 864
@@ -293,8 +293,12 @@ class DatasetLock:
         self._fd: int | None = None
 
     def acquire(self) -> None:
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise DatagenError(f"{exc.filename or self.path.parent}: cannot create the dataset folder "
+                               f"({exc.strerror})") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as exc:
@@ -338,7 +342,9 @@ def prepare_folder(layout: Layout, fingerprint: str, config: Config, *, overwrit
     refused unless ``overwrite``, which removes what datagen wrote there.
     """
     root = layout.root
-    entries = [p.name for p in root.iterdir() if p.name != LOCK_NAME] if root.is_dir() else []
+    # The lock and temporaries of an interrupted first run do not make a folder non-empty.
+    entries = [p.name for p in root.iterdir() if p.name != LOCK_NAME and not _temporary(p.name)] \
+        if root.is_dir() else []
     if not entries:
         return False
     path = layout.dataset_json
@@ -365,6 +371,10 @@ def prepare_folder(layout: Layout, fingerprint: str, config: Config, *, overwrit
     return False
 
 
+def _temporary(name: str) -> bool:
+    return name.startswith(".") and name.endswith(".tmp")
+
+
 def remove_owned(root: Path) -> None:
     """Delete what datagen wrote in ``root``: manifests first (so that no shard counts
     as done if this is interrupted), dataset.json last (so the folder stays
@@ -385,7 +395,7 @@ def sweep_temporaries(paths: list[Path]) -> int:
         if not folder.is_dir():
             continue
         for entry in folder.iterdir():
-            if entry.name.startswith(".") and entry.name.endswith(".tmp") and entry.is_file():
+            if _temporary(entry.name) and entry.is_file():
                 entry.unlink(missing_ok=True)
                 removed += 1
     return removed

@@ -152,7 +152,11 @@ def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_con
     out: dict[str, dict[int, tuple[float, float, float]]] = {}
     for path in sorted(folder.rglob("*.txt")):
         best: dict[int, tuple[float, float, float]] = {}
-        for n, line in enumerate(path.read_text().splitlines(), start=1):
+        try:
+            text = path.read_text()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise DatagenError(f"{path}: unreadable prediction file ({exc})") from None
+        for n, line in enumerate(text.splitlines(), start=1):
             tokens = line.split()
             if not tokens:
                 continue
@@ -160,7 +164,8 @@ def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_con
                 values = [float(t) for t in tokens]
             except ValueError:
                 raise DatagenError(f"{path}:{n}: not a YOLO detection line: {line!r}") from None
-            if len(values) not in (5, 6) or values[0] != int(values[0]) or not 0 <= values[0] < nc:
+            if (len(values) not in (5, 6) or not all(math.isfinite(v) for v in values)
+                    or values[0] != int(values[0]) or not 0 <= values[0] < nc):
                 raise DatagenError(f"{path}:{n}: expected 'class cx cy w h [conf]' with class < {nc}: {line!r}")
             cls, cx, cy = int(values[0]), values[1], values[2]
             conf = values[5] if len(values) == 6 else 1.0
@@ -180,8 +185,12 @@ def _target_object(view: DatasetView) -> str:
 
 
 def evaluate(view: DatasetView, *, noise_px: float = 0.0, run: int = 0, seed: int | None = None,
-             predictions: dict | None = None, settings: PnPSettings = PnPSettings()) -> dict[str, NDArray]:
+             predictions: dict | None = None, settings: PnPSettings = PnPSettings(),
+             split: str | None = None) -> dict[str, NDArray]:
     """PtD vectors of every frame (frame order) for one source of 2D points.
+
+    ``split`` limits the attempts to one split's frames (``val`` when scoring a
+    detector on what it did not train on).
 
     Returns per-frame arrays: ``frame_id``, ``distance_m``, ``matches_receiver``,
     ``matches_target``, ``reason`` (index into :data:`REASONS`), ``success``, ``ptd_m``
@@ -214,7 +223,10 @@ def evaluate(view: DatasetView, *, noise_px: float = 0.0, run: int = 0, seed: in
     guesses: dict[str, tuple] = {}
     chain = None
     history: deque = deque(maxlen=settings.rolling_window)
+    attempted = np.array([split is None or s == split for s in view.split])
     for i in range(b):
+        if not attempted[i]:
+            continue
         key = (int(view.approach_index[i]), int(view.approach_number[i]))
         if key != chain:
             chain, guesses, history = key, {}, deque(maxlen=settings.rolling_window)
@@ -246,7 +258,6 @@ def evaluate(view: DatasetView, *, noise_px: float = 0.0, run: int = 0, seed: in
         if poses["receiver"] is None or poses[target] is None:
             out["reason"][i] = REASONS.index("pnp_failed")
             continue
-        guesses = dict(poses)
         ptd = ptd_from_poses(poses["receiver"], poses[target])
         out["ptd_m"][i] = ptd
         if np.linalg.norm(ptd) > settings.max_range_m:
@@ -259,9 +270,14 @@ def evaluate(view: DatasetView, *, noise_px: float = 0.0, run: int = 0, seed: in
                 out["reason"][i] = REASONS.index("outlier")
                 continue
         history.append(ptd)
+        guesses = dict(poses)  # only an accepted pose seeds the next frame's solve
+    for name in list(out):  # frames of other splits were not attempted: drop them
+        out[name] = out[name][attempted]
     out["success"] = out["reason"] == 0
     out["error_m"] = np.linalg.norm(out["ptd_m"] - out["truth_m"], axis=1)
-    out["error_to_drogue_m"] = np.linalg.norm(out["ptd_m"] - view.ptd_receiver_m, axis=1)
+    out["error_to_drogue_m"] = np.linalg.norm(out["ptd_m"] - view.ptd_receiver_m[attempted], axis=1)
+    out["missing_predictions"] = 0 if predictions is None else int(sum(
+        1 for i in np.flatnonzero(attempted) if (stems[i] or label_stems[i]) not in predictions))
     out["target"] = target
     return out
 

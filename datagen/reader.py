@@ -24,7 +24,7 @@ from datagen.camera import Intrinsics
 from datagen.errors import DatagenError
 from datagen.features import FeatureTable
 from datagen.labels import FrameLabels, compute_labels
-from datagen.manifest import read_features
+from datagen.manifest import MANIFEST_VERSION, manifest_schema, read_features
 
 __all__ = ["DatasetView", "load_dataset"]
 
@@ -130,14 +130,26 @@ def load_dataset(root: str | Path) -> DatasetView:
     except (OSError, pa.ArrowException, KeyError, ValueError) as exc:
         raise DatagenError(f"{root / 'features.parquet'}: unreadable ({exc})") from None
     k = doc["intrinsics"]
+    missing = [key for key in ("fx", "fy", "cx", "cy") if not isinstance(k, dict) or key not in k]
+    if missing:
+        raise DatagenError(f"{root / 'dataset.json'}: intrinsics.{missing[0]}: missing")
     intrinsics = Intrinsics(int(doc["image_width"]), int(doc["image_height"]), k["fx"], k["fy"], k["cx"], k["cy"])
+    expected = manifest_schema()
     tables, names = [], []
     for path in sorted((root / "manifests").glob("*.parquet")):
         try:
             table = pq.read_table(path)
         except (OSError, pa.ArrowException) as exc:
-            raise DatagenError(f"{path}: unreadable manifest ({exc})") from None
-        tables.append(table)
+            raise DatagenError(f"{path}: unreadable manifest ({type(exc).__name__})") from None
+        version = (table.schema.metadata or {}).get(b"datagen.manifest_version", b"?").decode()
+        if version != MANIFEST_VERSION:
+            raise DatagenError(f"{path}: manifest version {version}, this datagen reads {MANIFEST_VERSION}")
+        for field in expected:
+            have = table.schema.field(field.name) if field.name in table.schema.names else None
+            if have is None or not have.type.equals(field.type):
+                what = "missing" if have is None else f"type {have.type}, expected {field.type}"
+                raise DatagenError(f"{path}: column {field.name}: {what}")
+        tables.append(table.select(expected.names).cast(expected))
         names += [str(path.relative_to(root))] * table.num_rows
     if not tables:
         raise DatagenError(f"{root / 'manifests'}: no manifest; the dataset has no finished shard")

@@ -118,14 +118,14 @@ def _uniform(rng: np.random.Generator, bounds) -> float:
 
 
 def _levels(rng: np.random.Generator, bounds, levels: int | None = None) -> float:
-    """A uniform draw in ``bounds`` rounded to one of :data:`SKY_SCALE_LEVELS` evenly
-    spaced values. Mitsuba's ``sunsky`` keeps its sun and sky scales as scalars that
+    """One of :data:`SKY_SCALE_LEVELS` evenly spaced values across ``bounds``, each
+    equally likely. Mitsuba's ``sunsky`` keeps its sun and sky scales as scalars that
     are baked into the compiled kernel: a continuous draw would compile (and keep in
     memory) a new kernel for every frame; a few levels bound the kernels at
     ``levels**2`` for the whole dataset."""
     levels = levels or SKY_SCALE_LEVELS
     lo, hi = bounds
-    step = round(float(rng.uniform(0.0, 1.0)) * (levels - 1))
+    step = int(rng.integers(levels))  # every level equally likely
     return lo + (hi - lo) * step / (levels - 1)
 
 

@@ -213,3 +213,24 @@ def test_html_report_renders_in_headless_chromium(dataset, tmp_path: Path) -> No
     assert 'data-images="8/8"' in out.stdout  # 5 plots + 3 overlays, every one decoded
     console = [line for line in out.stderr.splitlines() if "CONSOLE" in line]
     assert not [line for line in console if "Error" in line or "Uncaught" in line], console
+
+
+@pytest.mark.render
+def test_duplicate_coarse_and_non_finite_lines_fail_without_a_traceback(copy, tmp_path: Path) -> None:
+    path, lines = first_line(copy)
+    cls, cx, cy, w, h = lines[0].split()
+    lines.append(f"{cls} {float(cx):.2f} {float(cy):.2f} {float(w):.2f} {float(h):.2f}")  # same class, coarse
+    lines.append("nan 0.5 0.5 0.1 0.1")
+    lines.append(f"{cls} inf 0.5 0.1 0.1")
+    path.write_text("\n".join(lines) + "\n")
+    view = load_dataset(copy)
+    result = audit(view)
+    by_name = {c.name: c for c in result.checks}
+    rel = path.relative_to(copy)
+    line_offenders = "\n".join(by_name["label_lines"].offenders)
+    assert f"{rel}:{len(lines) - 2}: class {cls} has more than one line" in line_offenders
+    assert f"{rel}:{len(lines) - 2}: class {cls} differs from the manifest box" in line_offenders
+    rules = "\n".join(by_name["ultralytics_rules"].offenders)
+    assert f"{rel}:{len(lines) - 1}: not finite" in rules and f"{rel}:{len(lines)}: not finite" in rules
+    written = write_report(result, view, tmp_path, overlays=0)  # strict JSON: no NaN or inf
+    assert json.loads(written["json"].read_text())["passed"] is False

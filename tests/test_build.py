@@ -409,3 +409,15 @@ def test_resume_after_an_interruption_finishes_only_the_missing_shards(reference
     assert not temporaries(out)
     rendered = [r for r in manifest_rows(out).values() if r["render_s"] is not None]
     assert len(rendered) < 8  # frames whose image survived the kill were not rendered again
+
+
+def test_out_must_be_a_folder_and_temporaries_do_not_make_it_foreign(tmp_path: Path) -> None:
+    config = tiny_config(tmp_path)
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(DatagenError, match="--out is a file, not a folder"):
+        build_dataset(config, tmp_path / "file", render=False)
+    # A first run killed while writing dataset.json leaves only its temporary: not someone's data.
+    (tmp_path / "ds").mkdir()
+    (tmp_path / "ds" / ".dataset.json.123.tmp").write_text("{")
+    report = build_dataset(config, tmp_path / "ds", render=False)
+    assert report.frames == 8 and not temporaries(tmp_path / "ds")

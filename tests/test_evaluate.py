@@ -154,3 +154,16 @@ def test_evaluate_command_writes_json_parquet_and_plots(wingcam, tmp_path: Path)
     bad = subprocess.run([sys.executable, "-m", "datagen", "evaluate", str(wingcam.root), "--noise-px", "a,b"],
                          capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "--noise-px" in bad.stderr
+
+
+def test_split_limits_the_attempts_and_bad_inputs_are_one_line(wingcam, tmp_path: Path) -> None:
+    val = evaluate(wingcam, noise_px=0.0, split="val")
+    assert len(val["frame_id"]) == wingcam.split.count("val") > 0
+    assert set(val["frame_id"]) == {int(f) for f, s in zip(wingcam.frame_id, wingcam.split) if s == "val"}
+    out = subprocess.run([sys.executable, "-m", "datagen", "evaluate", str(wingcam.root), "--noise-px", "0,nan"],
+                         capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert out.returncode == 2 and out.stderr.strip() == (
+        "--noise-px: '0,nan': radii must be finite and not negative")
+    (tmp_path / "x.txt").write_bytes(b"\xff\xfe\x00")
+    with pytest.raises(DatagenError, match=r"x\.txt: unreadable prediction file"):
+        parse_predictions(tmp_path, 2048, 1080, 80)
