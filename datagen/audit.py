@@ -20,7 +20,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.labels import YOLO_DECIMALS, Exclusion
+from datagen.labels import YOLO_DECIMALS, Exclusion, FrameLabels
 from datagen.reader import DatasetView
 
 __all__ = [
@@ -86,6 +86,7 @@ class AuditResult:
     frames: int
     checks: list[Check]
     stats: dict
+    labels: FrameLabels  # the recomputation the checks ran against (reused by the report's overlays)
 
     @property
     def passed(self) -> bool:
@@ -162,7 +163,7 @@ def audit(view: DatasetView) -> AuditResult:
     ]
     stats = _statistics(view, labels)
     return AuditResult(view.root, str(view.doc.get("name", view.root.name)), len(view), [c.finish() for c in checks],
-                       stats)
+                       stats, labels)
 
 
 def _check_manifest(view: DatasetView, labels) -> Check:
@@ -258,13 +259,12 @@ def _check_label_files(view: DatasetView, labels) -> list[Check]:
                 if labels.exclusion[b, f] == Exclusion.BEHIND_CAMERA:
                     margin.fail(where, f"class {f} is behind the camera")
             else:
-                tol = LINE_TOLERANCE
                 expected = np.array([label_centre[b, f, 0] / w, label_centre[b, f, 1] / h,
                                      (box[b, f, 2] - box[b, f, 0]) / w, (box[b, f, 3] - box[b, f, 1]) / h])
                 err = np.abs(np.array(values[1:]) - expected)
                 if np.all(np.isfinite(err)):
                     worst_line = max(worst_line, float((err * [w, h, w, h]).max()))
-                if not np.all(err <= tol):
+                if not np.all(err <= LINE_TOLERANCE):
                     lines.fail(where, f"class {f} differs from the manifest box by "
                                f"{(err * [w, h, w, h]).max():.3g} px", float((err * [w, h, w, h]).max()))
             cx, cy, bw, bh = (values[1] * w, values[2] * h, values[3] * w, values[4] * h)
@@ -447,24 +447,22 @@ def write_report(result: AuditResult, view: DatasetView, out: Path, *, overlays:
                     f"{'<ul>' + offenders + '</ul>' if offenders else ''}</td></tr>")
     drift = result.stats["tight_drift_px"]
 
+    def cells(stat: dict) -> str:
+        """Count, mean, median, p95 and max cells of one drift bin (empty where no feature)."""
+        return f"<td>{stat['count']}</td>" + "".join(
+            f"<td>{stat[k]:.3f}</td>" if k in stat else "<td></td>" for k in ("mean", "median", "p95", "max"))
+
     def table(bins: list[dict], label: str) -> str:
-        body = "".join(
-            f"<tr><td>{b['lo']:g}-{b['hi']:g}</td><td>{b['count']}</td>"
-            + "".join(f"<td>{b[k]:.3f}</td>" if k in b else "<td></td>" for k in ("mean", "median", "p95", "max"))
-            + "</tr>" for b in bins)
+        body = "".join(f"<tr><td>{b['lo']:g}-{b['hi']:g}</td>{cells(b)}</tr>" for b in bins)
         return (f"<table><tr><th>{label}</th><th>features</th><th>mean</th><th>median</th><th>p95</th>"
                 f"<th>max</th></tr>{body}</table>")
 
-    sizes = "".join(f"<tr><td>{esc(s)}</td><td>{v['count']}</td>"
-                    + "".join(f"<td>{v[k]:.3f}</td>" if k in v else "<td></td>"
-                              for k in ("mean", "median", "p95", "max")) + "</tr>"
-                    for s, v in drift["by_size"].items())
+    sizes = "".join(f"<tr><td>{esc(s)}</td>{cells(v)}</tr>" for s, v in drift["by_size"].items())
     figures = "".join(f"<figure><img alt='{esc(name)}' src='{data_uri(path.read_bytes(), 'png')}'>"
                       f"<figcaption>{esc(name)}</figcaption></figure>" for name, path in plots.items())
-    labels = view.recompute()
     overlay_html = []
     for b in np.linspace(0, len(view) - 1, min(overlays, len(view))).round().astype(int) if len(view) else []:
-        image = draw_overlay(view, int(b), labels)
+        image = draw_overlay(view, int(b), result.labels)
         scale = min(1.0, 1200 / image.shape[1])
         image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
         ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 85])
