@@ -16,6 +16,14 @@ from datagen.files import atomic_path  # noqa: E402
 __all__ = ["plot_approaches", "plot_audit", "plot_evaluation"]
 
 
+def _save_png(fig, path: Path, dpi: int = 100) -> Path:
+    """Write a figure as PNG atomically and free it."""
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
 def plot_approaches(config: Config, path: Path, approaches: int = 5, seed: int | None = None) -> None:
     """Distance over time and trajectories in the drogue-centred frame for a few approaches."""
     seed = config.dataset.seed if seed is None else seed
@@ -39,9 +47,7 @@ def plot_approaches(config: Config, path: Path, approaches: int = 5, seed: int |
         ax.grid(True, alpha=0.3)
     axes[0].grid(True, alpha=0.3)
     fig.suptitle(f"{config.name}: {approaches} Monte Carlo approaches (seed {seed}, start markers o, drogue +)")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    _save_png(fig, path, dpi=110)
 
 
 def plot_audit(stats: dict, folder: Path) -> dict[str, Path]:
@@ -52,11 +58,7 @@ def plot_audit(stats: dict, folder: Path) -> dict[str, Path]:
     out: dict[str, Path] = {}
 
     def save(fig, name: str) -> None:
-        path = Path(folder) / f"{name}.png"
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, dpi=100, format="png")
-        plt.close(fig)
-        out[name] = path
+        out[name] = _save_png(fig, Path(folder) / f"{name}.png")
 
     drift, distance = arrays["drift"], arrays["distance"]
     floor = 1e-4  # a drift of exactly 0 (a symmetric view) still shows on the log axis
@@ -156,11 +158,7 @@ def plot_evaluation(runs, summaries, folder: Path, *, name: str = "") -> dict[st
     for ax in axes.ravel()[n:]:
         ax.axis("off")
     fig.suptitle(f"{name}: PtD vector error vs distance")
-    path = Path(folder) / "error_vs_distance.png"
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
-    plt.close(fig)
-    out["error_vs_distance"] = path
+    out["error_vs_distance"] = _save_png(fig, Path(folder) / "error_vs_distance.png")
 
     fig, ax = plt.subplots(figsize=(8, 4), constrained_layout=True)
     for (source, _), summary in zip(runs, summaries):
@@ -171,9 +169,5 @@ def plot_evaluation(runs, summaries, folder: Path, *, name: str = "") -> dict[st
            title=f"{name}: successful PtD predictions / attempts")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
-    path = Path(folder) / "reliability_vs_distance.png"
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
-    plt.close(fig)
-    out["reliability_vs_distance"] = path
+    out["reliability_vs_distance"] = _save_png(fig, Path(folder) / "reliability_vs_distance.png")
     return out
