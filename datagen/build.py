@@ -163,6 +163,7 @@ class ShardWriter:
         started = time.perf_counter()
         cfg, k, features, layout = self.config, self.intrinsics, self.features, self.layout
         seed = cfg.dataset.seed
+        sampler_seed = render_seed(seed, i)
         state = frame_state(cfg, i, seed)
         look = draw_look(cfg, frame_rng(seed, i))
         cam_from_world = state.cam_from_world
@@ -175,7 +176,7 @@ class ShardWriter:
             image_rel = layout.image_rel(job.split, job.shard, i)
             exr = cfg.render.exr
             exr_rel = layout.exr_rel(job.split, job.shard, i) if exr else None
-            render_s = self._render(state, look, render_seed(seed, i), layout.root / image_rel,
+            render_s = self._render(state, look, sampler_seed, layout.root / image_rel,
                                     layout.root / exr_rel if exr_rel else None)
             fraction, center_visible = self.renderer.feature_visibility(state, features)
             labels = labels.with_visibility(fraction, cfg.labels.min_visible_fraction)
@@ -204,7 +205,7 @@ class ShardWriter:
             "ptd_receiver_m": state.ptd_receiver_m.tolist(),
             "distance_m": state.distance_m,
             "seed": seed,
-            "render_seed": render_seed(seed, i),
+            "render_seed": sampler_seed,
             "spp": cfg.render.spp if self.renderer is not None else None,
             "mount": state.mount,
             "approach_index": state.approach_index,

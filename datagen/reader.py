@@ -97,10 +97,6 @@ def _read_json(path: Path) -> dict:
         raise DatagenError(f"{path}: unreadable ({exc})") from None
 
 
-def _column(flat: pa.StructArray, name: str) -> pa.Array:
-    return flat.field(name)
-
-
 def _floats(array: pa.Array, shape: tuple[int, ...]) -> NDArray[np.float64]:
     if pa.types.is_fixed_size_list(array.type):
         array = array.flatten()
@@ -172,7 +168,7 @@ def load_dataset(root: str | Path) -> DatasetView:
     def matrices(name: str) -> NDArray[np.float64]:
         return _floats(table.column(name).combine_chunks(), (b, 4, 4))
 
-    exclusion = np.array(_column(flat, "exclusion").to_pylist(), dtype=object).reshape(b, f)
+    exclusion = np.array(flat.field("exclusion").to_pylist(), dtype=object).reshape(b, f)
     return DatasetView(
         root=root,
         doc=doc,
@@ -193,12 +189,12 @@ def load_dataset(root: str | Path) -> DatasetView:
         ptd_receiver_m=_floats(table.column("ptd_receiver_m").combine_chunks(), (b, 3)),
         approach_index=np.asarray(table.column("approach_index"), dtype=np.int64),
         approach_number=np.asarray(table.column("approach_number"), dtype=np.int64),
-        class_id=np.asarray(_column(flat, "class_id"), dtype=np.int64).reshape(b, f),
-        center_px=_floats(_column(flat, "center_px"), (b, f, 2)),
-        tight_xyxy=_floats(_column(flat, "tight_xyxy"), (b, f, 4)),
-        corrected_xyxy=_floats(_column(flat, "corrected_xyxy"), (b, f, 4)),
-        labeled=np.asarray(_column(flat, "labeled").to_numpy(zero_copy_only=False), dtype=bool).reshape(b, f),
+        class_id=np.asarray(flat.field("class_id"), dtype=np.int64).reshape(b, f),
+        center_px=_floats(flat.field("center_px"), (b, f, 2)),
+        tight_xyxy=_floats(flat.field("tight_xyxy"), (b, f, 4)),
+        corrected_xyxy=_floats(flat.field("corrected_xyxy"), (b, f, 4)),
+        labeled=np.asarray(flat.field("labeled").to_numpy(zero_copy_only=False), dtype=bool).reshape(b, f),
         exclusion=exclusion,
-        visible_fraction=_floats(_column(flat, "visible_fraction"), (b, f)),
-        center_visible=_floats(pc.cast(_column(flat, "center_visible"), pa.float64()), (b, f)),
+        visible_fraction=_floats(flat.field("visible_fraction"), (b, f)),
+        center_visible=_floats(pc.cast(flat.field("center_visible"), pa.float64()), (b, f)),
     )

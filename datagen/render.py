@@ -117,16 +117,15 @@ def _uniform(rng: np.random.Generator, bounds) -> float:
     return float(rng.uniform(lo, hi))
 
 
-def _levels(rng: np.random.Generator, bounds, levels: int | None = None) -> float:
+def _levels(rng: np.random.Generator, bounds) -> float:
     """One of :data:`SKY_SCALE_LEVELS` evenly spaced values across ``bounds``, each
     equally likely. Mitsuba's ``sunsky`` keeps its sun and sky scales as scalars that
     are baked into the compiled kernel: a continuous draw would compile (and keep in
     memory) a new kernel for every frame; a few levels bound the kernels at
-    ``levels**2`` for the whole dataset."""
-    levels = levels or SKY_SCALE_LEVELS
+    ``SKY_SCALE_LEVELS**2`` for the whole dataset."""
     lo, hi = bounds
-    step = int(rng.integers(levels))  # every level equally likely
-    return lo + (hi - lo) * step / (levels - 1)
+    step = int(rng.integers(SKY_SCALE_LEVELS))  # every level equally likely
+    return lo + (hi - lo) * step / (SKY_SCALE_LEVELS - 1)
 
 
 def _hsv(rng: np.random.Generator, saturation, value) -> tuple[float, float, float]:
