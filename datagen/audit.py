@@ -44,6 +44,12 @@ LINE_TOLERANCE: Final = 0.5 * 10.0 ** -YOLO_DECIMALS + 1e-12
 MAX_OFFENDERS: Final = 20
 #: PnP needs at least this many labeled features of an object in a frame.
 PNP_MIN_FEATURES: Final = 3
+#: The ``learnable`` check fails when a smaller share of label lines can teach the detector.
+MIN_LEARNABLE_SHARE: Final = 0.95
+#: Files Ultralytics writes into a dataset it trains on: label caches beside the label
+#: folders (``labels/train/00000.cache``, and ``.cache.npy`` while it writes one) and
+#: ``.npy`` image caches beside the images (``cache=disk``). They are not orphans.
+ULTRALYTICS_SUFFIXES: Final = (".cache", ".cache.npy", ".npy")
 
 
 @dataclass
@@ -57,11 +63,19 @@ class Check:
     worst: float | None = None  # the largest error, where the check measures one
     offenders: list[str] = field(default_factory=list)  # "file: what", worst first
     applicable: bool = True
+    #: None: any failure fails the check; else the check passes while at least this share passes.
+    min_pass_share: float | None = None
     _scored: list[tuple[float, str]] = field(default_factory=list, repr=False)
 
     @property
+    def pass_share(self) -> float | None:
+        return (self.checked - self.failures) / self.checked if self.checked else None
+
+    @property
     def passed(self) -> bool:
-        return self.failures == 0
+        if self.min_pass_share is None:
+            return self.failures == 0
+        return self.checked == 0 or self.pass_share >= self.min_pass_share
 
     def fail(self, where: str, what: str, score: float = math.inf) -> None:
         self.failures += 1
@@ -76,6 +90,7 @@ class Check:
     def as_dict(self) -> dict:
         out = {k: v for k, v in asdict(self).items() if not k.startswith("_")}
         out["passed"] = self.passed
+        out["pass_share"] = self.pass_share
         return out
 
 
@@ -152,22 +167,29 @@ def _parse_label_file(path: Path) -> tuple[list[list[str]], str | None]:
 
 
 # --- the audit -----------------------------------------------------------------------------
-def audit(view: DatasetView) -> AuditResult:
-    """Run every check and compute every statistic of a loaded dataset."""
+def audit(view: DatasetView, *, min_learnable: float = MIN_LEARNABLE_SHARE) -> AuditResult:
+    """Run every check and compute every statistic of a loaded dataset.
+
+    ``min_learnable``: the share of label lines that must be learnable by Ultralytics'
+    trainer at ``labels.train_imgsz`` (:mod:`datagen.training`)."""
     labels = view.recompute()
+    line_checks, lines = _check_label_files(view, labels)
+    learnable, learnable_stats = _check_learnable(view, lines, min_learnable)
     checks = [
         _check_manifest(view, labels),
-        *_check_label_files(view, labels),
+        *line_checks,
+        learnable,
         _check_files(view),
         _check_names(view),
     ]
     stats = _statistics(view, labels)
+    stats["learnable"] = learnable_stats
     return AuditResult(view.root, str(view.doc.get("name", view.root.name)), len(view), [c.finish() for c in checks],
                        stats, labels)
 
 
 def _check_manifest(view: DatasetView, labels) -> Check:
-    check = Check("manifest_boxes", "manifest centres, tight and corrected boxes and exclusions equal a "
+    check = Check("manifest_boxes", "manifest centres, tight, corrected and label boxes and exclusions equal a "
                   f"recomputation from the poses and features.parquet (to {MANIFEST_TOLERANCE_PX:g} px)")
     expected_k = np.array([view.intrinsics.width, view.intrinsics.height, view.intrinsics.fx, view.intrinsics.fy,
                            view.intrinsics.cx, view.intrinsics.cy])
@@ -182,8 +204,10 @@ def _check_manifest(view: DatasetView, labels) -> Check:
             check.fail(where, "feature records are not one per class in class-id order")
             continue
         errors = []
-        for name in ("center_px", "tight_xyxy", "corrected_xyxy"):
+        for name in ("center_px", "tight_xyxy", "corrected_xyxy", "label_xyxy"):
             stored, fresh = getattr(view, name)[b], getattr(labels, name)[b]
+            if name == "label_xyxy":  # stored only for labeled features
+                fresh = np.where(labels.labeled[b][:, None], fresh, np.nan)
             both_nan = np.isnan(stored) & np.isnan(fresh)
             err = np.where(both_nan, 0.0, np.abs(stored - fresh))
             err = np.where(np.isnan(err), np.inf, err).max(axis=-1)
@@ -201,7 +225,8 @@ def _check_manifest(view: DatasetView, labels) -> Check:
     return check
 
 
-def _check_label_files(view: DatasetView, labels) -> list[Check]:
+def _check_label_files(view: DatasetView, labels) -> tuple[list[Check], NDArray[np.float64]]:
+    """The per-line checks, and every well-formed line as a row ``(frame row, class, cx, cy, w, h)``."""
     k = view.intrinsics
     w, h, m = k.width, k.height, view.edge_margin_px
     nc = len(view.features)
@@ -216,6 +241,7 @@ def _check_label_files(view: DatasetView, labels) -> list[Check]:
     label_centre = labels.label_center_px
     box = labels.label_xyxy
     worst_drift = worst_line = 0.0
+    parsed: list[tuple[float, ...]] = []
     for b in range(len(view)):
         rel = view.label_path[b]
         rows, problem = _parse_label_file(view.root / rel)
@@ -245,6 +271,7 @@ def _check_label_files(view: DatasetView, labels) -> list[Check]:
                 continue
             if min(values[1:]) < 0 or max(values[1:]) > 1 or values[3] <= 0 or values[4] <= 0:
                 rules.fail(where, f"values {tokens[1:]} outside [0, 1] or a size not positive")
+            parsed.append((b, *values))
             key = tuple(tokens)
             seen[key] += 1
             if seen[key] == 2:
@@ -283,7 +310,62 @@ def _check_label_files(view: DatasetView, labels) -> list[Check]:
         for f in sorted(labeled - set(per_class)):
             lines.fail(rel, f"class {f} is labeled in the manifest but has no line")
     lines.worst, drift.worst = worst_line, worst_drift
-    return [lines, drift, margin, rules]
+    return [lines, drift, margin, rules], np.array(parsed, dtype=np.float64).reshape(-1, 6)
+
+
+def _check_learnable(view: DatasetView, lines: NDArray[np.float64], min_share: float) -> tuple[Check, dict]:
+    """Which label lines Ultralytics' trainer keeps at ``labels.train_imgsz`` and can assign
+    to an anchor (:mod:`datagen.training`); the check passes while at least ``min_share`` can."""
+    rules = view.label_rules
+    train = view.train_view
+    check = Check("learnable", f"at least {100 * min_share:g}% of label lines survive Ultralytics' training "
+                  f"transforms at imgsz {rules.train_imgsz} (both sides above 2 px) and hold an anchor centre "
+                  "(strides 8/16/32)", min_pass_share=min_share)
+    k = view.intrinsics
+    b, cls = lines[:, 0].astype(np.int64), lines[:, 1].astype(np.int64)
+    cx, cy, bw, bh = lines[:, 2] * k.width, lines[:, 3] * k.height, lines[:, 4] * k.width, lines[:, 5] * k.height
+    xyxy = np.stack([cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2], axis=-1)
+    survives, anchored = train.survives(xyxy), train.has_anchor(xyxy)
+    ok = survives & anchored
+    check.checked = int(ok.size)
+    check.worst = None if not ok.size else float(1.0 - ok.mean())
+    names = view.features.name
+    by_class = {}
+    for c in np.unique(cls):
+        mine = ok[cls == c]
+        by_class[names[c]] = {"lines": int(mine.size), "share": float(mine.mean())}
+        if not mine.all():
+            check.fail(f"class {c} {names[c]}", f"{mine.mean():.1%} of {mine.size} lines learnable",
+                       float(1.0 - mine.mean()))
+    check.failures = int((~ok).sum())  # offenders are the classes above; the count is of label lines
+
+    def share(mask: NDArray[np.bool_]) -> dict:
+        return {"lines": int(mask.sum()), "share": float(ok[mask].mean()) if mask.any() else None}
+
+    distance = view.distance_m[b] if b.size else np.zeros(0)
+    top = max(10.0, float(np.ceil(view.distance_m.max() / 10.0) * 10.0)) if len(view) else 10.0
+    edges = np.arange(0.0, top + 10.0, 10.0)
+    size = np.array(view.features.size, dtype=object)[cls] if cls.size else np.zeros(0, dtype=object)
+    train_w = np.minimum(bw * train.scale[0], bh * train.scale[1])
+    stats = {
+        "train_imgsz": rules.train_imgsz,
+        "min_box_px": rules.min_box_px,
+        "small_boxes": rules.small_boxes,
+        "threshold": min_share,
+        "lines": int(ok.size),
+        "share": float(ok.mean()) if ok.size else None,
+        "share_survive_2px": float(survives.mean()) if ok.size else None,
+        "share_with_anchor": float(anchored.mean()) if ok.size else None,
+        "min_side_train_px": {"median": float(np.median(train_w)) if ok.size else None,
+                              "min": float(train_w.min()) if ok.size else None},
+        "by_distance_m": [{"lo": float(lo), "hi": float(hi), **share((distance >= lo) & (distance < hi))}
+                          for lo, hi in zip(edges[:-1], edges[1:], strict=True)],
+        "by_size": {(tag or "untagged"): share(size == tag) for tag in sorted(set(view.features.size))},
+        "by_class": by_class,
+        "worst_classes": [{"class": n, **v} for n, v in sorted(by_class.items(), key=lambda kv: kv[1]["share"])
+                          if v["share"] < 1.0][:10],
+    }
+    return check, stats
 
 
 
@@ -305,7 +387,7 @@ def _check_files(view: DatasetView) -> Check:
                 check.checked += 1
                 if name.startswith(".") and name.endswith(".tmp"):
                     check.fail(rel, "temporary file left by an interrupted writer")
-                elif rel not in referenced:
+                elif rel not in referenced and not name.endswith(ULTRALYTICS_SUFFIXES):
                     check.fail(rel, "orphan: no manifest names it")
     for name in os.listdir(root / "manifests"):
         if name.startswith("."):
@@ -487,6 +569,7 @@ Verdict: <span class="verdict">{verdict}</span></p>
 <h2>Checks</h2>
 <table><tr><th>check</th><th>result</th><th>checked</th><th>failures</th><th>worst</th><th>what (worst offenders)</th></tr>
 {''.join(rows)}</table>
+{_learnable_html(result.stats["learnable"], esc)}
 <h2>Parallax: tight-box centre drift from the true centre projection</h2>
 <p>{drift['features']} features in view; median {_fmt(drift['median'])} px, 95th percentile {_fmt(drift['p95'])} px,
 max {_fmt(drift['max'])} px. Corrected boxes are centred on the true centre; a detector trained on tight
@@ -497,7 +580,7 @@ boxes learns this drift.</p>
 <h2>Plots</h2>
 {figures}
 <h2>Overlays</h2>
-<p>Magenta crosshair: true centre projection; amber: tight box; green: corrected box (the label); grey: excluded.</p>
+<p>Magenta crosshair: true centre projection; amber: tight box; green: corrected box (the paper's label); cyan: the label box where it was grown to the minimum training size; grey: excluded.</p>
 {''.join(overlay_html)}
 <script>
 window.addEventListener("load", () => {{
@@ -511,6 +594,29 @@ window.addEventListener("load", () => {{
     with atomic_path(out / "report.html") as tmp:
         tmp.write_text(page)
     return {"json": out / "report.json", "html": out / "report.html", **plots}
+
+
+def _learnable_html(stats: dict, esc) -> str:
+    """The report's section on what Ultralytics' trainer can learn of the label lines."""
+    def pct(v: float | None) -> str:
+        return "-" if v is None else f"{100 * v:.1f}%"
+
+    def rows(items) -> str:
+        return "".join(f"<tr><td>{esc(str(k))}</td><td>{v['lines']}</td><td>{pct(v['share'])}</td></tr>"
+                       for k, v in items)
+
+    head = "<tr><th>{}</th><th>lines</th><th>learnable</th></tr>"
+    distance = [(f"{b['lo']:g}-{b['hi']:g}", b) for b in stats["by_distance_m"] if b["lines"]]
+    worst = [(w["class"], w) for w in stats["worst_classes"]]
+    return f"""<h2>Learnable by the detector</h2>
+<p>{stats['lines']} label lines; {pct(stats['share'])} survive Ultralytics' training transforms at imgsz
+{stats['train_imgsz']} ({pct(stats['share_survive_2px'])} have both sides above 2 px) and hold an anchor centre
+({pct(stats['share_with_anchor'])}); the check asks for {pct(stats['threshold'])}. Label boxes are at least
+{stats['min_box_px']:g} px there ({esc(stats['small_boxes'])} smaller ones).</p>
+<table>{head.format('distance (m)')}{rows(distance)}</table>
+<table>{head.format('size')}{rows(stats['by_size'].items())}</table>
+<table>{head.format('worst classes')}{rows(worst) or '<tr><td colspan=3>every class fully learnable</td></tr>'}</table>
+"""
 
 
 def _fmt(value: float | None) -> str:

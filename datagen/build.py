@@ -51,9 +51,11 @@ from datagen.dataset import (
     prepare_folder,
     sweep_temporaries,
     write_dataset_files,
+    write_image_lists,
 )
 from datagen.errors import DatagenError
 from datagen.labels import Exclusion
+from datagen.training import label_options
 
 __all__ = ["BuildProgress", "BuildReport", "ShardSummary", "ShardWriter", "build_dataset"]
 
@@ -103,6 +105,7 @@ class ShardWriter:
         self.features = feature_table(config)
         cam = config.camera
         self.intrinsics = Intrinsics.from_hfov_deg(cam.width, cam.height, cam.hfov_deg)
+        self.label_options = label_options(config.labels, cam.width, cam.height)
         self.renderer = None
         self._stop: Callable[[], bool] = lambda: False
         # Images are encoded and written by one background thread while the next frame
@@ -168,8 +171,7 @@ class ShardWriter:
         look = draw_look(cfg, frame_rng(seed, i))
         cam_from_world = state.cam_from_world
         cam_from_objects = np.stack([cam_from_world @ state.world_from(o) for o in features.objects])
-        labels = compute_labels(features, cam_from_objects, k, edge_margin_px=cfg.labels.edge_margin_px,
-                                corrected=cfg.labels.corrected)
+        labels = compute_labels(features, cam_from_objects, k, **self.label_options)
         image_rel = exr_rel = None
         fraction = center_visible = render_s = None
         if self.renderer is not None:
@@ -558,6 +560,8 @@ def build_dataset(config: Config, out: Path, *, workers: int | None = None, exec
                     workers = workers or 1
                 run(config, root, todo, workers, render, progress.advance if progress else (lambda n: None),
                     shard_done)
+            if render and len(report.shards) == len(jobs):
+                write_image_lists(layout, jobs)
         except KeyboardInterrupt:
             report.interrupted = True
             sweep_temporaries(leftovers)

@@ -170,6 +170,8 @@ def audit(
     dataset: Annotated[Path, typer.Argument(help="Dataset folder.", show_default=False)],
     out: Annotated[Path | None, typer.Option("--out", help="Report folder (default: DATASET/audit).")] = None,
     overlays: Annotated[int, typer.Option("--overlays", min=0, help="Overlay images in the HTML report.")] = 3,
+    min_learnable: Annotated[float, typer.Option("--min-learnable", min=0.0, max=1.0, help="Share of label lines "
+                                                 "that must be learnable at labels.train_imgsz.")] = 0.95,
 ) -> None:
     """Check a dataset's labels against the true centre projections; write
     report.json, plots and report.html. Exit 1 when a check fails."""
@@ -178,13 +180,18 @@ def audit(
     from datagen.reader import load_dataset
 
     view = load_dataset(dataset)
-    result = run_audit(view)
+    result = run_audit(view, min_learnable=min_learnable)
     folder = out if out is not None else Path(dataset) / "audit"
     written = write_report(result, view, folder, overlays=overlays)
     for check in result.checks:
         status = "n/a " if not check.applicable else ("pass" if check.passed else "FAIL")
-        worst = "" if check.worst is None else f", worst {check.worst:.3g}"
-        typer.echo(f"{status}  {check.name}: {check.checked} checked, {check.failures} failed{worst}")
+        if check.min_pass_share is not None:
+            share = "-" if check.pass_share is None else f"{100 * check.pass_share:.1f}%"
+            typer.echo(f"{status}  {check.name}: {share} of {check.checked} pass (needs "
+                       f"{100 * check.min_pass_share:g}%), {check.failures} failed")
+        else:
+            worst = "" if check.worst is None else f", worst {check.worst:.3g}"
+            typer.echo(f"{status}  {check.name}: {check.checked} checked, {check.failures} failed{worst}")
         for offender in check.offenders[:5]:
             typer.echo(f"        {offender}")
     drift = result.stats["tight_drift_px"]
@@ -226,31 +233,45 @@ def evaluate(
                                                      "detections (cls cx cy w h conf), by image stem; replaces "
                                                      "the truth runs.")] = None,
     conf: Annotated[float, typer.Option("--conf", min=0.0, max=1.0, help="Minimum detection confidence.")] = 0.25,
-    split: Annotated[str, typer.Option("--split", help="Frames to attempt: all, train or val.")] = "all",
+    split: Annotated[str | None, typer.Option("--split", help="Frames to attempt: all, train or val (default: "
+                                              "all for truth runs; with --predictions, the splits the "
+                                              "prediction files cover).", show_default=False)] = None,
     seed: Annotated[int | None, typer.Option("--seed", min=0, help="Noise seed (default: the dataset's).")] = None,
     out: Annotated[Path | None, typer.Option("--out", help="Output folder (default: DATASET/evaluation).")] = None,
 ) -> None:
     """PtD vectors by dual-object PnP from true centres (with noise) or detections;
     accuracy and reliability against distance (paper 3.3-3.6)."""
+    from datagen.evaluate import covered_splits, parse_predictions, summarize, write_evaluation
     from datagen.evaluate import evaluate as run_evaluate
-    from datagen.evaluate import parse_predictions, summarize, write_evaluation
     from datagen.reader import load_dataset
 
-    if split not in ("all", "train", "val"):
+    if split not in (None, "all", "train", "val"):
         raise DatagenError(f"--split: {split!r}: choose all, train or val")
-    only = None if split == "all" else split
     view = load_dataset(dataset)
     runs = []
     if predictions is not None:
         k = view.intrinsics
         found = parse_predictions(predictions, k.width, k.height, len(view.features), min_conf=conf)
+        if split is None:
+            covered = covered_splits(view, found)
+            if not found:  # yolo predict writes no file for an image without detections
+                split = "val"
+                typer.echo(f"{predictions}: no prediction file: the detector found nothing; scoring the val "
+                           "split (--split to choose)")
+            elif not covered:
+                raise DatagenError(f"--predictions: {predictions}: no prediction file is named after an image of "
+                                   f"{dataset} (expected files like 00000003.txt from `yolo predict save_txt=True`)")
+            else:
+                split = covered[0] if len(covered) == 1 else "all"
+                typer.echo(f"scoring the {split} split{'s' if split == 'all' else ''}: the frames the "
+                           "predictions cover (--split to choose)")
+        only = None if split == "all" else split
         result = run_evaluate(view, predictions=found, split=only)
         runs.append(({"source": "predictions", "predictions": str(predictions), "conf": conf, "split": split},
                      result))
-        if result["missing_predictions"]:
-            typer.echo(f"{result['missing_predictions']} of {len(result['frame_id'])} frames have no prediction "
-                       "file (no detection, or not predicted: see --split); they count as failed attempts")
     else:
+        split = split or "all"
+        only = None if split == "all" else split
         try:
             radii = [float(r) for r in noise_px.split(",")]
         except ValueError:
@@ -269,7 +290,21 @@ def evaluate(
                    f"mean error {_m(s['overall']['mean_m'])}, at contact {_m(contact['mean_m'])} "
                    f"(+2 sigma {_m(contact['plus_2sigma_m'])}, {contact['successes']} frames), "
                    f"target {s['target']}")
+        failures = [(r, n) for r, n in s["reasons"].items() if r != "ok" and n]
+        if failures:
+            typer.echo("  failed: " + ", ".join(f"{n} {_REASON_TEXT.get(r, r).format(conf=conf)}" for r, n in failures))
     typer.echo(f"wrote {written['json']}")
+
+
+#: How ``datagen evaluate`` names a failure reason of :data:`datagen.evaluate.REASONS`.
+_REASON_TEXT = {
+    "too_few_matches": "with fewer than 3 matched features of an object",
+    "pnp_failed": "where PnP found no pose",
+    "beyond_range": "with a vector longer than 120 m",
+    "outlier": "beyond 6 sigma of the approach's rolling mean",
+    "no_detections": "with no prediction file (nothing detected, or not predicted)",
+    "below_conf": "with all detections below --conf {conf:g}",
+}
 
 
 def _m(value: float | None) -> str:

@@ -67,7 +67,8 @@ Range = Annotated[tuple[float, float], AfterValidator(_ordered)]
 
 class _Section(BaseModel):
     model_config = ConfigDict(
-        extra="forbid", frozen=True, use_attribute_docstrings=True, validate_default=True
+        extra="forbid", frozen=True, use_attribute_docstrings=True, validate_default=True,
+        allow_inf_nan=False,
     )
 
 
@@ -385,6 +386,31 @@ class LabelsConfig(_Section):
     """Drop features whose visible share of points is below this; 0 keeps occluded
     features (the paper's choice)."""
 
+    train_imgsz: int = Field(864, ge=32, le=8192)
+    """Ultralytics' training image size (the recipe's imgsz; the paper trained at 864):
+    label sizes are judged as the trainer sees them there (datagen.training)."""
+
+    min_box_px: float = Field(8.0, ge=0.0, le=512.0)
+    """Smallest side a label box may have at train_imgsz, in the trainer's pixels (8: the
+    finest anchor stride, so every box holds an anchor centre); 0 keeps boxes as they are."""
+
+    small_boxes: Literal["grow", "exclude"] = "grow"
+    """A label box with a side under min_box_px: 'grow' widens it symmetrically about its
+    centre (the true centre stays exact); 'exclude' drops the feature as too_small."""
+
+    @field_validator("train_imgsz")
+    @classmethod
+    def _stride_multiple(cls, imgsz: int) -> int:
+        if imgsz % 32:
+            raise ValueError(f"must be a multiple of 32 (the detector's largest stride), got {imgsz}")
+        return imgsz
+
+    @model_validator(mode="after")
+    def _box_fits_input(self) -> LabelsConfig:
+        if self.min_box_px >= self.train_imgsz:
+            raise ValueError(f"min_box_px {self.min_box_px:g} must be smaller than train_imgsz {self.train_imgsz}")
+        return self
+
 
 # --- dataset -------------------------------------------------------------------
 class DatasetConfig(_Section):
@@ -450,12 +476,17 @@ class Config(_Section):
 
     @model_validator(mode="after")
     def _margin_fits(self) -> Config:
+        from datagen.training import TrainView
+
         m = self.labels.edge_margin_px
-        if 2.0 * m >= min(self.camera.width, self.camera.height):
-            raise ValueError(
-                f"labels.edge_margin_px {m} leaves no room inside a "
-                f"{self.camera.width}x{self.camera.height} image"
-            )
+        w, h = self.camera.width, self.camera.height
+        if 2.0 * m >= min(w, h):
+            raise ValueError(f"labels.edge_margin_px {m} leaves no room inside a {w}x{h} image")
+        box_w, box_h = TrainView(w, h, self.labels.train_imgsz).min_label_size_px(self.labels.min_box_px)
+        if box_w + 2.0 * m > w or box_h + 2.0 * m > h:
+            raise ValueError(f"labels.min_box_px {self.labels.min_box_px:g} at train_imgsz {self.labels.train_imgsz} "
+                             f"is a {box_w:.0f}x{box_h:.0f} px box, which does not fit inside the edge margin "
+                             f"of a {w}x{h} image")
         return self
 
 

@@ -3,7 +3,7 @@
 Layout (Ultralytics reads it as it is: a label's path is its image's path with
 the last ``/images/`` replaced by ``/labels/`` and the extension by ``.txt``)::
 
-    data.yaml  hyp.yaml  dataset.json  features.parquet
+    data.yaml  hyp.yaml  dataset.json  features.parquet  train.txt  val.txt
     images/{split}/{shard:05d}/{frame:08d}.png     8-bit sRGB training images
     labels/{split}/{shard:05d}/{frame:08d}.txt     YOLO lines (empty: no labeled feature)
     exr/{split}/{shard:05d}/{frame:08d}.exr        linear R, G, B, Z, object_id (with --exr)
@@ -41,6 +41,7 @@ from datagen.conventions import OBJECT_NAMES, PIXEL_CONVENTION, split_uniform
 from datagen.errors import DatagenError
 from datagen.files import atomic_path
 from datagen.manifest import MANIFEST_VERSION
+from datagen.training import TrainView, label_options
 
 __all__ = [
     "DATASET_SCHEMA",
@@ -57,6 +58,7 @@ __all__ = [
     "remove_owned",
     "sweep_temporaries",
     "write_dataset_files",
+    "write_image_lists",
 ]
 
 DATASET_SCHEMA: Final = "datagen.dataset"
@@ -65,10 +67,8 @@ DATASET_SCHEMA_VERSION: Final = 1
 SPLITS: Final = ("train", "val")
 #: Everything datagen writes at the top of a dataset folder (``--overwrite`` removes these only).
 OWNED: Final = ("manifests", "images", "labels", "exr", "audit", "preview", "evaluation", "data.yaml",
-                "hyp.yaml", "features.parquet", "dataset.json")
+                "hyp.yaml", "train.txt", "val.txt", "features.parquet", "dataset.json")
 LOCK_NAME: Final = ".datagen.lock"
-#: Ultralytics' training image size in the recipe (the paper trained at 864).
-TRAIN_IMGSZ: Final = 864
 
 
 # --- plan -------------------------------------------------------------------------------
@@ -127,6 +127,10 @@ class Layout:
 
     def manifest(self, job: ShardJob) -> Path:
         return self.root / "manifests" / f"{job.name}.parquet"
+
+    def image_list(self, split: str) -> Path:
+        """``train.txt`` or ``val.txt``: the split's images, one ``./images/...`` path per line."""
+        return self.root / f"{split}.txt"
 
     def shard_dirs(self, job: ShardJob) -> list[Path]:
         return [self.root / tree / job.split / f"{job.shard:05d}" for tree in ("images", "labels", "exr")]
@@ -202,6 +206,9 @@ def dataset_document(config: Config, jobs: list[ShardJob], fingerprint: str, ass
         "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy},
         "edge_margin_px": config.labels.edge_margin_px,
         "corrected": config.labels.corrected,
+        "label_size": {"train_imgsz": config.labels.train_imgsz, "min_box_px": config.labels.min_box_px,
+                       "small_boxes": config.labels.small_boxes,
+                       "min_label_size_px": list(label_options(config.labels, cam.width, cam.height)["min_size_px"])},
         "pixel_convention": PIXEL_CONVENTION,
         "camera_frame": "opencv: x right, y down, z forward",
         "body_frame": "x forward, y left, z up",
@@ -216,36 +223,52 @@ def dataset_document(config: Config, jobs: list[ShardJob], fingerprint: str, ass
     }
 
 
-def data_yaml(class_names: list[str], splits: tuple[str, ...] = SPLITS) -> str:
-    """Ultralytics' dataset file. No ``path:``: Ultralytics then resolves ``train``
-    and ``val`` against the folder of data.yaml itself, so the dataset can move.
-    ``splits`` are the splits that have frames: Ultralytics needs both folders, so a
-    split without frames (``val_fraction: 0``, or a tiny build) borrows the other's."""
+def _commands(root: Path, imgsz: int) -> str:
+    """Train, predict and evaluate commands that work offline from any folder."""
+    return f"""\
+# Train (offline, from any folder; yolo11s.yaml builds the network from scratch, a local .pt file works too):
+#   yolo detect train data={root / 'data.yaml'} cfg={root / 'hyp.yaml'} model=yolo11s.yaml project={root.parent / 'runs'} name={root.name}
+# Predict the validation frames (keeping low-confidence detections) and score the PtD vectors
+# that PnP makes of the detections at or above --conf:
+#   yolo detect predict model={root.parent / 'runs' / root.name / 'weights' / 'best.pt'} source={root / 'val.txt'} imgsz={imgsz} conf=0.001 save_txt=True save_conf=True project={root.parent / 'runs'} name={root.name}-predict
+#   datagen evaluate {root} --predictions {root.parent / 'runs' / (root.name + '-predict') / 'labels'} --conf 0.25
+"""
+
+
+def data_yaml(root: Path, class_names: list[str], splits: tuple[str, ...] = SPLITS, *, imgsz: int = 864) -> str:
+    """Ultralytics' dataset file. ``train`` and ``val`` are the image lists ``train.txt``
+    and ``val.txt`` (written when the build finishes). No ``path:``: Ultralytics then
+    resolves them against the folder of data.yaml itself, so the dataset can move.
+    ``splits`` are the splits that have frames: Ultralytics needs both, so a split
+    without frames (``val_fraction: 0``, or a tiny build) borrows the other's."""
     have = [s for s in SPLITS if s in splits] or ["train"]
-    folder = {s: f"images/{s if s in have else have[0]}" for s in SPLITS}
-    note = "".join(f"# no {s} frames in this build: {s} uses {folder[s]}\n" for s in SPLITS if s not in have)
-    doc = {"train": folder["train"], "val": folder["val"],
+    lists = {s: f"{s if s in have else have[0]}.txt" for s in SPLITS}
+    note = "".join(f"# no {s} frames in this build: {s} uses {lists[s]}\n" for s in SPLITS if s not in have)
+    doc = {"train": lists["train"], "val": lists["val"],
            "nc": len(class_names), "names": dict(enumerate(class_names))}
-    return ("# Ultralytics dataset (datagen). Train: yolo detect train data=<this file> cfg=hyp.yaml\n" + note
-            + yaml.safe_dump(doc, sort_keys=False))
+    return ("# Ultralytics dataset (datagen); train.txt and val.txt list the images of each split.\n"
+            + _commands(root, imgsz) + note + yaml.safe_dump(doc, sort_keys=False))
 
 
-def hyp_yaml(config: Config) -> str:
+def hyp_yaml(config: Config, root: Path) -> str:
     """A training recipe that keeps corrected centres and left/right classes intact."""
-    scale = TRAIN_IMGSZ / max(config.camera.width, config.camera.height)
+    imgsz = config.labels.train_imgsz
+    scale = min(TrainView(config.camera.width, config.camera.height, imgsz).scale)
     margin = config.labels.edge_margin_px * scale
     return f"""\
 # Ultralytics training recipe for a datagen dataset ({config.name}).
-# Use: yolo detect train data=data.yaml cfg=hyp.yaml model=yolo11s.pt
-# Corrected boxes are centred on the projection of a feature's true 3D centre, and
+{_commands(root, imgsz)}# Corrected boxes are centred on the projection of a feature's true 3D centre, and
 # many classes come in left/right pairs. Augmentations that clip boxes at a crop
 # border (mosaic, translate, scale) move the box centre off the true centre, and a
 # horizontal flip turns a left-wing feature into a right-wing one without changing
 # its class: all are off. Photometric (HSV) augmentation is harmless and stays.
-imgsz: {TRAIN_IMGSZ}  # the paper's training size; the {config.labels.edge_margin_px:g} px edge margin is {margin:.1f} px at this size
+# Label boxes are at least {config.labels.min_box_px:g} px at this imgsz (labels.min_box_px), so that every
+# label survives the trainer's 2 px rule and holds an anchor centre (datagen audit: learnable).
+imgsz: {imgsz}  # labels.train_imgsz; the {config.labels.edge_margin_px:g} px edge margin is {margin:.1f} px at this size
 mosaic: 0.0
 close_mosaic: 0
 mixup: 0.0
+cutmix: 0.0
 copy_paste: 0.0
 fliplr: 0.0
 flipud: 0.0
@@ -258,6 +281,22 @@ hsv_h: 0.015
 hsv_s: 0.7
 hsv_v: 0.4
 """
+
+
+def write_image_lists(layout: Layout, jobs: list[ShardJob]) -> list[Path]:
+    """``train.txt`` and ``val.txt``: every image of each split in frame order, one
+    ``./images/...`` path per line (Ultralytics resolves ``./`` against the list's
+    folder, for training and for ``yolo predict source=``). Written when every shard
+    is done, so that a list never names a missing image."""
+    written = []
+    for split in SPLITS:
+        lines = [f"./{layout.image_rel(job.split, job.shard, i)}\n"
+                 for job in jobs if job.split == split for i in job.frames]
+        if lines:
+            with atomic_path(layout.image_list(split)) as tmp:
+                tmp.write_text("".join(lines))
+            written.append(layout.image_list(split))
+    return written
 
 
 def write_dataset_files(layout: Layout, config: Config, jobs: list[ShardJob], fingerprint: str,
@@ -277,7 +316,9 @@ def write_dataset_files(layout: Layout, config: Config, jobs: list[ShardJob], fi
         with atomic_path(layout.dataset_json) as tmp:
             tmp.write_text(json.dumps(document, indent=2) + "\n")
     splits = tuple(sorted({job.split for job in jobs}))
-    for name, text in (("data.yaml", data_yaml(names, splits)), ("hyp.yaml", hyp_yaml(config))):
+    imgsz = config.labels.train_imgsz
+    for name, text in (("data.yaml", data_yaml(root, names, splits, imgsz=imgsz)),
+                       ("hyp.yaml", hyp_yaml(config, root))):
         with atomic_path(root / name) as tmp:
             tmp.write_text(text)
     write_features(root / "features.parquet", features)

@@ -22,7 +22,8 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
-from dataclasses import dataclass
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final
 
@@ -37,6 +38,8 @@ from datagen.transforms import invert_rigid
 
 __all__ = [
     "PnPSettings",
+    "Predictions",
+    "covered_splits",
     "evaluate",
     "noise_offsets",
     "parse_predictions",
@@ -45,8 +48,11 @@ __all__ = [
     "summarize",
 ]
 
-#: Failure reasons of a PtD attempt, recorded per frame.
-REASONS: Final = ("ok", "too_few_matches", "pnp_failed", "beyond_range", "outlier")
+#: Failure reasons of a PtD attempt, recorded per frame. With predictions, a frame without
+#: enough matches is ``no_detections`` (no prediction file: the detector found nothing, or
+#: the frame was not predicted), ``below_conf`` (every detection of the frame is below
+#: ``--conf``) or ``too_few_matches`` (fewer than 3 classes of an object detected).
+REASONS: Final = ("ok", "too_few_matches", "pnp_failed", "beyond_range", "outlier", "no_detections", "below_conf")
 
 
 @dataclass(frozen=True)
@@ -141,8 +147,32 @@ def noise_offsets(rng: np.random.Generator, n: int, radius_px: float) -> NDArray
 
 
 # --- predictions --------------------------------------------------------------------------------
-def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_conf: float = 0.25
-                      ) -> dict[str, dict[int, tuple[float, float, float]]]:
+@dataclass(frozen=True)
+class Predictions(Mapping):
+    """A detector's predictions by image stem: per class the highest-confidence detection at
+    or above the threshold, as ``(u_px, v_px, conf)`` of its box centre (paper 3.3)."""
+
+    best: dict[str, dict[int, tuple[float, float, float]]]
+    min_conf: float
+    #: Detections per stem, and those below ``min_conf``.
+    detections: dict[str, int] = field(default_factory=dict)
+    below_conf: dict[str, int] = field(default_factory=dict)
+
+    def __getitem__(self, stem: str) -> dict[int, tuple[float, float, float]]:
+        return self.best[stem]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.best)
+
+    def __len__(self) -> int:
+        return len(self.best)
+
+    def all_below_conf(self, stem: str) -> bool:
+        """The image has detections, every one of them below the threshold."""
+        return self.detections.get(stem, 0) > 0 and self.below_conf.get(stem, 0) == self.detections[stem]
+
+
+def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_conf: float = 0.25) -> Predictions:
     """Ultralytics ``save_txt`` files (``cls cx cy w h conf``, normalized) by image stem:
     per class the highest-confidence box at or above ``min_conf``, as (u_px, v_px, conf)
     of its centre (paper 3.3). Lines without a confidence count as confidence 1."""
@@ -150,12 +180,15 @@ def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_con
     if not folder.is_dir():
         raise DatagenError(f"--predictions: {folder}: no such folder")
     out: dict[str, dict[int, tuple[float, float, float]]] = {}
+    detections: dict[str, int] = {}
+    below: dict[str, int] = {}
     for path in sorted(folder.rglob("*.txt")):
         best: dict[int, tuple[float, float, float]] = {}
         try:
             text = path.read_text()
         except (OSError, UnicodeDecodeError) as exc:
             raise DatagenError(f"{path}: unreadable prediction file ({exc})") from None
+        n_detections = n_below = 0
         for n, line in enumerate(text.splitlines(), start=1):
             tokens = line.split()
             if not tokens:
@@ -169,10 +202,20 @@ def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_con
                 raise DatagenError(f"{path}:{n}: expected 'class cx cy w h [conf]' with class < {nc}: {line!r}")
             cls, cx, cy = int(values[0]), values[1], values[2]
             conf = values[5] if len(values) == 6 else 1.0
-            if conf >= min_conf and (cls not in best or conf > best[cls][2]):
+            n_detections += 1
+            if conf < min_conf:
+                n_below += 1
+            elif cls not in best or conf > best[cls][2]:
                 best[cls] = (cx * width, cy * height, conf)
         out[path.stem] = best
-    return out
+        detections[path.stem], below[path.stem] = n_detections, n_below
+    return Predictions(out, min_conf, detections, below)
+
+
+def covered_splits(view: DatasetView, predictions: Mapping) -> list[str]:
+    """The splits of the frames that have a prediction file, in dataset order."""
+    stems = [Path(p).stem if p else Path(lp).stem for p, lp in zip(view.image_path, view.label_path, strict=True)]
+    return [s for s in dict.fromkeys(view.split[i] for i, stem in enumerate(stems) if stem in predictions)]
 
 
 # --- a whole dataset -------------------------------------------------------------------------------
@@ -185,7 +228,7 @@ def _target_object(view: DatasetView) -> str:
 
 
 def evaluate(view: DatasetView, *, noise_px: float = 0.0, run: int = 0, seed: int | None = None,
-             predictions: dict | None = None, settings: PnPSettings = PnPSettings(),
+             predictions: Mapping | None = None, settings: PnPSettings = PnPSettings(),
              split: str | None = None) -> dict[str, NDArray]:
     """PtD vectors of every frame (frame order) for one source of 2D points.
 
@@ -253,7 +296,14 @@ def evaluate(view: DatasetView, *, noise_px: float = 0.0, run: int = 0, seed: in
             poses[name] = solve_pose(centers[sel], uv[sel], k, settings, guesses.get(name))
         out["solve_s"][i] = time.perf_counter() - start
         if "few" in poses.values():
-            out["reason"][i] = REASONS.index("too_few_matches")
+            reason = "too_few_matches"
+            if predictions is not None:
+                stem = stems[i] or label_stems[i]
+                if stem not in predictions:
+                    reason = "no_detections"
+                elif isinstance(predictions, Predictions) and predictions.all_below_conf(stem):
+                    reason = "below_conf"
+            out["reason"][i] = REASONS.index(reason)
             continue
         if poses["receiver"] is None or poses[target] is None:
             out["reason"][i] = REASONS.index("pnp_failed")

@@ -15,11 +15,18 @@ For each feature in each frame:
    - ``behind_camera``: a point or the centre is at or behind the camera plane;
    - ``off_frame``: the label box reaches outside ``[0, W] x [0, H]``;
    - ``edge_margin``: the label box lies inside the image but closer than
-     ``edge_margin_px`` to a border. A side exactly at the margin is allowed.
+     ``edge_margin_px`` to a border. A side exactly at the margin is allowed;
+   - ``too_small`` (only with ``small_boxes="exclude"``): a side of the box is
+     shorter than ``min_size_px``.
 
-The *label box* is the corrected box, or the tight box when ``corrected`` is
-false (the paper's uncorrected ablation, model H). Only features with no
-exclusion become YOLO lines.
+The *label box* (the box written to the label file) starts as the corrected
+box, or the tight box when ``corrected`` is false (the paper's uncorrected
+ablation, model H). A detector can only learn boxes of a few pixels at its
+training size (:mod:`datagen.training`), so with ``small_boxes="grow"`` a side
+shorter than ``min_size_px`` is widened symmetrically about the box's centre
+(the true centre when corrected) to exactly that size: the centre does not move
+and the label box contains the corrected (or tight) box. The exclusion rules
+apply to the label box. Only features with no exclusion become YOLO lines.
 """
 
 from __future__ import annotations
@@ -28,6 +35,7 @@ import dataclasses
 
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -39,6 +47,7 @@ __all__ = [
     "YOLO_DECIMALS",
     "Exclusion",
     "FrameLabels",
+    "SmallBoxes",
     "boxes_from_uv",
     "compute_labels",
     "yolo_lines",
@@ -53,6 +62,7 @@ class Exclusion(IntEnum):
     OFF_FRAME = 2
     EDGE_MARGIN = 3
     OCCLUDED = 4  # only with labels.min_visible_fraction > 0 and a rendered frame
+    TOO_SMALL = 5  # only with small_boxes="exclude"
 
     @property
     def reason(self) -> str | None:
@@ -70,7 +80,8 @@ class FrameLabels:
         center_px: ``(*B, F, 2)`` projection of each feature's true 3D centre.
         tight_xyxy: ``(*B, F, 4)`` tight box of the projected points.
         corrected_xyxy: ``(*B, F, 4)`` box centred on ``center_px`` containing the tight box.
-        label_xyxy: ``(*B, F, 4)`` the box the label uses (corrected or tight).
+        label_xyxy: ``(*B, F, 4)`` the box written to the label file: the corrected (or
+            tight) box, widened to the minimum size where ``small_boxes`` is ``"grow"``.
         exclusion: ``(*B, F)`` int8 :class:`Exclusion` codes.
         corrected: whether labels use the corrected box.
     """
@@ -116,6 +127,11 @@ class FrameLabels:
         )
 
 
+#: What happens to a label box with a side under the minimum size: widened about its
+#: centre, or the feature excluded as ``too_small``.
+SmallBoxes = Literal["grow", "exclude"]
+
+
 def boxes_from_uv(
     uv_points: ArrayLike,
     uv_center: ArrayLike,
@@ -125,6 +141,8 @@ def boxes_from_uv(
     height: int,
     edge_margin_px: float,
     corrected: bool = True,
+    min_size_px: float | tuple[float, float] = 0.0,
+    small_boxes: SmallBoxes = "grow",
 ) -> FrameLabels:
     """Boxes and exclusions from projected points.
 
@@ -137,11 +155,21 @@ def boxes_from_uv(
         width, height: image size in pixels.
         edge_margin_px: minimum distance of the label box from every border.
         corrected: label with the corrected box (else the tight box).
+        min_size_px: smallest label box side, pixels (one value, or width and height).
+        small_boxes: ``"grow"`` a smaller box about its centre, or ``"exclude"`` the feature.
     """
     uv_points = np.asarray(uv_points, dtype=np.float64)
     center = np.asarray(uv_center, dtype=np.float64)
     return _boxes(uv_points[..., 0], uv_points[..., 1], center, np.asarray(front, dtype=bool),
-                  width=width, height=height, edge_margin_px=edge_margin_px, corrected=corrected)
+                  width=width, height=height, edge_margin_px=edge_margin_px, corrected=corrected,
+                  min_size_px=min_size_px, small_boxes=small_boxes)
+
+
+def _min_size(min_size_px: float | tuple[float, float]) -> NDArray[np.float64]:
+    size = np.broadcast_to(np.asarray(min_size_px, dtype=np.float64), (2,)).copy()
+    if not np.all(np.isfinite(size) & (size >= 0.0)):
+        raise ValueError(f"min_size_px must be finite and not negative, got {min_size_px}")
+    return size
 
 
 def _boxes(
@@ -154,8 +182,13 @@ def _boxes(
     height: int,
     edge_margin_px: float,
     corrected: bool,
+    min_size_px: float | tuple[float, float],
+    small_boxes: SmallBoxes,
 ) -> FrameLabels:
     """:func:`boxes_from_uv` on point coordinates ``u``, ``v`` of shape ``(*B, F, P)``."""
+    if small_boxes not in ("grow", "exclude"):
+        raise ValueError(f"small_boxes must be 'grow' or 'exclude', got {small_boxes!r}")
+    need = _min_size(min_size_px)
     lo = np.stack([u.min(axis=-1), v.min(axis=-1)], axis=-1)
     hi = np.stack([u.max(axis=-1), v.max(axis=-1)], axis=-1)
     tight = np.concatenate([lo, hi], axis=-1)
@@ -166,6 +199,14 @@ def _boxes(
         [np.minimum(lo, center - half), np.maximum(hi, center + half)], axis=-1
     )
     box = corrected_box if corrected else tight
+    with np.errstate(invalid="ignore"):
+        small = (box[..., 2:] - box[..., :2]) < need  # (*B, F, 2); NaN boxes are never small
+    if small_boxes == "grow" and small.any():
+        centre = center if corrected else 0.5 * (lo + hi)
+        grown = np.concatenate([np.minimum(box[..., :2], centre - need / 2),
+                                np.maximum(box[..., 2:], centre + need / 2)], axis=-1)
+        box = np.where(np.concatenate([small, small], axis=-1), grown, box)
+    too_small = small.any(axis=-1) if small_boxes == "exclude" else np.zeros(front.shape, dtype=bool)
 
     x0, y0, x1, y1 = np.moveaxis(box, -1, 0)
     m = float(edge_margin_px)
@@ -173,6 +214,7 @@ def _boxes(
         inside_image = (x0 >= 0.0) & (y0 >= 0.0) & (x1 <= width) & (y1 <= height)
         inside_margin = (x0 >= m) & (y0 >= m) & (x1 <= width - m) & (y1 <= height - m)
     exclusion = np.full(front.shape, Exclusion.NONE, dtype=np.int8)
+    exclusion[too_small] = Exclusion.TOO_SMALL
     exclusion[~inside_margin] = Exclusion.EDGE_MARGIN
     exclusion[~inside_image] = Exclusion.OFF_FRAME
     exclusion[~front] = Exclusion.BEHIND_CAMERA
@@ -193,6 +235,8 @@ def compute_labels(
     *,
     edge_margin_px: float = 10.0,
     corrected: bool = True,
+    min_size_px: float | tuple[float, float] = 0.0,
+    small_boxes: SmallBoxes = "grow",
 ) -> FrameLabels:
     """Labels for every feature of ``features`` in one or many frames.
 
@@ -203,6 +247,11 @@ def compute_labels(
         intrinsics: the camera (shared by all frames of the batch).
         edge_margin_px: minimum distance of a labeled box from every border.
         corrected: use corrected boxes (paper 3.2) rather than tight ones.
+        min_size_px: smallest side of a label box in pixels, one value or ``(width,
+            height)`` (:meth:`datagen.training.TrainView.min_label_size_px` converts
+            ``labels.min_box_px`` at the training size); 0 keeps every box as it is.
+        small_boxes: ``"grow"`` smaller label boxes about their centre, or
+            ``"exclude"`` their features as ``too_small``.
 
     Returns:
         :class:`FrameLabels` with leading shape ``B``.
@@ -236,6 +285,8 @@ def compute_labels(
         height=intrinsics.height,
         edge_margin_px=edge_margin_px,
         corrected=corrected,
+        min_size_px=min_size_px,
+        small_boxes=small_boxes,
     )
 
 

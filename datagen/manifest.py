@@ -42,7 +42,7 @@ __all__ = [
 ]
 
 #: Version of the manifest and feature-table schemas (bumped on any incompatible change).
-MANIFEST_VERSION: Final = "1"
+MANIFEST_VERSION: Final = "2"
 #: Manifest columns that describe the run rather than the frame: they differ between
 #: two builds of the same config; every other column is identical.
 RUN_COLUMNS: Final = ("render_s", "frame_s", "worker", "worker_rss_mib")
@@ -62,6 +62,7 @@ FEATURE_RECORD: Final = pa.struct([
     ("center_px", _vec(2)),
     ("tight_xyxy", _vec(4)),
     ("corrected_xyxy", _vec(4)),
+    ("label_xyxy", _vec(4)),
     ("labeled", pa.bool_()),
     ("exclusion", pa.string()),
     ("visible_fraction", _F64),
@@ -209,6 +210,7 @@ class FeatureColumns:
     center_px: NDArray[np.float64]  # (F, 2)
     tight_xyxy: NDArray[np.float64]  # (F, 4)
     corrected_xyxy: NDArray[np.float64]  # (F, 4)
+    label_xyxy: NDArray[np.float64]  # (F, 4) the box written to the label file (null where not labeled)
     exclusion: NDArray[np.int8]  # Exclusion codes
     visible_fraction: NDArray[np.float64] | None  # None: not rendered
     center_visible: NDArray[np.bool_] | None
@@ -231,6 +233,7 @@ def feature_records(labels, class_ids, visible_fraction=None, center_visible=Non
         center_px=np.asarray(labels.center_px, dtype=np.float64),
         tight_xyxy=np.asarray(labels.tight_xyxy, dtype=np.float64),
         corrected_xyxy=np.asarray(labels.corrected_xyxy, dtype=np.float64),
+        label_xyxy=np.asarray(labels.label_xyxy, dtype=np.float64),
         exclusion=np.asarray(labels.exclusion, dtype=np.int8),
         visible_fraction=None if visible_fraction is None else np.asarray(visible_fraction, dtype=np.float64),
         center_visible=None if center_visible is None else np.asarray(center_visible, dtype=bool),
@@ -251,8 +254,9 @@ def _features_column(frames: Sequence[FeatureColumns]) -> pa.Array:
             return np.zeros((0, width) if width else 0)
         return np.concatenate(arrays) if width == 0 else np.concatenate(arrays).reshape(-1, width)
 
-    def fixed(values: NDArray, width: int) -> pa.Array:
-        return pa.FixedSizeListArray.from_arrays(pa.array(values.reshape(-1), _F64), width)
+    def fixed(values: NDArray, width: int, mask: NDArray | None = None) -> pa.Array:
+        return pa.FixedSizeListArray.from_arrays(pa.array(values.reshape(-1), _F64), width,
+                                                 mask=None if mask is None else pa.array(mask))
 
     def optional(name: str, dtype) -> pa.Array:
         values = np.zeros(n, dtype=dtype)
@@ -274,6 +278,7 @@ def _features_column(frames: Sequence[FeatureColumns]) -> pa.Array:
             fixed(cat("center_px", 2), 2),
             fixed(cat("tight_xyxy", 4), 4),
             fixed(cat("corrected_xyxy", 4), 4),
+            fixed(cat("label_xyxy", 4), 4, mask=codes != 0),
             pa.array(codes == 0),
             pa.array(reasons[codes].tolist(), pa.string()),
             optional("visible_fraction", np.float64),

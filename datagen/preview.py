@@ -1,8 +1,9 @@
 """``datagen preview``: overlays in the style of the paper's Fig. 11.
 
 On each frame's image: the projection of every feature's true 3D centre (a
-crosshair), its tight box (the perceived extent) and its corrected box (centred
-on the true centre), with the class name; features that are excluded but in
+crosshair), its tight box (the perceived extent), its corrected box (centred
+on the true centre) and, where it was grown to the minimum training size, the
+box written to the label file, with the class name; features that are excluded but in
 view (edge margin, occluded) are drawn in another colour with their reason.
 """
 
@@ -20,7 +21,8 @@ __all__ = ["draw_overlay", "write_previews"]
 
 # BGR colours.
 TIGHT = (0, 200, 255)  # amber: the tight box
-CORRECTED = (80, 220, 60)  # green: the corrected box (the label)
+CORRECTED = (80, 220, 60)  # green: the corrected box (the paper's label)
+WRITTEN = (255, 200, 0)  # cyan: the label box when grown to labels.min_box_px
 CENTRE = (255, 80, 255)  # magenta: true centre crosshair
 EXCLUDED = (160, 160, 160)  # grey: excluded features still in view
 
@@ -54,6 +56,9 @@ def draw_overlay(view: DatasetView, b: int, labels: FrameLabels, *, names: bool 
         cv2.rectangle(image, pt(x0, y0), pt(x1, y1), EXCLUDED if excluded else TIGHT, thick, cv2.LINE_AA, shift)
         x0, y0, x1, y1 = frame.corrected_xyxy[f]
         cv2.rectangle(image, pt(x0, y0), pt(x1, y1), EXCLUDED if excluded else CORRECTED, thick, cv2.LINE_AA, shift)
+        if not excluded and not np.array_equal(frame.label_xyxy[f], frame.corrected_xyxy[f]):
+            lx0, ly0, lx1, ly1 = frame.label_xyxy[f]
+            cv2.rectangle(image, pt(lx0, ly0), pt(lx1, ly1), WRITTEN, thick, cv2.LINE_AA, shift)
         u, v = frame.center_px[f]
         arm = 6 * scale
         colour = EXCLUDED if excluded else CENTRE
@@ -64,7 +69,8 @@ def draw_overlay(view: DatasetView, b: int, labels: FrameLabels, *, names: bool 
             cv2.putText(image, text, (int(x1) + 2, int(y0) + int(8 * scale)), cv2.FONT_HERSHEY_SIMPLEX, font,
                         colour, 1, cv2.LINE_AA)
     caption = (f"frame {view.frame_id[b]}  {view.split[b]}  PtD {view.distance_m[b]:.1f} m   "
-               "magenta +: true centre   amber: tight box   green: corrected box   grey: excluded")
+               "magenta +: true centre   amber: tight box   green: corrected box   cyan: label box grown to the "
+               "minimum training size   grey: excluded")
     cv2.putText(image, caption, (8, int(20 * scale)), cv2.FONT_HERSHEY_SIMPLEX, 0.5 * scale, (255, 255, 255),
                 thick, cv2.LINE_AA)
     return image

@@ -21,10 +21,12 @@ import yaml
 from numpy.typing import NDArray
 
 from datagen.camera import Intrinsics
+from datagen.config import LabelsConfig
 from datagen.errors import DatagenError
 from datagen.features import FeatureTable
 from datagen.labels import FrameLabels, compute_labels
 from datagen.manifest import MANIFEST_VERSION, manifest_schema, read_features
+from datagen.training import TrainView, label_options
 
 __all__ = ["DatasetView", "load_dataset"]
 
@@ -56,6 +58,7 @@ class DatasetView:
     center_px: NDArray[np.float64]  # (B, F, 2)
     tight_xyxy: NDArray[np.float64]  # (B, F, 4)
     corrected_xyxy: NDArray[np.float64]  # (B, F, 4)
+    label_xyxy: NDArray[np.float64]  # (B, F, 4) the box written to the label file, NaN where not labeled
     labeled: NDArray[np.bool_]  # (B, F)
     exclusion: NDArray[np.object_]  # (B, F) reason or None
     visible_fraction: NDArray[np.float64]  # (B, F), NaN where not rendered
@@ -72,6 +75,16 @@ class DatasetView:
     def edge_margin_px(self) -> float:
         return float(self.doc["edge_margin_px"])
 
+    @property
+    def label_rules(self) -> LabelsConfig:
+        """The ``labels`` section of the config the dataset was built with."""
+        return LabelsConfig.model_validate(self.doc["config"]["labels"])
+
+    @property
+    def train_view(self) -> TrainView:
+        """How Ultralytics' trainer sees this dataset's images (``labels.train_imgsz``)."""
+        return TrainView(self.intrinsics.width, self.intrinsics.height, self.label_rules.train_imgsz)
+
     def cam_from_objects(self) -> NDArray[np.float64]:
         """``(B, O, 4, 4)`` in the order of ``features.objects``."""
         return np.stack([self.cam_from_world @ self.world_from[o] for o in self.features.objects], axis=1)
@@ -79,9 +92,10 @@ class DatasetView:
     def recompute(self) -> FrameLabels:
         """The labels of every frame from the poses and features.parquet alone (with the
         manifest's visibility for the optional occlusion rule)."""
+        rules = self.label_rules
         labels = compute_labels(self.features, self.cam_from_objects(), self.intrinsics,
-                                edge_margin_px=self.edge_margin_px, corrected=self.corrected)
-        threshold = float(self.doc["config"]["labels"].get("min_visible_fraction", 0.0))
+                                **label_options(rules, self.intrinsics.width, self.intrinsics.height))
+        threshold = rules.min_visible_fraction
         if threshold > 0:
             fraction = np.where(np.isnan(self.visible_fraction), 1.0, self.visible_fraction)
             labels = labels.with_visibility(fraction, threshold)
@@ -98,8 +112,15 @@ def _read_json(path: Path) -> dict:
 
 
 def _floats(array: pa.Array, shape: tuple[int, ...]) -> NDArray[np.float64]:
+    """A float column (or fixed-size lists of floats) as an array of ``shape``, NaN where null."""
     if pa.types.is_fixed_size_list(array.type):
-        array = array.flatten()
+        n = array.type.list_size
+        values = _floats(array.values.slice(array.offset * n, len(array) * n), (len(array), n))
+        null = np.asarray(array.is_null())
+        if null.any():
+            values = values.copy()
+            values[null] = np.nan  # a null list hides its (arbitrary) values
+        return values.reshape(shape)
     return np.asarray(pc.fill_null(array, float("nan")).to_numpy(zero_copy_only=False),
                       dtype=np.float64).reshape(shape)
 
@@ -117,6 +138,11 @@ def load_dataset(root: str | Path) -> DatasetView:
     for key in ("intrinsics", "image_width", "image_height", "edge_margin_px", "corrected", "config"):
         if key not in doc:
             raise DatagenError(f"{root / 'dataset.json'}: {key}: missing")
+    try:
+        LabelsConfig.model_validate(doc["config"]["labels"])
+    except (KeyError, TypeError, ValueError) as exc:
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise DatagenError(f"{root / 'dataset.json'}: config.labels: invalid ({first})") from None
     try:
         data_yaml = yaml.safe_load((root / "data.yaml").read_text()) or {}
     except (OSError, yaml.YAMLError) as exc:
@@ -193,6 +219,7 @@ def load_dataset(root: str | Path) -> DatasetView:
         center_px=_floats(flat.field("center_px"), (b, f, 2)),
         tight_xyxy=_floats(flat.field("tight_xyxy"), (b, f, 4)),
         corrected_xyxy=_floats(flat.field("corrected_xyxy"), (b, f, 4)),
+        label_xyxy=_floats(flat.field("label_xyxy"), (b, f, 4)),
         labeled=np.asarray(flat.field("labeled").to_numpy(zero_copy_only=False), dtype=bool).reshape(b, f),
         exclusion=exclusion,
         visible_fraction=_floats(flat.field("visible_fraction"), (b, f)),

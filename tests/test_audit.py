@@ -65,7 +65,7 @@ def test_a_built_dataset_passes_every_check(dataset) -> None:
     assert result.passed, [(c.name, c.offenders[:3]) for c in result.checks if not c.passed]
     by_name = {c.name: c for c in result.checks}
     assert set(by_name) == {"manifest_boxes", "label_lines", "centre_drift", "edge_margin_and_front",
-                            "ultralytics_rules", "files", "class_names"}
+                            "ultralytics_rules", "learnable", "files", "class_names"}
     assert by_name["label_lines"].checked > 100
     assert by_name["centre_drift"].worst < 1e-3  # seven decimals: under 1.2e-4 px at most
     stats = result.stats
@@ -83,7 +83,7 @@ def test_audit_command_writes_the_report(copy) -> None:
     assert out.returncode == 0, out.stdout + out.stderr
     assert out.stdout.strip().splitlines()[-1] == f"PASSED: {copy / 'audit' / 'report.html'}"
     doc = json.loads((copy / "audit" / "report.json").read_text())
-    assert doc["passed"] is True and doc["frames"] == 8 and len(doc["checks"]) == 7
+    assert doc["passed"] is True and doc["frames"] == 8 and len(doc["checks"]) == 8
     assert len(list((copy / "audit" / "plots").glob("*.png"))) == 5
     # The report is not a dataset file: a second audit still finds no orphan.
     assert checks(copy)["files"].passed
@@ -234,3 +234,74 @@ def test_duplicate_coarse_and_non_finite_lines_fail_without_a_traceback(copy, tm
     assert f"{rel}:{len(lines) - 1}: not finite" in rules and f"{rel}:{len(lines)}: not finite" in rules
     written = write_report(result, view, tmp_path, overlays=0)  # strict JSON: no NaN or inf
     assert json.loads(written["json"].read_text())["passed"] is False
+
+
+# --- learnability (labels.min_box_px) ---------------------------------------------------------
+def wingcam_labels(tmp: Path, **overrides) -> Path:
+    """A labels-only wingcam55 build of 40 frames (seed 123, not the config's)."""
+    from datagen.config import load_config, override_config
+
+    config = override_config(load_config(ROOT / "scenes" / "wingcam55.yaml"),
+                             {"dataset.frames": 40, "dataset.seed": 123, **overrides})
+    build_dataset(config, tmp / "ds", render=False)
+    return tmp / "ds"
+
+
+def test_label_boxes_contain_the_corrected_boxes_and_share_their_true_centre(tmp_path: Path) -> None:
+    view = load_dataset(wingcam_labels(tmp_path))
+    lab = view.labeled
+    label, corrected, centre = view.label_xyxy[lab], view.corrected_xyxy[lab], view.center_px[lab]
+    assert np.all(label[:, :2] <= corrected[:, :2]) and np.all(label[:, 2:] >= corrected[:, 2:])
+    np.testing.assert_allclose(0.5 * (label[:, :2] + label[:, 2:]), centre, rtol=0, atol=1e-9)
+    assert np.isnan(view.label_xyxy[~lab]).all()  # null where not labeled
+    grown = np.any(label != corrected, axis=1)
+    assert grown.mean() > 0.5  # most wingcam55 boxes are under 8 px at imgsz 864
+    sides = (label[:, 2:] - label[:, :2]) * np.array(view.train_view.scale)
+    assert sides.min() >= 8.0 - 1e-9
+
+
+def test_audit_fails_unlearnable_labels_and_names_the_worst_classes(tmp_path: Path) -> None:
+    result = audit(load_dataset(wingcam_labels(tmp_path, **{"labels.min_box_px": 0.0})))
+    learnable = {c.name: c for c in result.checks}["learnable"]
+    assert not learnable.passed and not result.passed
+    assert learnable.pass_share < 0.5  # most tight wingcam55 boxes are under 2 px or hold no anchor at 864
+    names = set(load_dataset(tmp_path / "ds").features.name)
+    worst = learnable.offenders[0]
+    assert worst.startswith("class ") and worst.split(":")[0].split(" ", 2)[2] in names
+    assert "lines learnable" in worst
+    stats = result.stats["learnable"]
+    assert stats["share"] == pytest.approx(learnable.pass_share)
+    assert stats["worst_classes"][0]["share"] == min(v["share"] for v in stats["by_class"].values())
+    assert {b["lo"] for b in stats["by_distance_m"]} >= {0.0, 110.0} and set(stats["by_size"]) == {"small", "medium"}
+    # The same frames with the default 8 px minimum are learnable throughout.
+    default = audit(load_dataset(wingcam_labels(tmp_path / "default")))
+    check = {c.name: c for c in default.checks}["learnable"]
+    assert check.passed and check.failures == 0 and default.stats["learnable"]["share"] == 1.0
+
+
+def test_audit_command_reports_learnability_and_its_threshold(tmp_path: Path) -> None:
+    root = wingcam_labels(tmp_path, **{"labels.min_box_px": 0.0})
+    out = subprocess.run([sys.executable, "-m", "datagen", "audit", str(root)], capture_output=True, text=True,
+                         timeout=300, cwd=ROOT)
+    assert out.returncode == 1
+    line = next(x for x in out.stdout.splitlines() if "learnable:" in x)
+    assert line.startswith("FAIL  learnable:") and "(needs 95%)" in line
+    assert "Learnable by the detector" in (root / "audit" / "report.html").read_text()
+    loose = subprocess.run([sys.executable, "-m", "datagen", "audit", str(root), "--min-learnable", "0.1"],
+                           capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert loose.returncode == 0, loose.stdout
+    doc = json.loads((root / "audit" / "report.json").read_text())
+    check = next(c for c in doc["checks"] if c["name"] == "learnable")
+    assert check["passed"] and check["min_pass_share"] == 0.1 and 0.1 <= check["pass_share"] < 0.5
+
+
+@pytest.mark.render
+def test_files_ultralytics_writes_are_not_orphans(copy) -> None:
+    """Training writes label caches beside the label folders and (cache=disk) .npy images."""
+    shard = sorted((copy / "labels" / "train").iterdir())[0]
+    shard.with_suffix(".cache").write_bytes(b"ultralytics label cache")
+    image = sorted((copy / "images" / "train").rglob("*.png"))[0]
+    image.with_suffix(".npy").write_bytes(b"ultralytics image cache")
+    assert checks(copy)["files"].passed
+    (shard / "stray.txt").write_text("")
+    assert not checks(copy)["files"].passed

@@ -24,11 +24,12 @@ from hypothesis import strategies as st
 from datagen.assets import feature_table
 from datagen.build import build_dataset
 from datagen.camera import Intrinsics
-from datagen.config import load_config, override_config
+from datagen.config import LabelsConfig, load_config, override_config
 from datagen.dataset import SPLITS, DatasetLock, frame_split, plan_shards
 from datagen.errors import ConfigError, DatagenError
 from datagen.labels import compute_labels
 from datagen.manifest import RUN_COLUMNS, features_schema, manifest_schema, read_features
+from datagen.training import label_options
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -147,7 +148,7 @@ def test_features_parquet_round_trips(tmp_path: Path) -> None:
 # Keys every Ultralytics release since 8.0 accepts in a cfg file.
 ULTRALYTICS_KEYS = {
     "imgsz", "epochs", "batch", "rect", "close_mosaic", "hsv_h", "hsv_s", "hsv_v", "degrees", "translate",
-    "scale", "shear", "perspective", "flipud", "fliplr", "mosaic", "mixup", "copy_paste",
+    "scale", "shear", "perspective", "flipud", "fliplr", "mosaic", "mixup", "cutmix", "copy_paste",
 }
 
 
@@ -158,17 +159,21 @@ def test_labels_only_build_and_its_metadata(tmp_path: Path) -> None:
     assert report.frames == 8 and not report.interrupted and report.rendered == 0
     data = yaml.safe_load((root / "data.yaml").read_text())
     assert "path" not in data
-    assert (root / data["train"]).resolve() == root / "images" / "train"
+    assert (data["train"], data["val"]) == ("train.txt", "val.txt")
+    assert not (root / "train.txt").exists()  # no images, nothing to list
     assert data["names"] == dict(enumerate(feature_table(config).name)) and data["nc"] == 80
     hyp = yaml.safe_load((root / "hyp.yaml").read_text())
     assert set(hyp) <= ULTRALYTICS_KEYS
     assert hyp["fliplr"] == 0.0 and hyp["mosaic"] == 0.0 and hyp["translate"] == 0.0 and hyp["scale"] == 0.0
+    assert hyp["imgsz"] == config.labels.train_imgsz == 864
     doc = json.loads((root / "dataset.json").read_text())
     assert doc["image_width"] == 128 and doc["image_height"] == 68
     assert doc["edge_margin_px"] == 2.0 and doc["corrected"] is True and doc["pixel_convention"] == "continuous"
     assert [o["name"] for o in doc["objects"]] == ["tanker", "receiver", "drogue", "hose"]
     assert [o["id"] for o in doc["objects"]] == [1, 2, 3, 4]
-    assert doc["config"]["dataset"]["frames"] == 8 and doc["manifest_version"] == "1"
+    assert doc["config"]["dataset"]["frames"] == 8 and doc["manifest_version"] == "2"
+    assert doc["label_size"]["train_imgsz"] == 864 and doc["label_size"]["min_box_px"] == 8.0
+    np.testing.assert_allclose(doc["label_size"]["min_label_size_px"], [8 / 6.75, 8 / 6.75], rtol=1e-12)
     assert doc["schema"] == "datagen.dataset" and doc["schema_version"] == 1
     assert {"datagen", "mitsuba", "drjit", "numpy", "pyarrow"} <= set(doc["versions"])
     assert sum(s["frames"] for s in doc["splits"].values()) == 8
@@ -177,7 +182,7 @@ def test_labels_only_build_and_its_metadata(tmp_path: Path) -> None:
     assert all(r["image_path"] is None and r["render_s"] is None for r in rows.values())
     assert all(f["visible_fraction"] is None for r in rows.values() for f in r["features"])
     assert pq.read_schema(next((root / "manifests").glob("*.parquet"))).metadata[
-        b"datagen.manifest_version"] == b"1"
+        b"datagen.manifest_version"] == b"2"
     assert not temporaries(root)
 
 
@@ -197,8 +202,8 @@ def test_a_split_without_frames_borrows_the_other_in_data_yaml(tmp_path: Path) -
     config = tiny_config(tmp_path, **{"dataset.val_fraction": 0.0})
     build_dataset(config, tmp_path / "ds", render=False)
     data = yaml.safe_load((tmp_path / "ds" / "data.yaml").read_text())
-    assert data["train"] == data["val"] == "images/train"
-    assert "# no val frames in this build: val uses images/train" in (tmp_path / "ds" / "data.yaml").read_text()
+    assert data["train"] == data["val"] == "train.txt"
+    assert "# no val frames in this build: val uses train.txt" in (tmp_path / "ds" / "data.yaml").read_text()
 
 
 def test_another_config_is_refused_unless_overwrite(tmp_path: Path) -> None:
@@ -281,8 +286,11 @@ def test_layout_is_what_ultralytics_reads(reference) -> None:
         assert (root / row["exr_path"]).is_file()
     data = yaml.safe_load((root / "data.yaml").read_text())
     for split in SPLITS:
-        listed = {str(p) for p in (root / data[split]).rglob("*.png")}
-        assert listed == {str(root / r["image_path"]) for r in rows.values() if r["split"] == split}
+        # Ultralytics reads a list line './x' as x beside the list file, in the order given.
+        lines = (root / data[split]).read_text().splitlines()
+        assert all(line.startswith("./") for line in lines)
+        listed = [str(root / line[2:]) for line in lines]
+        assert listed == [str(root / rows[i]["image_path"]) for i in sorted(rows) if rows[i]["split"] == split]
     assert not temporaries(root)
 
 
@@ -297,8 +305,8 @@ def test_labels_recompute_from_manifest_and_features_alone(reference) -> None:
         cam_from_world = np.reshape(row["cam_from_world"], (4, 4))
         cam_from_objects = np.stack([cam_from_world @ np.reshape(row[f"world_from_{o}"], (4, 4))
                                      for o in features.objects])
-        labels = compute_labels(features, cam_from_objects, k, edge_margin_px=doc["edge_margin_px"],
-                                corrected=doc["corrected"])
+        rules = LabelsConfig.model_validate(doc["config"]["labels"])
+        labels = compute_labels(features, cam_from_objects, k, **label_options(rules, k.width, k.height))
         stored = row["features"]
         assert [f["class_id"] for f in stored] == features.class_id.tolist()
         for name in ("center_px", "tight_xyxy", "corrected_xyxy"):
@@ -306,13 +314,16 @@ def test_labels_recompute_from_manifest_and_features_alone(reference) -> None:
                                        getattr(labels, name), rtol=0, atol=1e-6)
         labeled = np.array([f["labeled"] for f in stored])
         np.testing.assert_array_equal(labeled, labels.labeled)
+        assert all((f["label_xyxy"] is None) == (not f["labeled"]) for f in stored)
+        np.testing.assert_allclose(np.array([f["label_xyxy"] for f in stored if f["labeled"]], dtype=float),
+                                   labels.label_xyxy[labeled], rtol=0, atol=1e-6)
         # The label file holds exactly the labeled features, centred on the true centre.
         lines = (root / row["label_path"]).read_text().splitlines()
         assert len(lines) == labeled.sum() == row["n_labeled"]
         for line in lines:
             cls, cx, cy, w, h = line.split()
             f = int(cls)
-            box = labels.corrected_xyxy[f]
+            box = labels.label_xyxy[f]
             expected = [labels.center_px[f, 0] / k.width, labels.center_px[f, 1] / k.height,
                         (box[2] - box[0]) / k.width, (box[3] - box[1]) / k.height]
             np.testing.assert_allclose([float(cx), float(cy), float(w), float(h)], expected, atol=5e-8)
@@ -421,3 +432,19 @@ def test_out_must_be_a_folder_and_temporaries_do_not_make_it_foreign(tmp_path: P
     (tmp_path / "ds" / ".dataset.json.123.tmp").write_text("{")
     report = build_dataset(config, tmp_path / "ds", render=False)
     assert report.frames == 8 and not temporaries(tmp_path / "ds")
+
+
+def test_exclude_mode_drops_boxes_under_the_minimum_as_too_small(tmp_path: Path) -> None:
+    config = tiny_config(tmp_path, **{"labels.small_boxes": "exclude", "labels.min_box_px": 16.0})
+    report = build_dataset(config, tmp_path / "ds", render=False)
+    need = np.array(label_options(config.labels, 128, 68)["min_size_px"])
+    records = [f for row in manifest_rows(tmp_path / "ds").values() for f in row["features"]]
+    small = [f for f in records if f["exclusion"] == "too_small"]
+    assert len(small) == report.excluded["too_small"] > 0
+    for f in small:  # the paper's box is recorded; a side of it is under the minimum
+        box = np.array(f["corrected_xyxy"])
+        assert f["label_xyxy"] is None and np.any(box[2:] - box[:2] < need)
+    for f in records:
+        if f["labeled"]:  # a written box is the corrected one, never grown, at least the minimum
+            assert f["label_xyxy"] == f["corrected_xyxy"]
+            assert np.all(np.diff(np.reshape(f["label_xyxy"], (2, 2)), axis=0) >= need)

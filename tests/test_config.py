@@ -119,6 +119,15 @@ def test_missing_required_keys(tmp_path: Path) -> None:
         (MINIMAL + "labels: {edge_margin_px: 600}\n", "edge_margin_px 600.0 leaves no room"),
         (MINIMAL + "features: {objects: [tanker, tanker]}\n", ":4: features.objects:"),
         (MINIMAL + "randomization: {sky: {turbidity: [0.5, 3]}}\n", "turbidity must lie within [1.0, 10.0]"),
+        (MINIMAL + "labels: {min_box_px: -2}\n", ":4: labels.min_box_px: value -2: Input should be greater than or "
+         "equal to 0"),
+        (MINIMAL + "labels: {min_box_px: .inf}\n", ":4: labels.min_box_px: value inf: Input should be a finite number"),
+        (MINIMAL + "labels: {min_box_px: .nan}\n", ":4: labels.min_box_px: value nan: Input should be a finite number"),
+        (MINIMAL + "labels: {small_boxes: shrink}\n", ":4: labels.small_boxes: value 'shrink': Input should be 'grow' "
+         "or 'exclude'"),
+        (MINIMAL + "labels: {train_imgsz: 850}\n", ":4: labels.train_imgsz: value 850: must be a multiple of 32"),
+        (MINIMAL + "labels: {train_imgsz: 320, min_box_px: 320}\n", "min_box_px 320 must be smaller than train_imgsz"),
+        (MINIMAL + "labels: {edge_margin_px: 500, min_box_px: 40}\n", "does not fit inside the edge margin"),
     ],
 )
 def test_bad_configs(tmp_path: Path, text: str, expected: str) -> None:

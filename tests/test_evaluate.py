@@ -167,3 +167,49 @@ def test_split_limits_the_attempts_and_bad_inputs_are_one_line(wingcam, tmp_path
     (tmp_path / "x.txt").write_bytes(b"\xff\xfe\x00")
     with pytest.raises(DatagenError, match=r"x\.txt: unreadable prediction file"):
         parse_predictions(tmp_path, 2048, 1080, 80)
+
+
+def write_predictions(view, folder: Path, frames, *, conf: float) -> None:
+    """save_txt files of perfect detections (the true centres) at ``conf`` for the rows ``frames``."""
+    k = view.intrinsics
+    folder.mkdir(parents=True, exist_ok=True)
+    for b in frames:
+        lines = [f"{f} {view.center_px[b, f, 0] / k.width:.9f} {view.center_px[b, f, 1] / k.height:.9f} 0.01 0.01 "
+                 f"{conf}" for f in np.flatnonzero(view.labeled[b])]
+        (folder / f"{Path(view.label_path[b]).stem}.txt").write_text("".join(line + "\n" for line in lines))
+
+
+def test_predictions_score_the_split_they_cover_and_name_every_failure(wingcam, tmp_path: Path) -> None:
+    val = [b for b in range(len(wingcam)) if wingcam.split[b] == "val"]
+    confident, timid = val[: len(val) // 2], val[len(val) // 2:-2]  # the last two val frames: no file at all
+    write_predictions(wingcam, tmp_path / "pred", confident, conf=0.9)
+    write_predictions(wingcam, tmp_path / "pred", timid, conf=0.1)
+    out = subprocess.run([sys.executable, "-m", "datagen", "evaluate", str(wingcam.root), "--predictions",
+                          str(tmp_path / "pred"), "--out", str(tmp_path / "ev")], capture_output=True, text=True,
+                         timeout=300, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    assert lines[0] == "scoring the val split: the frames the predictions cover (--split to choose)"
+    failed = next(line for line in lines if line.startswith("  failed: "))
+    n_timid = sum(1 for b in timid if wingcam.labeled[b].sum())  # a frame with no labeled feature has no line
+    assert f"{n_timid} with all detections below --conf 0.25" in failed
+    assert "2 with no prediction file (nothing detected, or not predicted)" in failed
+    doc = json.loads((tmp_path / "ev" / "evaluation.json").read_text())
+    run = doc["runs"][0]
+    assert run["split"] == "val" and run["overall"]["attempts"] == len(val)
+    assert run["reasons"]["below_conf"] == n_timid and run["reasons"]["no_detections"] >= 2
+    everything = subprocess.run([sys.executable, "-m", "datagen", "evaluate", str(wingcam.root), "--predictions",
+                                 str(tmp_path / "pred"), "--split", "all", "--out", str(tmp_path / "ev2")],
+                                capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert everything.returncode == 0 and "scoring" not in everything.stdout
+    assert json.loads((tmp_path / "ev2" / "evaluation.json").read_text())["runs"][0]["overall"]["attempts"] == len(
+        wingcam)
+
+
+def test_predictions_that_match_no_frame_are_one_line(wingcam, tmp_path: Path) -> None:
+    (tmp_path / "pred").mkdir()
+    (tmp_path / "pred" / "holiday.txt").write_text("0 0.5 0.5 0.1 0.1 0.9\n")
+    out = subprocess.run([sys.executable, "-m", "datagen", "evaluate", str(wingcam.root), "--predictions",
+                          str(tmp_path / "pred")], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert out.returncode == 2 and out.stderr.count("\n") == 1
+    assert "no prediction file is named after an image of" in out.stderr

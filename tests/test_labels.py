@@ -274,3 +274,85 @@ def test_rejects_wrong_object_count() -> None:
 def test_strategy_rotations_are_proper(rot) -> None:
     np.testing.assert_allclose(rot @ rot.T, np.eye(3), atol=1e-12)
     assert np.linalg.det(rot) == pytest.approx(1.0)
+
+
+# --- the minimum label size (labels.min_box_px) ------------------------------------------
+@given(k=intrinsics(), points=point_sets(), cam_from_model=cam_from_model_in_front(),
+       min_w=st.floats(0.0, 60.0, **finite), min_h=st.floats(0.0, 60.0, **finite), corrected=st.booleans())
+def test_grow_widens_small_sides_to_the_minimum_about_the_unmoved_centre(k, points, cam_from_model, min_w, min_h,
+                                                                        corrected) -> None:
+    table = one_feature(points)
+    plain = compute_labels(table, cam_from_model[None], k, edge_margin_px=0.0, corrected=corrected)
+    grown = compute_labels(table, cam_from_model[None], k, edge_margin_px=0.0, corrected=corrected,
+                           min_size_px=(min_w, min_h), small_boxes="grow")
+    base, box = plain.label_xyxy[0], grown.label_xyxy[0]
+    # The paper's boxes and the true centre do not change.
+    np.testing.assert_array_equal(grown.corrected_xyxy, plain.corrected_xyxy)
+    np.testing.assert_array_equal(grown.center_px, plain.center_px)
+    # The label box contains the paper's box and keeps its centre (the true centre when corrected).
+    assert box[0] <= base[0] and box[1] <= base[1] and box[2] >= base[2] and box[3] >= base[3]
+    centre = 0.5 * (box[:2] + box[2:])
+    scale = max(1.0, float(np.abs(box).max()))
+    np.testing.assert_allclose(centre, 0.5 * (base[:2] + base[2:]), rtol=0, atol=1e-12 * scale)
+    if corrected:
+        np.testing.assert_array_equal(grown.label_center_px, grown.center_px)
+    for axis, need in ((0, min_w), (1, min_h)):
+        side, old = box[axis + 2] - box[axis], base[axis + 2] - base[axis]
+        if old >= need:
+            assert side == old  # a side already long enough is left alone
+        else:
+            assert abs(side - need) <= 1e-12 * scale  # a short side becomes exactly the minimum
+
+
+@given(side=st.floats(0.01, 150.0, **finite), aspect=st.floats(0.2, 5.0, **finite),
+       above=st.booleans(), corrected=st.booleans())
+def test_exclude_drops_a_box_exactly_when_a_side_is_under_the_minimum(side, aspect, above, corrected) -> None:
+    """At the size boundary: a side equal to the minimum is kept; one ulp more minimum excludes it."""
+    w, h = side, side * aspect
+    corners = np.array([[300.0, 200.0], [300.0 + w, 200.0], [300.0 + w, 200.0 + h], [300.0, 200.0 + h]])
+    centre = corners.mean(0)
+    box = boxes_from_uv(corners[None], centre[None], np.array([True]), width=2048, height=1080,
+                        edge_margin_px=10.0, corrected=corrected).label_xyxy[0]
+    exact = (box[2] - box[0], box[3] - box[1])
+    need = (np.nextafter(exact[0], np.inf), exact[1]) if above else exact
+    labels = boxes_from_uv(corners[None], centre[None], np.array([True]), width=2048, height=1080,
+                           edge_margin_px=10.0, corrected=corrected, min_size_px=need, small_boxes="exclude")
+    assert labels.exclusion[0] == (Exclusion.TOO_SMALL if above else Exclusion.NONE)
+    np.testing.assert_array_equal(labels.label_xyxy[0], box)  # exclude never changes a box
+    grown = boxes_from_uv(corners[None], centre[None], np.array([True]), width=2048, height=1080,
+                          edge_margin_px=10.0, corrected=corrected, min_size_px=need, small_boxes="grow")
+    assert grown.exclusion[0] == Exclusion.NONE
+
+
+def test_the_edge_rule_applies_to_the_grown_box() -> None:
+    """A 2 px feature 12 px from the left border is inside a 10 px margin; grown to 20 px it is not."""
+    corners = np.array([[12.0, 500.0], [14.0, 500.0], [14.0, 502.0], [12.0, 502.0]])
+    centre = corners.mean(0)
+    args = dict(width=2048, height=1080, edge_margin_px=10.0)
+    small = boxes_from_uv(corners[None], centre[None], np.array([True]), **args)
+    assert small.exclusion[0] == Exclusion.NONE
+    grown = boxes_from_uv(corners[None], centre[None], np.array([True]), min_size_px=20.0, **args)
+    np.testing.assert_allclose(grown.label_xyxy[0], [3.0, 491.0, 23.0, 511.0])
+    assert grown.exclusion[0] == Exclusion.EDGE_MARGIN
+    assert grown.exclusion[0] != Exclusion.TOO_SMALL
+
+
+def test_uncorrected_labels_grow_about_the_tight_box_centre() -> None:
+    """Model H gets the same treatment around its tight-box centre, not the true centre."""
+    corners = np.array([[500.0, 500.0], [504.0, 500.0], [504.0, 503.0], [500.0, 503.0]])
+    true_centre = np.array([503.0, 502.0])  # off the tight box's centre (parallax)
+    labels = boxes_from_uv(corners[None], true_centre[None], np.array([True]), width=2048, height=1080,
+                           edge_margin_px=10.0, corrected=False, min_size_px=(10.0, 12.0))
+    np.testing.assert_allclose(labels.label_xyxy[0], [497.0, 495.5, 507.0, 507.5])
+    np.testing.assert_allclose(labels.label_center_px[0], [502.0, 501.5])
+
+
+@pytest.mark.parametrize("bad", [-1.0, float("nan"), float("inf"), (1.0, -2.0)])
+def test_a_bad_minimum_size_is_refused(bad) -> None:
+    corners = np.array([[0.0, 0.0], [1.0, 1.0]])
+    with pytest.raises(ValueError, match="min_size_px must be finite and not negative"):
+        boxes_from_uv(corners[None], corners.mean(0)[None], np.array([True]), width=10, height=10,
+                      edge_margin_px=0.0, min_size_px=bad)
+    with pytest.raises(ValueError, match="small_boxes must be 'grow' or 'exclude'"):
+        boxes_from_uv(corners[None], corners.mean(0)[None], np.array([True]), width=10, height=10,
+                      edge_margin_px=0.0, small_boxes="shrink")

@@ -1,0 +1,228 @@
+"""Labels a detector can learn, end to end through Ultralytics (issue 13).
+
+    python bench/bench_train.py [--frames 24] [--spp 4] [--epochs 3] [--batch 4] [--seed 2024]
+    python bench/bench_train.py --sweep [--sweep-frames 1000]
+
+Needs the ``train`` extra (``pip install -e '.[train]'``). Default run:
+
+1. builds a rendered wingcam55 dataset of ``--frames`` frames at ``--spp`` with a
+   held-out seed (not the config's) and its train.txt / val.txt;
+2. runs every image of both splits through Ultralytics' own training dataloader
+   with the dataset's hyp.yaml and counts the label lines it keeps and those that
+   hold an anchor centre of the detection head (``datagen.yolo``), beside what
+   ``datagen audit`` computes without Ultralytics;
+3. trains ``yolo11n.yaml`` (from scratch: nothing is downloaded) for ``--epochs``
+   epochs on the CPU with the dataset's recipe, counting the instances the trainer
+   sees per epoch and reading its box loss;
+4. predicts ``val.txt`` and scores the detections with ``datagen evaluate --predictions``.
+
+``--sweep`` chooses ``labels.min_box_px``: labels-only builds of ``--sweep-frames``
+frames for several minimum sizes, and per size the learnable share (datagen's rule,
+which equals Ultralytics' dataloader line for line: tests/test_train.py), the share
+of learnable boxes whose every anchor centre also lies in another box of the frame
+(the assigner then gives those anchors to one box only), edge-margin exclusions,
+labels per frame, and the share of label lines to which Ultralytics' own
+detection loss gives a positive anchor on an untrained yolo11n (``datagen.yolo``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from datagen.build import build_dataset
+from datagen.config import load_config, override_config
+from datagen.reader import load_dataset
+from datagen.training import ANCHOR_STRIDES
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def config_for(seed: int, frames: int, **overrides):
+    return override_config(load_config(ROOT / "scenes" / "wingcam55.yaml"),
+                           {"dataset.frames": frames, "dataset.seed": seed, **overrides})
+
+
+# --- the sweep ---------------------------------------------------------------------------------
+def contested(view) -> tuple[int, int]:
+    """(learnable label boxes, those whose every anchor centre lies in another labeled box too)."""
+    train = view.train_view
+    imgsz = train.imgsz
+    total = shared = 0
+    for b in range(len(view)):
+        boxes = train.to_train(view.label_xyxy[b][view.labeled[b]])
+        if not len(boxes):
+            continue
+        learnable = train.learnable(view.label_xyxy[b][view.labeled[b]])
+        for j in np.flatnonzero(learnable):
+            x0, y0, x1, y1 = boxes[j]
+            others = np.delete(boxes, j, axis=0)
+            own = True
+            for s in ANCHOR_STRIDES:
+                c = (np.arange(imgsz // s) + 0.5) * s
+                xs, ys = c[(c > x0) & (c < x1)], c[(c > y0) & (c < y1)]
+                for x in xs:
+                    for y in ys:
+                        if not np.any((others[:, 0] < x) & (x < others[:, 2]) & (others[:, 1] < y)
+                                      & (y < others[:, 3])):
+                            own = False
+                            break
+                    if not own:
+                        break
+                if not own:
+                    break
+            total += 1
+            shared += own
+    return total, shared
+
+
+def blank_images(root: Path, config) -> None:
+    """One grey PNG hard-linked at every frame's image path, and the image lists: Ultralytics'
+    dataloader needs images to exist, not rendered ones (labels do not depend on pixels)."""
+    import os
+
+    import cv2
+
+    from datagen.dataset import Layout, plan_shards, write_image_lists
+
+    layout, jobs = Layout(root), plan_shards(config)
+    grey = root / ".grey.png"
+    grey.write_bytes(cv2.imencode(".png", np.full((config.camera.height, config.camera.width, 3), 90,
+                                                  np.uint8))[1].tobytes())
+    for job in jobs:
+        for i in job.frames:
+            path = root / layout.image_rel(job.split, job.shard, i)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            os.link(grey, path)
+    grey.unlink()
+    write_image_lists(layout, jobs)
+
+
+def sweep(args) -> None:
+    from datagen.audit import audit
+    from datagen.yolo import assigner_positives
+
+    print(f"min_box_px sweep: wingcam55, {args.sweep_frames} labels-only frames, seed {args.seed}, imgsz 864, "
+          f"{platform.machine()} {platform.node()}; assigner: untrained yolo11n.yaml (torch seed 0) on the first "
+          f"{args.assigner_images} train images")
+    print("| min_box_px | label lines | per frame | edge_margin excluded | learnable | all anchors shared | "
+          "positive from the assigner |")
+    print("|---|---|---|---|---|---|---|")
+    for size in (0.0, 2.0, 4.0, 8.0, 12.0, 16.0, 24.0):
+        with tempfile.TemporaryDirectory() as tmp:
+            config = config_for(args.seed, args.sweep_frames, **{"labels.min_box_px": size})
+            report = build_dataset(config, Path(tmp) / "ds", render=False)
+            view = load_dataset(Path(tmp) / "ds")
+            share = audit(view).stats["learnable"]["share"]
+            learnable, shared = contested(view)
+            blank_images(Path(tmp) / "ds", config)
+            assigned = assigner_positives(Path(tmp) / "ds", "train", images=args.assigner_images)
+            print(f"| {size:g} | {report.labels} | {report.labels / report.frames:.1f} | "
+                  f"{report.excluded['edge_margin']} | {100 * share:.1f}% | "
+                  f"{100 * shared / max(1, learnable):.1f}% | "
+                  f"{100 * assigned['positive'] / max(1, assigned['label_lines']):.1f}% |", flush=True)
+
+
+# --- the end-to-end run ---------------------------------------------------------------------------
+def train_and_count(root: Path, runs: Path, epochs: int, batch: int) -> dict:
+    """Train yolo11n.yaml with the dataset's recipe; instances per epoch and box loss per epoch."""
+    import yaml
+    from ultralytics import YOLO
+
+    seen: dict[int, int] = {}
+    box_loss: list[float] = []
+
+    def epoch_end(trainer) -> None:  # the epoch's mean loss items, unrounded (results.csv keeps 5 decimals)
+        items = trainer.tloss if isinstance(trainer.tloss, dict) else {}
+        box_loss.extend(float(v) for k, v in items.items() if "box" in k)
+
+    def count(trainer) -> None:
+        original = trainer.preprocess_batch
+
+        def wrapped(batch_dict):
+            seen[trainer.epoch] = seen.get(trainer.epoch, 0) + int(batch_dict["cls"].shape[0])
+            return original(batch_dict)
+
+        trainer.preprocess_batch = wrapped
+
+    model = YOLO("yolo11n.yaml")
+    model.add_callback("on_train_start", count)
+    model.add_callback("on_train_epoch_end", epoch_end)
+    hyp = yaml.safe_load((root / "hyp.yaml").read_text())
+    start = time.perf_counter()
+    model.train(data=str(root / "data.yaml"), cfg=str(root / "hyp.yaml"), epochs=epochs, batch=batch, workers=0,
+                device="cpu", project=str(runs), name="train", exist_ok=True, plots=False, verbose=False)
+    wall = time.perf_counter() - start
+    with open(runs / "train" / "results.csv") as f:
+        rows = list(csv.DictReader(f))
+    return {"imgsz": hyp["imgsz"], "seconds": wall, "instances": [seen.get(e, 0) for e in range(epochs)],
+            "box_loss": box_loss or [float(r["train/box_loss"]) for r in rows],
+            "cls_loss": [float(r["train/cls_loss"]) for r in rows], "weights": runs / "train" / "weights" / "last.pt"}
+
+
+def end_to_end(args) -> None:
+    from datagen.audit import audit
+    from datagen.yolo import assigner_positives, dataloader_learnability
+
+    out = Path(args.out or tempfile.mkdtemp(prefix="bench-train-"))
+    root = out / "w55"
+    shutil.rmtree(root, ignore_errors=True)  # this benchmark's own folder: time a fresh build
+    start = time.perf_counter()
+    build_dataset(config_for(args.seed, args.frames, **{"render.spp": args.spp}), root, overwrite=True)
+    print(f"build: {args.frames} frames at {args.spp} spp in {time.perf_counter() - start:.1f} s -> {root}")
+    view = load_dataset(root)
+    learn = audit(view).stats["learnable"]
+    print(f"datagen audit: {learn['lines']} label lines, learnable {100 * learn['share']:.1f}% "
+          f"(min side at imgsz {learn['train_imgsz']}: {learn['min_side_train_px']['min']:.2f} px)")
+    for split in ("train", "val"):
+        seen = dataloader_learnability(root, split)
+        n = max(1, seen["lines"])
+        print(f"Ultralytics training dataloader, {split}: {seen['images']} images, {seen['lines']} label lines, "
+              f"kept {seen['kept']} ({100 * seen['kept'] / n:.1f}%), with an anchor centre inside "
+              f"{seen['anchored']} ({100 * seen['anchored'] / n:.1f}%), assigner candidates "
+              f"{seen['assigner_candidates']} ({100 * seen['assigner_candidates'] / n:.1f}%)")
+    assigned = assigner_positives(root, "train")
+    print(f"Ultralytics' detection-loss assigner, untrained yolo11n.yaml: {assigned['positive']} of "
+          f"{assigned['label_lines']} train label lines get a positive anchor "
+          f"({100 * assigned['positive'] / max(1, assigned['label_lines']):.1f}%)")
+    trained = train_and_count(root, out / "runs", args.epochs, args.batch)
+    print(f"train yolo11n.yaml, imgsz {trained['imgsz']}, {args.epochs} epochs in {trained['seconds']:.0f} s (CPU): "
+          f"instances per epoch {trained['instances']}, box loss per epoch "
+          f"{', '.join(f'{x:.3g}' for x in trained['box_loss'])}, cls loss per epoch "
+          f"{', '.join(f'{x:.3g}' for x in trained['cls_loss'])}")
+    yolo = str(Path(sys.executable).parent / "yolo")
+    subprocess.run([yolo, "detect", "predict", f"model={trained['weights']}", f"source={root / 'val.txt'}",
+                    f"imgsz={trained['imgsz']}", "conf=0.001", "save_txt=True", "save_conf=True", "save=False",
+                    f"project={out / 'runs'}", "name=predict", "exist_ok=True"], check=True, capture_output=True)
+    evaluation = subprocess.run([sys.executable, "-m", "datagen", "evaluate", str(root), "--predictions",
+                                 str(out / "runs" / "predict" / "labels")], capture_output=True, text=True)
+    print("datagen evaluate --predictions:")
+    print("  " + (evaluation.stdout + evaluation.stderr).strip().replace("\n", "\n  "))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--frames", type=int, default=24)
+    parser.add_argument("--spp", type=int, default=4)
+    parser.add_argument("--epochs", type=int, default=3)
+    parser.add_argument("--batch", type=int, default=4)
+    parser.add_argument("--seed", type=int, default=2024, help="held out: no shipped config uses it")
+    parser.add_argument("--out", type=str, default=None)
+    parser.add_argument("--sweep", action="store_true", help="choose labels.min_box_px instead")
+    parser.add_argument("--sweep-frames", type=int, default=1000)
+    parser.add_argument("--assigner-images", type=int, default=128)
+    args = parser.parse_args()
+    sweep(args) if args.sweep else end_to_end(args)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,149 @@
+"""datagen's labels through Ultralytics' own code: the label verifier, the training
+dataloader at the recipe's imgsz, the label caches it leaves behind, and the documented
+train -> predict -> evaluate commands run offline from another folder.
+
+Marked ``train``: they need the ``train`` extra (``pip install -e '.[train]'``, which
+pulls torch) and are skipped cleanly without it; CI does not install it.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from datagen.audit import audit
+from datagen.build import build_dataset
+from datagen.config import load_config, override_config
+from datagen.dataset import Layout, plan_shards, write_image_lists
+from datagen.reader import load_dataset
+
+pytestmark = pytest.mark.train
+pytest.importorskip("ultralytics", reason="needs the train extra: pip install -e '.[train]'")
+
+from datagen.yolo import dataloader_learnability  # noqa: E402  (imports Ultralytics lazily)
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Not a seed any shipped config uses: the labels are checked on frames nobody tuned on.
+HELD_OUT_SEED = 2024
+
+
+def labels_with_blank_images(root: Path, frames: int, **overrides) -> Path:
+    """A labels-only wingcam55 build whose images are one grey 2048x1080 PNG, hard-linked
+    at every frame's image path: Ultralytics' dataloader needs images, but not rendered ones."""
+    config = override_config(load_config(ROOT / "scenes" / "wingcam55.yaml"),
+                             {"dataset.frames": frames, "dataset.seed": HELD_OUT_SEED, **overrides})
+    build_dataset(config, root, render=False)
+    layout, jobs = Layout(root), plan_shards(config)
+    grey = root / ".grey.png"
+    grey.write_bytes(cv2.imencode(".png", np.full((1080, 2048, 3), 90, np.uint8))[1].tobytes())
+    for job in jobs:
+        for i in job.frames:
+            path = root / layout.image_rel(job.split, job.shard, i)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            os.link(grey, path)
+    grey.unlink()
+    write_image_lists(layout, jobs)
+    return root
+
+
+@pytest.fixture(scope="module")
+def held_out(tmp_path_factory) -> Path:
+    return labels_with_blank_images(tmp_path_factory.mktemp("train") / "ds", 200)
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory) -> Path:
+    """Eight rendered wingcam55 frames (1 spp; frame 7 is the val split) in ``.../data/w55``."""
+    config = override_config(load_config(ROOT / "scenes" / "wingcam55.yaml"),
+                             {"dataset.frames": 8, "dataset.seed": HELD_OUT_SEED, "render.spp": 1})
+    root = tmp_path_factory.mktemp("train") / "data" / "w55"
+    build_dataset(config, root)
+    return root
+
+
+def test_ultralytics_keeps_and_anchors_at_least_95_percent_of_label_lines(held_out) -> None:
+    for split in ("train", "val"):
+        seen = dataloader_learnability(held_out, split)
+        assert seen["imgsz"] == 864 and seen["lines"] > 1000
+        assert seen["kept"] / seen["lines"] >= 0.95, seen
+        assert seen["anchored"] / seen["lines"] >= 0.95, seen
+
+
+def test_datagen_learnable_rule_equals_ultralytics_line_by_line(tmp_path: Path) -> None:
+    """With no minimum size most lines are lost; datagen's audit must say which, exactly."""
+    root = labels_with_blank_images(tmp_path / "ds", 120, **{"labels.min_box_px": 0.0})
+    seen = dataloader_learnability(root, "train")
+    assert seen["kept"] < 0.6 * seen["lines"] and seen["anchored"] < seen["kept"]
+    view = load_dataset(root)
+    row = {Path(p).stem: b for b, p in enumerate(view.label_path)}
+    for i, image in enumerate(seen["im_files"]):
+        b = row[Path(image).stem]
+        classes = np.flatnonzero(view.labeled[b])
+        boxes = view.label_xyxy[b][view.labeled[b]]
+        mine = seen["image"] == i
+        assert set(classes[view.train_view.survives(boxes)]) == set(seen["classes"][mine]), image
+        assert set(classes[view.train_view.learnable(boxes)]) == set(seen["classes"][mine & seen["anchored_mask"]])
+    share = audit(view).stats["learnable"]["share"]
+    assert share < 0.95
+    assert not {c.name: c for c in audit(view).checks}["learnable"].passed
+
+
+def test_ultralytics_label_verifier_accepts_every_label_file(held_out) -> None:
+    from ultralytics.data.utils import verify_image_label
+
+    view = load_dataset(held_out)
+    nc = len(view.features)
+    for b in range(0, len(view), 7):
+        image = held_out / Layout(held_out).image_rel(view.split[b], int(view.label_path[b].split("/")[2]),
+                                                       int(view.frame_id[b]))
+        result = verify_image_label((str(image), str(held_out / view.label_path[b]), "", False, nc, 0, 0, False))
+        _, lb, shape, _, _, missing, found, empty, corrupt, msg = result
+        assert (missing, corrupt) == (0, 0) and msg == "", msg
+        assert len(lb) == int(view.labeled[b].sum()) and shape == (1080, 2048)
+
+
+def test_audit_passes_after_ultralytics_wrote_its_label_caches(rendered) -> None:
+    for split in ("train", "val"):
+        dataloader_learnability(rendered, split)
+    caches = list((rendered / "labels").rglob("*.cache"))
+    assert len(caches) == 2  # Ultralytics writes labels/{split}/{shard}.cache beside the label folders
+    result = audit(load_dataset(rendered))
+    assert result.passed, [(c.name, c.offenders[:3]) for c in result.checks if not c.passed]
+
+
+def documented_commands(root: Path) -> list[str]:
+    """The commands the dataset's hyp.yaml gives (the README gives the same)."""
+    lines = (root / "hyp.yaml").read_text().splitlines()
+    return [line.removeprefix("#").strip() for line in lines if line.startswith("#   ")]
+
+
+def test_documented_train_predict_evaluate_commands_run_offline_from_another_folder(rendered, tmp_path) -> None:
+    root = rendered
+    commands = documented_commands(root)
+    assert [c.split()[:3] for c in commands] == [["yolo", "detect", "train"], ["yolo", "detect", "predict"],
+                                                 ["datagen", "evaluate", str(root)]]
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    bin_dir = Path(sys.executable).parent
+    env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}"}
+    extra = {"train": ["epochs=1", "batch=2", "workers=0", "plots=False"], "predict": [], "evaluate": []}
+    for command in commands:
+        words = shlex.split(command)
+        verb = words[2] if words[0] == "yolo" else words[1]
+        out = subprocess.run(words + extra[verb], cwd=elsewhere, env=env, capture_output=True, text=True,
+                             timeout=1200)
+        assert out.returncode == 0, (command, out.stdout[-2000:], out.stderr[-2000:])
+    assert (root.parent / "runs" / "w55" / "weights" / "best.pt").is_file()
+    assert (root.parent / "runs" / "w55-predict" / "labels").is_dir()
+    doc = yaml.safe_load((root / "evaluation" / "evaluation.json").read_text())
+    assert doc["runs"][0]["source"] == "predictions" and doc["runs"][0]["split"] == "val"
+    assert doc["runs"][0]["overall"]["attempts"] == load_dataset(root).split.count("val")
+    assert not list(elsewhere.iterdir())  # nothing written where the commands ran
