@@ -43,6 +43,7 @@ from datagen.conventions import random_features_rng
 from datagen.errors import ConfigError, Problem
 from datagen.features import FeatureTable
 from datagen.files import atomic_path
+from datagen.inputs import parse_json, read_text
 from datagen.models import SIZE_SCALE, FeatureAnchor, Model
 from datagen.models.drogue import build_drogue
 from datagen.models.receiver import build_receiver
@@ -79,6 +80,16 @@ STORED_VARIANTS: Final = ("baseline", "small", "medium", "large")
 SIZES: Final = tuple(SIZE_SCALE)
 #: A centre may lie this far outside its points' convex hull (rounding), metres.
 HULL_TOLERANCE_M: Final = 1e-4
+#: Most points a feature may have, and most features a variant may list.
+MAX_FEATURE_POINTS: Final = 1024
+MAX_FEATURES: Final = 1000
+#: Longest feature name, characters.
+MAX_NAME_CHARS: Final = 100
+#: A point set is degenerate (cannot make a box in every view) when its second-largest
+#: spread is below this share of its largest: coincident or collinear points.
+DEGENERATE_SPREAD: Final = 1e-6
+#: Largest mesh file read, bytes.
+MAX_MESH_BYTES: Final = 1 << 30
 #: Points of a feature ring (besides the snapped anchor).
 RING_POINTS: Final = 8
 #: Coordinates in feature files are rounded to micrometres.
@@ -132,6 +143,12 @@ def load_mesh(path: Path, object_name: str) -> ObjectMesh:
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise fail(f"unsupported mesh format {path.suffix!r} (use OBJ, PLY or GLB)")
     try:
+        size = path.stat().st_size
+    except OSError as exc:
+        raise fail(f"cannot read mesh: {exc.strerror}") from None
+    if size > MAX_MESH_BYTES:
+        raise fail(f"{size:,} bytes: larger than the {MAX_MESH_BYTES:,} bytes a mesh file may have")
+    try:
         scene = trimesh.load(path, force="scene", process=False)
     except Exception as exc:  # trimesh raises many kinds on a malformed file
         raise fail(f"cannot read mesh: {exc}") from None
@@ -180,6 +197,9 @@ def load_features(path: Path, object_name: str, variant: str) -> list[Feature]:
     records = variants[variant]
     if not isinstance(records, list) or not records:
         raise ConfigError([*problems, Problem(path, f"variants.{variant}", "expected a non-empty list of features")])
+    if len(records) > MAX_FEATURES:
+        raise ConfigError([*problems, Problem(path, f"variants.{variant}",
+                                              f"{len(records)} features; a variant may have at most {MAX_FEATURES}")])
     features = []
     seen_ids: dict[int, int] = {}
     seen_names: dict[str, int] = {}
@@ -206,16 +226,7 @@ def load_features(path: Path, object_name: str, variant: str) -> list[Feature]:
 
 
 def _read_json(path: Path) -> object:
-    if not path.is_file():
-        raise ConfigError([Problem(path, "", "feature file not found")])
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError([Problem(path, "", f"cannot read feature file: {exc}")]) from None
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ConfigError([Problem(path, "", f"invalid JSON: {exc.msg} (column {exc.colno})", line=exc.lineno)]) from None
+    return parse_json(read_text(path, "feature file"), path)
 
 
 def _parse_feature(record: object, key: str, object_name: str, problem) -> Feature | None:
@@ -236,8 +247,9 @@ def _parse_feature(record: object, key: str, object_name: str, problem) -> Featu
     if not isinstance(class_id, int) or isinstance(class_id, bool) or class_id < 0:
         problem(f"{key}.class_id", "must be a non-negative integer", class_id, True)
         ok = False
-    if not isinstance(name, str) or not name:
-        problem(f"{key}.name", "must be a non-empty string", name, True)
+    if not isinstance(name, str) or not name or len(name) > MAX_NAME_CHARS or not name.isprintable():
+        problem(f"{key}.name", f"must be a non-empty printable string of at most {MAX_NAME_CHARS} characters",
+                name, True)
         ok = False
     if obj not in RIGID_OBJECTS:
         problem(f"{key}.object", f"unknown object (known: {', '.join(RIGID_OBJECTS)})", obj, True)
@@ -256,6 +268,13 @@ def _parse_feature(record: object, key: str, object_name: str, problem) -> Featu
     points = _coords(record["points_m"], f"{key}.points_m", problem, rows=True)
     if points is not None and len(points) < 3:
         problem(f"{key}.points_m", f"a point set needs at least 3 points, got {len(points)}")
+        points = None
+    elif points is not None and len(points) > MAX_FEATURE_POINTS:
+        problem(f"{key}.points_m", f"{len(points)} points; a feature may have at most {MAX_FEATURE_POINTS}")
+        points = None
+    elif points is not None and (degenerate := _degenerate(points)):
+        problem(f"{key}.points_m", f"{degenerate}: a feature needs points that span an area, or its box can "
+                "have no width or height")
         points = None
     center = None
     if record.get("center_m") is not None:
@@ -288,6 +307,17 @@ def _coords(value: object, key: str, problem, *, rows: bool) -> NDArray[np.float
         problem(key, "coordinates must be finite numbers", value, True)
         return None
     return arr
+
+
+def _degenerate(points: NDArray[np.float64]) -> str | None:
+    """Why a point set cannot make a box in every view, or None: all its points coincide,
+    or they lie on one line (the spreads of the centred points, largest first)."""
+    spread = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
+    if spread[0] <= 1e-9:
+        return "all points coincide"
+    if spread[1] <= DEGENERATE_SPREAD * spread[0]:
+        return "the points lie on one line"
+    return None
 
 
 def hull_distance(points: NDArray[np.float64], center: NDArray[np.float64]) -> float:
@@ -407,7 +437,12 @@ def load_object_features(object_name: str, variant: str, *, mesh_path: Path | No
         return load_features(features_path, object_name, variant)
     mesh = load_mesh(mesh_path, object_name)
     radius = _random_radius(features_path, mesh)
-    return random_features(mesh, random_count, random_features_rng(seed, object_name), radius)
+    features = random_features(mesh, random_count, random_features_rng(seed, object_name), radius)
+    bad = [(f, why) for f in features if (why := _degenerate(f.points_m))]
+    if bad:
+        raise ConfigError([Problem(mesh_path, "", f"random feature {f.name}: {why} (the surface around it is too "
+                                   "thin to hold a feature ring)") for f, why in bad[:3]])
+    return features
 
 
 def _random_radius(features_path: Path, mesh: ObjectMesh) -> float:

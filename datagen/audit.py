@@ -10,8 +10,10 @@ feature size and view obliqueness (paper Fig. 8).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import stat
 from collections import Counter
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -20,8 +22,10 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from datagen.dataset import MANIFEST_NAME
+from datagen.files import is_temporary
 from datagen.labels import YOLO_DECIMALS, Exclusion, FrameLabels
-from datagen.reader import DatasetView
+from datagen.reader import DatasetView, image_size
 
 __all__ = [
     "DRIFT_LIMIT_PX",
@@ -155,6 +159,8 @@ def _binned(values: NDArray, keys: NDArray, edges: NDArray) -> list[dict]:
 
 # --- label files --------------------------------------------------------------------------
 def _parse_label_file(path: Path) -> tuple[list[list[str]], str | None]:
+    if path.exists() and not path.is_file():
+        return [], "not a regular file"
     try:
         text = path.read_text()
     except FileNotFoundError:
@@ -180,6 +186,7 @@ def audit(view: DatasetView, *, min_learnable: float = MIN_LEARNABLE_SHARE) -> A
         *line_checks,
         learnable,
         _check_files(view),
+        _check_images(view),
         _check_names(view),
     ]
     stats = _statistics(view, labels)
@@ -194,6 +201,7 @@ def _check_manifest(view: DatasetView, labels) -> Check:
     expected_k = np.array([view.intrinsics.width, view.intrinsics.height, view.intrinsics.fx, view.intrinsics.fy,
                            view.intrinsics.cx, view.intrinsics.cy])
     worst = 0.0
+    labeled = labels.labeled  # a whole-dataset array: computed once
     for b in range(len(view)):
         where = f"{view.manifest_file[b]} frame {view.frame_id[b]}"
         check.checked += 1
@@ -207,7 +215,7 @@ def _check_manifest(view: DatasetView, labels) -> Check:
         for name in ("center_px", "tight_xyxy", "corrected_xyxy", "label_xyxy"):
             stored, fresh = getattr(view, name)[b], getattr(labels, name)[b]
             if name == "label_xyxy":  # stored only for labeled features
-                fresh = np.where(labels.labeled[b][:, None], fresh, np.nan)
+                fresh = np.where(labeled[b][:, None], fresh, np.nan)
             both_nan = np.isnan(stored) & np.isnan(fresh)
             err = np.where(both_nan, 0.0, np.abs(stored - fresh))
             err = np.where(np.isnan(err), np.inf, err).max(axis=-1)
@@ -216,7 +224,7 @@ def _check_manifest(view: DatasetView, labels) -> Check:
         worst = max(worst, float(err[np.isfinite(err)].max(initial=0.0)))
         reasons = np.array([Exclusion(int(e)).reason for e in labels.exclusion[b]], dtype=object)
         bad = np.flatnonzero((err > MANIFEST_TOLERANCE_PX) | (reasons != view.exclusion[b])
-                             | (view.labeled[b] != labels.labeled[b]))
+                             | (view.labeled[b] != labeled[b]))
         for f in bad[:3]:
             what = (f"class {f}: stored exclusion {view.exclusion[b][f]!r}, recomputed {reasons[f]!r}"
                     if reasons[f] != view.exclusion[b][f] else f"class {f}: box or centre off by {err[f]:.3g} px")
@@ -240,6 +248,7 @@ def _check_label_files(view: DatasetView, labels) -> tuple[list[Check], NDArray[
                   "values in [0, 1], positive size, no duplicate rows")
     label_centre = labels.label_center_px
     box = labels.label_xyxy
+    labeled_all = labels.labeled  # a whole-dataset array: computed once, not per line
     worst_drift = worst_line = 0.0
     parsed: list[tuple[float, ...]] = []
     for b in range(len(view)):
@@ -280,7 +289,7 @@ def _check_label_files(view: DatasetView, labels) -> tuple[list[Check], NDArray[
             per_class[f] += 1
             if per_class[f] == 2:
                 lines.fail(where, f"class {f} has more than one line")
-            if not labels.labeled[b, f]:
+            if not labeled_all[b, f]:
                 reason = Exclusion(int(labels.exclusion[b, f])).reason
                 lines.fail(where, f"class {f} has a line but the feature is excluded ({reason})")
                 if labels.exclusion[b, f] == Exclusion.BEHIND_CAMERA:
@@ -306,7 +315,7 @@ def _check_label_files(view: DatasetView, labels) -> tuple[list[Check], NDArray[
             inside = min(x0, y0, w - x1, h - y1)
             if inside < m - 1e-3:
                 margin.fail(where, f"class {f} box is {inside:.2f} px from the border, margin {m:g} px", m - inside)
-        labeled = set(np.flatnonzero(labels.labeled[b]).tolist())
+        labeled = set(np.flatnonzero(labeled_all[b]).tolist())
         for f in sorted(labeled - set(per_class)):
             lines.fail(rel, f"class {f} is labeled in the manifest but has no line")
     lines.worst, drift.worst = worst_line, worst_drift
@@ -385,20 +394,120 @@ def _check_files(view: DatasetView) -> Check:
             for name in files:
                 rel = str((Path(dirpath) / name).relative_to(root))
                 check.checked += 1
-                if name.startswith(".") and name.endswith(".tmp"):
+                if is_temporary(name):
                     check.fail(rel, "temporary file left by an interrupted writer")
                 elif rel not in referenced and not name.endswith(ULTRALYTICS_SUFFIXES):
                     check.fail(rel, "orphan: no manifest names it")
-    for name in os.listdir(root / "manifests"):
-        if name.startswith("."):
+    for name in sorted(os.listdir(root / "manifests")):
+        if is_temporary(name):
             check.fail(f"manifests/{name}", "temporary file left by an interrupted writer")
-    for split, planned in view.doc.get("splits", {}).items():
-        have = sum(1 for s in view.split if s == split)
+        elif not MANIFEST_NAME.fullmatch(name):
+            check.fail(f"manifests/{name}", "not a shard manifest ({split}-{shard:05d}.parquet): an orphan")
+    rows = sorted(zip(view.frame_id.tolist(), view.split, view.image_path, strict=True))
+    for split in ("train", "val"):  # the image lists Ultralytics trains on: every image, in frame order
+        want = [f"./{rel}" for _, s, rel in rows if s == split and rel]
+        if not want:
+            continue
+        listed = root / f"{split}.txt"
         check.checked += 1
-        if have != planned.get("frames", have):
-            check.fail("dataset.json", f"splits.{split}: {planned['frames']} frames planned, {have} in the manifests "
+        try:
+            have = listed.read_text().splitlines() if listed.is_file() else None
+        except (OSError, UnicodeDecodeError):
+            have = None
+        if have is None:
+            check.fail(f"{split}.txt", f"missing or unreadable; it lists the {split} images for Ultralytics")
+        elif have != want:
+            extra = sorted(set(have) - set(want))[:1]
+            what = f"names {extra[0]!r}, which no manifest does" if extra else "misses images or lists them out of order"
+            check.fail(f"{split}.txt", f"{what} ({len(have)} lines, {len(want)} {split} images)")
+    ids, counts = np.unique(view.frame_id, return_counts=True)
+    for frame in ids[counts > 1][:MAX_OFFENDERS]:
+        rows = [view.manifest_file[b] for b in np.flatnonzero(view.frame_id == frame)]
+        check.fail(rows[0], f"frame {frame} is in {len(rows)} manifest rows ({', '.join(sorted(set(rows)))}): a "
+                   "manifest copied or renamed by hand")
+    splits = view.doc.get("splits", {})
+    for split, planned in (splits.items() if isinstance(splits, dict) else []):
+        have = len({int(f) for f, s in zip(view.frame_id, view.split, strict=True) if s == split})
+        want = planned.get("frames", have) if isinstance(planned, dict) else have
+        check.checked += 1
+        if have < want:
+            check.fail("dataset.json", f"splits.{split}: {want} frames planned, {have} in the manifests "
                        "(an unfinished build: rerun it)")
+        elif have > want:
+            check.fail("dataset.json", f"splits.{split}: {want} frames planned, {have} in the manifests "
+                       "(manifests from another build?)")
     return check
+
+
+#: Bytes read to find an image's size in its header (a JPEG's frame header may follow its EXIF).
+_HEADER_BYTES: Final = 65536
+
+
+def _check_images(view: DatasetView) -> Check:
+    """Open every image a manifest names: its header states the dataset's size, and it
+    decodes fully (a truncated file or one that is not an image fails). Missing files
+    are the ``files`` check's."""
+    import cv2
+
+    k = view.intrinsics
+    check = Check("images", f"every image a manifest names decodes fully, {k.width}x{k.height} 8-bit colour as "
+                  "dataset.json states")
+    paths = [p for p in view.image_path if p]
+    # A decoded frame is at most its raw size; a file far larger than that is not one.
+    max_bytes = 4 * k.width * k.height * 3 + (1 << 20)
+
+    def one(rel: str) -> str | None:
+        path = view.root / rel
+        try:
+            info = path.stat()
+            size = info.st_size
+            if not stat.S_ISREG(info.st_mode):
+                return "not a regular file"
+            if size > max_bytes:
+                return f"{size:,} bytes, more than a {k.width}x{k.height} image can take"
+            data = path.read_bytes()
+        except FileNotFoundError:
+            return None
+        except OSError as exc:
+            return f"unreadable ({exc.strerror})"
+        found = image_size(data[:_HEADER_BYTES])
+        if found is None:
+            return "not a PNG or JPEG image"
+        if found != (k.width, k.height):
+            return f"{found[0]}x{found[1]} px, dataset.json says {k.width}x{k.height}"
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            return "does not decode (truncated or corrupt)"
+        if image.dtype != np.uint8 or image.shape != (k.height, k.width, 3):
+            return f"decodes to {image.dtype} {image.shape}, expected uint8 ({k.height}, {k.width}, 3)"
+        return None
+
+    from concurrent.futures import ThreadPoolExecutor
+
+    with _quiet_stderr(), ThreadPoolExecutor(max(1, os.cpu_count() or 1)) as pool:  # OpenCV decodes without the GIL
+        for rel, problem in zip(paths, pool.map(one, paths), strict=True):
+            check.checked += 1
+            if problem:
+                check.fail(rel, problem)
+    return check
+
+
+@contextlib.contextmanager
+def _quiet_stderr():
+    """Silence what libpng prints to the process's stderr about a damaged file (the check
+    names the file itself)."""
+    try:
+        saved = os.dup(2)
+    except OSError:
+        yield
+        return
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def _check_names(view: DatasetView) -> Check:
@@ -510,9 +619,6 @@ def write_report(result: AuditResult, view: DatasetView, out: Path, *, overlays:
     from datagen.preview import draw_overlay
 
     out = Path(out)
-    doc = report_document(result)
-    with atomic_path(out / "report.json") as tmp:
-        tmp.write_text(json.dumps(doc, indent=2, allow_nan=False, default=_json_default) + "\n")
     plots = plot_audit(result.stats, out / "plots")
 
     def data_uri(data: bytes, kind: str) -> str:
@@ -593,6 +699,12 @@ window.addEventListener("load", () => {{
 """
     with atomic_path(out / "report.html") as tmp:
         tmp.write_text(page)
+    # report.json last: it is the record of every file the report wrote (``files``, relative to
+    # the report folder), which --overwrite removes and nothing else.
+    doc = report_document(result)
+    doc["files"] = ["report.html", *(str(p.relative_to(out)) for p in plots.values())]
+    with atomic_path(out / "report.json") as tmp:
+        tmp.write_text(json.dumps(doc, indent=2, allow_nan=False, default=_json_default) + "\n")
     return {"json": out / "report.json", "html": out / "report.html", **plots}
 
 

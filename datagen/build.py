@@ -42,13 +42,16 @@ import numpy as np
 from datagen.camera import Intrinsics
 from datagen.config import Config
 from datagen.dataset import (
+    LOCK_NAME,
     DatasetLock,
     Layout,
     ShardJob,
     asset_files,
+    check_folder,
     config_fingerprint,
     plan_shards,
     prepare_folder,
+    remove_owned,
     sweep_temporaries,
     write_dataset_files,
     write_image_lists,
@@ -329,9 +332,9 @@ def _ctrl_c_flag():
 
 
 def _run_local(config: Config, root: Path, jobs: list[ShardJob], workers: int, render: bool,
-               progress: Progress, done: Callable[[ShardSummary], None]) -> None:
+               progress: Progress, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
     workers = min(workers, len(jobs))
-    threads = max(1, _cpu_count() // workers)
+    threads = threads or max(1, _cpu_count() // workers)
     if workers == 1:
         writer = ShardWriter(config, root, threads=threads, render=render)
         with _ctrl_c_flag() as stop:
@@ -381,11 +384,12 @@ def _ray_run(config: Config, root: str, job: ShardJob, threads: int, render: boo
     return writer.run(job, lambda n: queue.put_nowait(n))
 
 
-def _run_ray(config: Config, root: Path, jobs: list[ShardJob], workers: int | None, render: bool,
-             progress: Progress, done: Callable[[ShardSummary], None]) -> None:
+@contextlib.contextmanager
+def _ray_cluster(workers: int | None):
+    """Connect to Ray (``RAY_ADDRESS``, else a local cluster) before any work starts and
+    check ``workers`` against its CPUs; shuts down a cluster it started."""
     try:
         import ray
-        from ray.util.queue import Queue
     except ImportError:
         raise DatagenError("--executor ray: Ray is not installed; install it with "
                            "`pip install 'datagen[ray]'` (or use --executor local)") from None
@@ -399,35 +403,48 @@ def _run_ray(config: Config, root: Path, jobs: list[ShardJob], workers: int | No
         started = True
     try:
         cpus = int(ray.cluster_resources().get("CPU", 1))
-        alive = [n for n in ray.nodes() if n.get("Alive")]
-        largest = max((int(n.get("Resources", {}).get("CPU", 0)) for n in alive), default=1) or 1
-        workers = workers or max(1, len(alive))
-        # A task that asks for more CPUs than any one node has would never be scheduled.
-        per_task = max(1, min(cpus // workers, largest))
-        task = ray.remote(num_cpus=per_task, max_retries=0)(_ray_run)
-        queue = Queue()
-        refs = {task.remote(config, str(root), job, per_task, render, queue): job for job in jobs}
-        pending = list(refs)
-        try:
-            while pending:
-                ready, pending = ray.wait(pending, num_returns=1, timeout=0.2)
-                for n in queue.get_nowait_batch(queue.qsize()) if queue.qsize() else []:
-                    progress(n)
-                for ref in ready:
-                    done(ray.get(ref))
-            for n in queue.get_nowait_batch(queue.qsize()) if queue.qsize() else []:
-                progress(n)
-        except BaseException:
-            for ref in pending:
-                with contextlib.suppress(Exception):
-                    ray.cancel(ref, force=True)
-            raise
-        finally:
-            with contextlib.suppress(Exception):
-                queue.shutdown()
+        if workers is not None and workers > cpus:
+            raise DatagenError(f"--workers: {workers} is more than the {cpus} CPUs of the Ray cluster "
+                               f"(at most {cpus})")
+        yield
     finally:
         if started:
             ray.shutdown()
+
+
+def _run_ray(config: Config, root: Path, jobs: list[ShardJob], workers: int | None, render: bool,
+             progress: Progress, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
+    """Shards as Ray tasks on the cluster :func:`_ray_cluster` connected to."""
+    import ray
+    from ray.util.queue import Queue
+
+    cpus = int(ray.cluster_resources().get("CPU", 1))
+    alive = [n for n in ray.nodes() if n.get("Alive")]
+    largest = max((int(n.get("Resources", {}).get("CPU", 0)) for n in alive), default=1) or 1
+    workers = workers or max(1, len(alive))
+    # A task that asks for more CPUs than any one node has would never be scheduled.
+    per_task = max(1, min(cpus // workers, largest))
+    task = ray.remote(num_cpus=per_task, max_retries=0)(_ray_run)
+    queue = Queue()
+    refs = {task.remote(config, str(root), job, threads or per_task, render, queue): job for job in jobs}
+    pending = list(refs)
+    try:
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1, timeout=0.2)
+            for n in queue.get_nowait_batch(queue.qsize()) if queue.qsize() else []:
+                progress(n)
+            for ref in ready:
+                done(ray.get(ref))
+        for n in queue.get_nowait_batch(queue.qsize()) if queue.qsize() else []:
+            progress(n)
+    except BaseException:
+        for ref in pending:
+            with contextlib.suppress(Exception):
+                ray.cancel(ref, force=True)
+        raise
+    finally:
+        with contextlib.suppress(Exception):
+            queue.shutdown()
 
 
 # --- the build ---------------------------------------------------------------------------
@@ -494,7 +511,8 @@ class BuildReport:
 
 
 def build_dataset(config: Config, out: Path, *, workers: int | None = None, executor: Executor = "local",
-                  overwrite: bool = False, render: bool = True, progress=None) -> BuildReport:
+                  overwrite: bool = False, render: bool = True, progress=None,
+                  threads: int | None = None) -> BuildReport:
     """Build (or resume) the dataset of ``config`` in ``out``.
 
     Args:
@@ -507,6 +525,9 @@ def build_dataset(config: Config, out: Path, *, workers: int | None = None, exec
         render: render images (False writes labels and manifests only).
         progress: a :class:`BuildProgress`-like object (``start``, ``advance``,
             ``shard_done``, ``close``), or None.
+        threads: Mitsuba threads per worker (default: the cores divided among the
+            workers). With 1, a seed gives the same image bytes on any machine, for
+            any worker count and across resumptions.
 
     Raises:
         DatagenError: the folder is locked by another build, holds something
@@ -515,65 +536,85 @@ def build_dataset(config: Config, out: Path, *, workers: int | None = None, exec
     from datagen.assets import check_assets
 
     started = time.perf_counter()
+    if threads is not None and not 1 <= threads <= _cpu_count():
+        raise DatagenError(f"--threads: {threads} is not between 1 and the {_cpu_count()} cores this process may use")
+    if executor == "local" and workers is not None and workers > _cpu_count():
+        raise DatagenError(f"--workers: {workers} is more than the {_cpu_count()} cores this process may use "
+                           f"(at most {_cpu_count()}; --executor ray for a cluster)")
     check_assets(config)
     root = Path(out).resolve()
-    if root.exists() and not root.is_dir():
-        raise DatagenError(f"{out}: --out is a file, not a folder")
     layout = Layout(root, ".jpg" if config.render.image_format == "jpg" else ".png")
+    check_folder(layout)  # refuse someone else's folder before anything (the lock included) is created
     jobs = plan_shards(config)
     assets = asset_files(config)
     fingerprint = config_fingerprint(config, assets, render=render)
     report = BuildReport(config.name, root, jobs)
-    with DatasetLock(root):
-        resumed = prepare_folder(layout, fingerprint, config, overwrite=overwrite)
-        write_dataset_files(layout, config, jobs, fingerprint, assets, describe=not resumed)
-        todo = []
-        for job in jobs:
-            manifest = layout.manifest(job)
-            if manifest.is_file():
-                from datagen.manifest import read_manifest_summary
+    cluster = _ray_cluster(workers) if executor == "ray" else contextlib.nullcontext()
+    created = not root.exists()
+    try:
+        with cluster, DatasetLock(root):
+            resumed = prepare_folder(layout, fingerprint, config, assets, render=render, overwrite=overwrite)
+            write_dataset_files(layout, config, jobs, fingerprint, assets, describe=not resumed, render=render)
+            todo = []
+            for job in jobs:
+                manifest = layout.manifest(job)
+                if manifest.is_file():
+                    from datagen.manifest import read_manifest_summary
 
-                try:
-                    counts = read_manifest_summary(manifest)
-                except Exception as exc:  # damaged outside datagen: manifests are written atomically
-                    raise DatagenError(f"{manifest}: unreadable manifest ({type(exc).__name__}); delete it to "
-                                       "render its shard again") from None
-                report.shards[job.name] = ShardSummary(job.name, counts.get("frames", len(job.frames)),
-                                                       counts.get("labels", 0), counts.get("excluded", {}))
-                report.resumed.append(job.name)
-            else:
-                todo.append(job)
-        leftovers = [root, root / "manifests"] + [d for job in todo for d in layout.shard_dirs(job)]
-        sweep_temporaries(leftovers)
-
-        def shard_done(summary: ShardSummary) -> None:
-            report.shards[summary.name] = summary
-            if progress is not None:
-                progress.shard_done(summary)
-
-        if progress is not None:
-            progress.start(report.frames, report.frames - sum(len(j.frames) for j in todo))
-        try:
-            if todo:
-                run = _run_ray if executor == "ray" else _run_local
-                if executor == "local":
-                    workers = workers or 1
-                run(config, root, todo, workers, render, progress.advance if progress else (lambda n: None),
-                    shard_done)
-            if render and len(report.shards) == len(jobs):
-                write_image_lists(layout, jobs)
-        except KeyboardInterrupt:
-            report.interrupted = True
+                    try:
+                        counts = read_manifest_summary(manifest)
+                    except Exception as exc:  # damaged outside datagen: manifests are written atomically
+                        raise DatagenError(f"{manifest}: unreadable manifest ({type(exc).__name__}); delete it to "
+                                           "render its shard again") from None
+                    report.shards[job.name] = ShardSummary(job.name, counts.get("frames", len(job.frames)),
+                                                           counts.get("labels", 0), counts.get("excluded", {}))
+                    report.resumed.append(job.name)
+                else:
+                    todo.append(job)
+            leftovers = [root, root / "manifests"] + [d for job in todo for d in layout.shard_dirs(job)]
             sweep_temporaries(leftovers)
-        except OSError as exc:  # disk full, permissions: the file and the reason, on one line
-            sweep_temporaries(leftovers)
-            raise DatagenError(f"{exc.filename or root}: {exc.strerror or exc}; the finished shards are kept, "
-                               "rerun the same command to finish the others") from None
-        finally:
+
+            def shard_done(summary: ShardSummary) -> None:
+                report.shards[summary.name] = summary
+                if progress is not None:
+                    progress.shard_done(summary)
+
             if progress is not None:
-                progress.close()
+                progress.start(report.frames, report.frames - sum(len(j.frames) for j in todo))
+            try:
+                if todo:
+                    run = _run_ray if executor == "ray" else _run_local
+                    if executor == "local":
+                        workers = workers or 1
+                    run(config, root, todo, workers, render, progress.advance if progress else (lambda n: None),
+                        shard_done, threads)
+                if render and len(report.shards) == len(jobs):
+                    write_image_lists(layout, jobs)
+            except KeyboardInterrupt:
+                report.interrupted = True
+                sweep_temporaries(leftovers)
+            except OSError as exc:  # disk full, permissions: the file and the reason, on one line
+                sweep_temporaries(leftovers)
+                raise DatagenError(f"{exc.filename or root}: {exc.strerror or exc}; the finished shards are kept, "
+                                   "rerun the same command to finish the others") from None
+            finally:
+                if progress is not None:
+                    progress.close()
+    except (DatagenError, OSError):
+        if created and not any(layout.manifest(job).is_file() for job in jobs):
+            _discard_new(layout, config)  # a folder this build made and finished nothing in: leave no trace
+        raise
     report.wall_s = time.perf_counter() - started
     return report
+
+
+def _discard_new(layout: Layout, config: Config) -> None:
+    """Remove a dataset folder this build created: every file it wrote (its own plan names
+    them), its lock, and the folders left empty."""
+    with contextlib.suppress(OSError, DatagenError):
+        remove_owned(layout, {"config": config.model_dump(mode="json")})
+        (layout.root / LOCK_NAME).unlink(missing_ok=True)
+        layout.root.rmdir()
 
 
 class BuildProgress:

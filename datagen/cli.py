@@ -1,13 +1,18 @@
 """The ``datagen`` command line.
 
-Bad input ends with one line per problem on stderr and exit status 2; no
-traceback reaches the user for anything that is the input's fault.
+Bad input ends with one line per problem on stderr and exit status 2, and so
+does a file that cannot be read or written (read-only folder, full disk, a name
+too long); no traceback reaches the user for anything that is not a bug in
+datagen. Every count a flag takes has an upper bound, checked before any work.
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
+import os
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, TypeVar
@@ -29,8 +34,19 @@ app = typer.Typer(
 assets_app = typer.Typer(help="Build and inspect the built-in meshes and feature sets.", no_args_is_help=True)
 app.add_typer(assets_app, name="assets")
 
-#: Exit status for bad input (configs, assets, dataset folders).
+#: Exit status for bad input (configs, assets, dataset folders, flags) and for files that
+#: cannot be read or written.
 EXIT_BAD_INPUT = 2
+#: Most frames one --frames list of preview or render may name.
+MAX_FRAME_LIST = 10_000
+#: Largest --noise-px radius, pixels, and most radii in one run.
+MAX_NOISE_PX = 1000.0
+MAX_NOISE_RUNS = 20
+#: Largest --spp of render, gallery and assets preview (as render.spp).
+MAX_SPP = 65536
+#: Most approaches --frames prints, and most overlays in an audit report.
+MAX_PRINTED_FRAMES = 100_000
+MAX_OVERLAYS = 100
 
 F = TypeVar("F", bound=Callable[..., object])
 
@@ -43,11 +59,32 @@ def user_errors(func: F) -> F:
         try:
             return func(*args, **kwargs)
         except DatagenError as exc:
-            for line in exc.lines():
-                typer.echo(line, err=True)
-            raise typer.Exit(EXIT_BAD_INPUT) from None
+            lines = exc.lines()
+        except OSError as exc:  # a file that cannot be read or written: where and why, on one line
+            where = exc.filename if exc.filename is not None else "datagen"
+            lines = [f"{os.fsdecode(where)}: {exc.strerror or exc}"]
+        except MemoryError:
+            lines = ["datagen: out of memory"]
+        for line in lines:
+            typer.echo(line, err=True)
+        raise typer.Exit(EXIT_BAD_INPUT) from None
 
     return wrapper  # type: ignore[return-value]
+
+
+def output_path(path: Path, flag: str) -> Path:
+    """An output path that can be created: UTF-8 and every name within the filesystem's
+    limit, checked before anything is written (a bad one would fail half-way)."""
+    text = str(path)
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        raise DatagenError(f"{flag}: {ascii(text)}: not a UTF-8 path; choose a name in UTF-8") from None
+    for part in Path(text).parts:
+        if len(os.fsencode(part)) > 255:
+            raise DatagenError(f"{flag}: {part[:40]}...: a name of {len(os.fsencode(part))} bytes, longer than "
+                               "the 255 a folder or file name may have")
+    return path
 
 
 def _version(value: bool) -> None:
@@ -100,12 +137,15 @@ def approach(
     config: Annotated[Path, typer.Option("--config", help="Scene config file (YAML).")],
     plot: Annotated[Path | None, typer.Option("--plot", help="Write a PNG of the approaches here.")] = None,
     approaches: Annotated[int, typer.Option("--approaches", min=1, max=50, help="Approaches to draw.")] = 5,
-    frames: Annotated[int, typer.Option("--frames", min=0, help="Also print the state of the first N frames.")] = 0,
+    frames: Annotated[int, typer.Option("--frames", min=0, max=MAX_PRINTED_FRAMES,
+                                        help="Also print the state of the first N frames.")] = 0,
     seed: Annotated[int | None, typer.Option("--seed", min=0, help="Override the config's seed.")] = None,
 ) -> None:
     """Simulate Monte Carlo refueling approaches; plot a few, print frame states."""
     from datagen.approach import frame_state, trace_approach
 
+    if plot is not None:
+        output_path(plot, "--plot")
     cfg = load_config(config)
     seed = cfg.dataset.seed if seed is None else seed
     for a in range(approaches):
@@ -135,6 +175,9 @@ def build(
                                                 "(local: processes, default 1; ray: tasks, default one "
                                                 "per node).")] = None,
     shard_size: Annotated[int | None, typer.Option("--shard-size", min=1, help="Override dataset.shard_size.")] = None,
+    threads: Annotated[int | None, typer.Option("--threads", min=1, help="Mitsuba threads per worker (default: the "
+                                                "cores divided among the workers); 1 gives the same image bytes "
+                                                "for a seed on any machine, worker count and resumption.")] = None,
     executor: Annotated[str, typer.Option("--executor", help="local (processes) or ray (RAY_ADDRESS, "
                                           "else a local Ray cluster).")] = "local",
     exr: Annotated[bool, typer.Option("--exr", help="Also write linear EXR (R, G, B, Z, object_id).")] = False,
@@ -151,13 +194,15 @@ def build(
 
     if executor not in ("local", "ray"):
         raise DatagenError(f"--executor: unknown executor {executor!r} (choose local or ray)")
+    if out is not None:
+        output_path(out, "--out")
     cfg = load_config(config)
     updates = {"dataset.frames": frames, "dataset.seed": seed, "render.spp": spp,
                "dataset.shard_size": shard_size, "render.exr": True if exr else None}
     cfg = override_config(cfg, {k: v for k, v in updates.items() if v is not None})
-    out = out if out is not None else Path("datasets") / cfg.name
+    out = out if out is not None else output_path(Path("datasets") / cfg.name, "--out")
     report = build_dataset(cfg, out, workers=workers, executor=executor, overwrite=overwrite,
-                           render=not no_render, progress=BuildProgress(cfg.name))
+                           render=not no_render, progress=BuildProgress(cfg.name), threads=threads)
     for line in report.lines():
         typer.echo(line)
     if report.interrupted:
@@ -169,7 +214,8 @@ def build(
 def audit(
     dataset: Annotated[Path, typer.Argument(help="Dataset folder.", show_default=False)],
     out: Annotated[Path | None, typer.Option("--out", help="Report folder (default: DATASET/audit).")] = None,
-    overlays: Annotated[int, typer.Option("--overlays", min=0, help="Overlay images in the HTML report.")] = 3,
+    overlays: Annotated[int, typer.Option("--overlays", min=0, max=MAX_OVERLAYS,
+                                          help="Overlay images in the HTML report.")] = 3,
     min_learnable: Annotated[float, typer.Option("--min-learnable", min=0.0, max=1.0, help="Share of label lines "
                                                  "that must be learnable at labels.train_imgsz.")] = 0.95,
 ) -> None:
@@ -179,9 +225,9 @@ def audit(
     from datagen.audit import write_report
     from datagen.reader import load_dataset
 
-    view = load_dataset(dataset)
+    folder = output_path(out if out is not None else Path(dataset) / "audit", "--out")
+    view = load_dataset(dataset, allow_duplicates=True)
     result = run_audit(view, min_learnable=min_learnable)
-    folder = out if out is not None else Path(dataset) / "audit"
     written = write_report(result, view, folder, overlays=overlays)
     for check in result.checks:
         status = "n/a " if not check.applicable else ("pass" if check.passed else "FAIL")
@@ -216,9 +262,10 @@ def preview(
     from datagen.preview import write_previews
     from datagen.reader import load_dataset
 
+    folder = output_path(out if out is not None else Path(dataset) / "preview", "--out")
+    wanted = _frame_list(frames) if frames else None
     view = load_dataset(dataset)
-    folder = out if out is not None else Path(dataset) / "preview"
-    for path in write_previews(view, _frame_list(frames) if frames else None, folder):
+    for path in write_previews(view, wanted, folder):
         typer.echo(f"wrote {path}")
 
 
@@ -278,10 +325,14 @@ def evaluate(
             raise DatagenError(f"--noise-px: {noise_px!r} is not a list of radii like 0,0.5,1,2.5") from None
         if not all(math.isfinite(r) and r >= 0 for r in radii):
             raise DatagenError(f"--noise-px: {noise_px!r}: radii must be finite and not negative")
+        if max(radii) > MAX_NOISE_PX or len(radii) > MAX_NOISE_RUNS:
+            raise DatagenError(f"--noise-px: {noise_px[:60]!r}: at most {MAX_NOISE_RUNS} radii of at most "
+                               f"{MAX_NOISE_PX:g} px each")
         for run, radius in enumerate(radii):
             runs.append(({"source": "truth", "noise_px": radius, "split": split},
                          run_evaluate(view, noise_px=radius, run=run, seed=seed, split=only)))
-    written = write_evaluation(view, runs, out if out is not None else Path(dataset) / "evaluation")
+    written = write_evaluation(view, runs, output_path(out if out is not None else Path(dataset) / "evaluation",
+                                                       "--out"))
     for source, result in runs:
         s = summarize(result)
         what = f"noise {source['noise_px']:g} px" if source["source"] == "truth" else "predictions"
@@ -317,7 +368,8 @@ def render(
     config: Annotated[Path, typer.Option("--config", help="Scene config file (YAML).")],
     frames: Annotated[str, typer.Option("--frames", help="Frame indices, e.g. 0,5,9 or 0-7.")] = "0",
     out: Annotated[Path, typer.Option("--out", help="Folder for the images.")] = Path("renders"),
-    spp: Annotated[int | None, typer.Option("--spp", min=1, help="Samples per pixel (default: the config's).")] = None,
+    spp: Annotated[int | None, typer.Option("--spp", min=1, max=MAX_SPP,
+                                            help="Samples per pixel (default: the config's).")] = None,
     scale: Annotated[float, typer.Option("--scale", min=0.05, max=1.0, help="Image size relative to the "
                                          "config's (same hFOV).")] = 1.0,
     exr: Annotated[bool, typer.Option("--exr", help="Also write linear EXR (R, G, B, Z, object_id).")] = False,
@@ -326,6 +378,7 @@ def render(
     """Render single frames of a config (no labels): for looking, not for datasets."""
     from datagen.render import render_frames
 
+    output_path(out, "--out")
     cfg = load_config(config)
     for path in render_frames(cfg, _frame_list(frames), out, spp=spp, scale=scale, exr=exr, seed=seed):
         typer.echo(f"wrote {path}")
@@ -335,27 +388,35 @@ def render(
 @user_errors
 def gallery(
     out: Annotated[Path, typer.Option("--out", help="Gallery image (JPEG or PNG).")] = Path("docs/gallery.jpg"),
-    spp: Annotated[int, typer.Option("--spp", min=1, help="Samples per pixel.")] = 16,
+    spp: Annotated[int, typer.Option("--spp", min=1, max=MAX_SPP, help="Samples per pixel.")] = 16,
 ) -> None:
     """Render four frames each of wingcam55, podcam15 and dashcam75 into one sheet."""
     from datagen.render import write_gallery
 
+    output_path(out, "--out")
     root = Path(__file__).resolve().parent.parent / "scenes"
     configs = [load_config(root / f"{name}.yaml") for name in ("wingcam55", "podcam15", "dashcam75")]
     typer.echo(f"wrote {write_gallery(configs, out, spp=spp)}")
 
 
 def _frame_list(text: str) -> list[int]:
-    indices: list[int] = []
+    """Frame indices from ``0,5,9`` or ``0-7`` (at most :data:`MAX_FRAME_LIST`), in the order given."""
+    ranges: list[tuple[int, int]] = []
     try:
         for part in text.split(","):
-            lo, _, hi = part.strip().partition("-")
-            indices += list(range(int(lo), int(hi) + 1)) if hi else [int(lo)]
+            lo, dash, hi = part.strip().partition("-")
+            ranges.append((int(lo), int(hi) if dash else int(lo)))
     except ValueError:
-        raise DatagenError(f"--frames: {text!r} is not a list of frame indices like 0,5,9 or 0-7") from None
-    if not indices or min(indices) < 0:
-        raise DatagenError(f"--frames: {text!r}: frame indices must be non-negative")
-    return indices
+        raise DatagenError(f"--frames: {text[:60]!r} is not a list of frame indices like 0,5,9 or 0-7") from None
+    for lo, hi in ranges:
+        if lo < 0:
+            raise DatagenError(f"--frames: {text[:60]!r}: frame indices must be non-negative")
+        if hi < lo:
+            raise DatagenError(f"--frames: {lo}-{hi}: a range goes from the lower index to the higher")
+    count = sum(hi - lo + 1 for lo, hi in ranges)
+    if count > MAX_FRAME_LIST:
+        raise DatagenError(f"--frames: {text[:60]!r} names {count:,} frames; at most {MAX_FRAME_LIST:,} at a time")
+    return [i for lo, hi in ranges for i in range(lo, hi + 1)]
 
 
 @assets_app.command("build")
@@ -366,7 +427,7 @@ def assets_build(
     """Regenerate every built-in mesh and feature file, byte for byte."""
     from datagen.assets import BUILTIN_DIR, build_assets
 
-    for path in build_assets(out or BUILTIN_DIR):
+    for path in build_assets(output_path(out, "--out") if out else BUILTIN_DIR):
         typer.echo(f"wrote {path} ({path.stat().st_size:,} bytes)")
 
 
@@ -389,7 +450,8 @@ def assets_show(
     config: Annotated[Path | None, typer.Option("--config", help="Use this config's mesh and feature files "
                                                 "and its seed (default: the built-in assets).")] = None,
     seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of random features without --config.")] = 0,
-    count: Annotated[int, typer.Option("--count", min=3, help="Random features without --config.")] = 40,
+    count: Annotated[int, typer.Option("--count", min=3, max=1000, help="Random features without --config "
+                                       "(as features.random_per_object).")] = 40,
 ) -> None:
     """Print the feature table of an object."""
     from datagen.assets import builtin_paths, describe_features, load_object_features, object_paths
@@ -414,7 +476,7 @@ def assets_show(
 def assets_preview(
     out: Annotated[Path | None, typer.Option("--out", help="Folder for the PNGs (default: assets/previews).")] = None,
     objects: Annotated[list[str] | None, typer.Option("--object", help="Only this object (repeatable).")] = None,
-    spp: Annotated[int, typer.Option("--spp", min=1, help="Samples per pixel.")] = 64,
+    spp: Annotated[int, typer.Option("--spp", min=1, max=MAX_SPP, help="Samples per pixel.")] = 64,
     config: Annotated[Path | None, typer.Option("--config", help="Use this config's mesh and feature files.")] = None,
 ) -> None:
     """Render a contact sheet of each object from six views, feature centres marked."""
@@ -422,7 +484,7 @@ def assets_preview(
     from datagen.previews import write_contact_sheet
 
     cfg = load_config(config) if config is not None else None
-    folder = out or BUILTIN_DIR / "previews"
+    folder = output_path(out, "--out") if out else BUILTIN_DIR / "previews"
     for name in objects or RIGID_OBJECTS:
         name = _object_name(name)
         mesh_path, features_path = object_paths(cfg, name) if cfg else builtin_paths(name)
@@ -434,4 +496,23 @@ def assets_preview(
 
 
 def main() -> None:
-    app()
+    """The ``datagen`` command: a bad flag is one line too, and so is an unprintable path."""
+    for stream in (sys.stdout, sys.stderr):  # paths with undecodable bytes print escaped, never crash
+        with contextlib.suppress(AttributeError, ValueError):
+            stream.reconfigure(errors="backslashreplace")
+    try:
+        code = app(prog_name="datagen", standalone_mode=False)
+    except typer.exceptions.TyperException as exc:
+        ctx = getattr(exc, "ctx", None)
+        if type(exc).__name__ == "NoArgsIsHelpError" and ctx is not None:  # a bare group: its help
+            print(ctx.get_help())
+            sys.exit(EXIT_BAD_INPUT)
+        if not hasattr(exc, "format_message"):
+            raise
+        where = ctx.command_path if ctx is not None else "datagen"
+        print(f"{where}: {' '.join(exc.format_message().split())}", file=sys.stderr)
+        sys.exit(EXIT_BAD_INPUT)
+    except typer.Abort:
+        print("datagen: aborted", file=sys.stderr)
+        sys.exit(130)
+    sys.exit(code if isinstance(code, int) else 0)

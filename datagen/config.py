@@ -19,15 +19,18 @@ from typing import Annotated, Any, Literal
 import yaml
 from pydantic import (
     AfterValidator,
+    BeforeValidator,
     BaseModel,
     ConfigDict,
     Field,
+    Strict,
     ValidationError,
     field_validator,
     model_validator,
 )
 
 from datagen.errors import ConfigError, Problem
+from datagen.inputs import parse_yaml, read_text
 
 __all__ = [
     "ApproachConfig",
@@ -54,6 +57,29 @@ Mount = Literal["wingcam", "dashcam", "podcam"]
 LabeledObject = Literal["tanker", "receiver", "drogue"]
 
 
+def _real(value: Any) -> Any:
+    """Numbers only: YAML ``true`` or ``"55"`` is not a number (pydantic would take both)."""
+    if isinstance(value, str):
+        try:
+            float(value)
+        except ValueError:
+            pass
+        else:  # YAML 1.1 reads 1e12 (no dot) and quoted numbers as text
+            raise ValueError(f"must be a number, got the text {value!r} (write exponents with a dot, as 1.0e12, "
+                             "and numbers without quotes)")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"must be a number, got {type(value).__name__}")
+    return value
+
+
+#: A finite number (an integer is a number too; booleans and strings are not).
+Number = Annotated[float, BeforeValidator(_real)]
+#: An integer (not a boolean, not a float, not a string).
+Integer = Annotated[int, Strict()]
+#: true or false (not 0, 1 or a string).
+Flag = Annotated[bool, Strict()]
+
+
 def _ordered(bounds: tuple[float, float]) -> tuple[float, float]:
     lo, hi = bounds
     if lo > hi:
@@ -62,7 +88,18 @@ def _ordered(bounds: tuple[float, float]) -> tuple[float, float]:
 
 
 #: A closed interval ``[low, high]`` written as a two-element list in YAML.
-Range = Annotated[tuple[float, float], AfterValidator(_ordered)]
+Range = Annotated[tuple[Number, Number], AfterValidator(_ordered)]
+
+
+def _within(low: float, high: float) -> AfterValidator:
+    """A :data:`Range` whose ends must lie in ``[low, high]``: every range has a documented bound."""
+    def check(bounds: tuple[float, float]) -> tuple[float, float]:
+        lo, hi = bounds
+        if lo < low or hi > high:
+            raise ValueError(f"must lie within [{low:g}, {high:g}], got [{lo:g}, {hi:g}]")
+        return bounds
+
+    return AfterValidator(check)
 
 
 class _Section(BaseModel):
@@ -76,10 +113,10 @@ class _Section(BaseModel):
 class MountJitterConfig(_Section):
     """Per-approach perturbation of the camera mount: extrinsics are unknown and drift."""
 
-    translation_m: float = Field(0.02, ge=0.0, le=1.0)
+    translation_m: Number = Field(0.02, ge=0.0, le=1.0)
     """Each mount offset component is drawn uniformly in [-t, t] metres per approach."""
 
-    rotation_deg: float = Field(1.0, ge=0.0, le=30.0)
+    rotation_deg: Number = Field(1.0, ge=0.0, le=30.0)
     """Each of yaw, pitch, roll of the mount is drawn uniformly in [-r, r] degrees per approach."""
 
 
@@ -90,13 +127,13 @@ class CameraConfig(_Section):
     """wingcam: receiver right wing pod, forward; dashcam: receiver cockpit, forward;
     podcam: tanker hose pod next to the hose port, rearward."""
 
-    hfov_deg: float = Field(gt=0.0, lt=180.0)
+    hfov_deg: Number = Field(gt=0.0, lt=180.0)
     """Horizontal field of view in degrees; fx = fy = (W/2) / tan(hFOV/2)."""
 
-    width: int = Field(2048, gt=0, le=16384)
+    width: Integer = Field(2048, gt=0, le=16384)
     """Image width in pixels (Table 1: 2048)."""
 
-    height: int = Field(1080, gt=0, le=16384)
+    height: Integer = Field(1080, gt=0, le=16384)
     """Image height in pixels (Table 1: 1080)."""
 
     mount_jitter: MountJitterConfig = MountJitterConfig()
@@ -137,7 +174,7 @@ class FeaturesConfig(_Section):
     """Feature set variant: the paper's baseline, the co-located size variants
     (models J, K, L) or seeded random surface features (model I)."""
 
-    random_per_object: int = Field(40, ge=3, le=1000)
+    random_per_object: Integer = Field(40, ge=3, le=1000)
     """Number of random surface features per object when variant is 'random'."""
 
     @field_validator("objects")
@@ -152,22 +189,22 @@ class FeaturesConfig(_Section):
 class ApproachConfig(_Section):
     """Monte Carlo refueling approaches (paper 3.1) and how frames are taken from them."""
 
-    range_m: Range = (0.0, 120.0)
+    range_m: Annotated[Range, _within(0.0, 10_000.0)] = (0.0, 120.0)
     """Probe-to-drogue distance range the dataset covers, metres."""
 
-    yaw_deg: float = Field(10.0, ge=0.0, le=180.0)
+    yaw_deg: Number = Field(10.0, ge=0.0, le=180.0)
     """Initial receiver yaw perturbation, uniform in [-yaw, yaw] degrees."""
 
-    pitch_deg: float = Field(15.0, ge=0.0, le=90.0)
+    pitch_deg: Number = Field(15.0, ge=0.0, le=90.0)
     """Initial receiver pitch perturbation, uniform in [-pitch, pitch] degrees."""
 
-    roll_deg: float = Field(45.0, ge=0.0, le=180.0)
+    roll_deg: Number = Field(45.0, ge=0.0, le=180.0)
     """Initial receiver roll perturbation, uniform in [-roll, roll] degrees."""
 
-    start_azimuth_deg: float = Field(15.0, ge=0.0, le=90.0)
+    start_azimuth_deg: Number = Field(15.0, ge=0.0, le=90.0)
     """Start position bearing from the drogue, uniform in [-a, a] degrees off dead astern."""
 
-    start_elevation_deg: Range = (-12.0, 3.0)
+    start_elevation_deg: Annotated[Range, _within(-90.0, 90.0)] = (-12.0, 3.0)
     """Start position elevation from the drogue, degrees (negative: the receiver starts below)."""
 
     sampling: Literal["distance", "time"] = "distance"
@@ -176,34 +213,34 @@ class ApproachConfig(_Section):
     uniform distance in range and frames are taken every stride_steps simulation steps,
     through contact and the next approach."""
 
-    frames_per_approach: int = Field(16, ge=1, le=100_000)
+    frames_per_approach: Integer = Field(16, ge=1, le=100_000)
     """Consecutive frames taken from one approach (the unit of simulation)."""
 
-    stride_steps: int = Field(15, ge=1)
+    stride_steps: Integer = Field(15, ge=1, le=100_000)
     """Simulation steps between frames in 'time' sampling."""
 
-    dt_s: float = Field(1.0 / 30.0, gt=0.0, le=0.2)
+    dt_s: Number = Field(1.0 / 30.0, gt=0.0, le=0.2)
     """Simulation time step, seconds."""
 
-    forward_gain: float = Field(0.12, gt=0.0, le=10.0)
+    forward_gain: Number = Field(0.12, gt=0.0, le=10.0)
     """Convergence rate of the PtD vector's forward (receiver x) component, 1/s."""
 
-    lateral_gain_ratio: float = Field(2.0, gt=0.0, le=10.0)
+    lateral_gain_ratio: Number = Field(2.0, gt=0.0, le=10.0)
     """Lateral and vertical convergence rates relative to the forward one (paper: about 2)."""
 
-    max_closure_mps: float = Field(4.0, gt=0.0)
+    max_closure_mps: Number = Field(4.0, gt=0.0, le=100.0)
     """Speed limit of the receiver relative to the drogue along its x axis, m/s."""
 
-    max_lateral_mps: float = Field(2.0, gt=0.0)
+    max_lateral_mps: Number = Field(2.0, gt=0.0, le=100.0)
     """Speed limit of the receiver relative to the drogue along its y and z axes, m/s."""
 
-    attitude_time_constant_s: float = Field(6.0, gt=0.0)
+    attitude_time_constant_s: Number = Field(6.0, gt=0.0, le=3600.0)
     """Time constant of the attitude slerp back to the tanker's orientation, s."""
 
-    contact_m: float = Field(0.01, gt=0.0)
+    contact_m: Number = Field(0.01, gt=0.0, le=10.0)
     """PtD distance that counts as contact (paper: 1 cm)."""
 
-    max_steps: int = Field(100_000, ge=100)
+    max_steps: Integer = Field(100_000, ge=100, le=1_000_000)
     """Safety limit on the steps of one approach."""
 
     @model_validator(mode="after")
@@ -225,39 +262,39 @@ class DrogueConfig(_Section):
     second-order hose-drogue response (natural frequency ``natural_hz``,
     damping ratio ``damping``)."""
 
-    rms_m: tuple[float, float, float] = (0.15, 0.4, 0.3)
+    rms_m: tuple[Number, Number, Number] = (0.15, 0.4, 0.3)
     """Gust-equilibrium RMS displacement along tanker x, y, z at intensity 1, metres."""
 
-    intensity: Range = (0.0, 1.0)
+    intensity: Annotated[Range, _within(0.0, 100.0)] = (0.0, 1.0)
     """Turbulence intensity multiplier, drawn once per approach."""
 
-    gust_time_s: float = Field(3.0, gt=0.0)
+    gust_time_s: Number = Field(3.0, gt=0.0, le=3600.0)
     """Gust correlation time (Dryden L / V), seconds."""
 
-    natural_hz: float = Field(0.5, gt=0.0, le=10.0)
+    natural_hz: Number = Field(0.5, gt=0.0, le=10.0)
     """Natural frequency of the hose-drogue response, Hz."""
 
-    damping: float = Field(0.4, gt=0.0, le=5.0)
+    damping: Number = Field(0.4, gt=0.0, le=5.0)
     """Damping ratio of the hose-drogue response."""
 
     @field_validator("rms_m")
     @classmethod
     def _non_negative(cls, rms: tuple[float, float, float]) -> tuple[float, float, float]:
-        if min(rms) < 0.0:
-            raise ValueError("rms_m components must not be negative")
+        if min(rms) < 0.0 or max(rms) > 100.0:
+            raise ValueError(f"rms_m components must lie within [0, 100] m, got {list(rms)}")
         return rms
 
 
 class TankerConfig(_Section):
     """Tanker flight: straight and level, or a coordinated banking turn."""
 
-    speed_mps: float = Field(150.0, gt=0.0, le=400.0)
+    speed_mps: Number = Field(150.0, gt=0.0, le=400.0)
     """True airspeed, m/s."""
 
-    altitude_m: Range = (4000.0, 8000.0)
+    altitude_m: Annotated[Range, _within(0.0, 20_000.0)] = (4000.0, 8000.0)
     """Altitude above the sea surface (world z = 0), metres, drawn per approach."""
 
-    turn_probability: float = Field(0.3, ge=0.0, le=1.0)
+    turn_probability: Number = Field(0.3, ge=0.0, le=1.0)
     """Share of approaches flown in a banking turn instead of straight and level."""
 
     bank_deg: Range = (15.0, 30.0)
@@ -280,7 +317,7 @@ class SkyConfig(_Section):
     sun_elevation_deg: Range = (15.0, 70.0)
     """Sun elevation above the horizon, degrees."""
 
-    sun_azimuth_deg: Range = (0.0, 360.0)
+    sun_azimuth_deg: Annotated[Range, _within(-720.0, 720.0)] = (0.0, 360.0)
     """Sun azimuth, degrees counter-clockwise from the tanker's initial heading."""
 
     turbidity: Range = (2.0, 5.0)
@@ -341,10 +378,10 @@ class RandomizationConfig(_Section):
     materials: MaterialsConfig = MaterialsConfig()
     """Materials of the airframes."""
 
-    exposure_ev: Range = (-0.5, 0.5)
+    exposure_ev: Annotated[Range, _within(-20.0, 20.0)] = (-0.5, 0.5)
     """Exposure compensation in stops applied before the sRGB transform."""
 
-    haze: bool = False
+    haze: Flag = False
     """Add a homogeneous haze between the camera and the scene."""
 
 
@@ -355,19 +392,19 @@ class RenderConfig(_Section):
     variant: Literal["auto", "llvm_ad_rgb", "cuda_ad_rgb", "scalar_rgb"] = "auto"
     """Mitsuba variant; 'auto' picks cuda_ad_rgb with a GPU, else llvm_ad_rgb, else scalar_rgb."""
 
-    spp: int = Field(16, ge=1, le=65536)
+    spp: Integer = Field(16, ge=1, le=65536)
     """Samples per pixel."""
 
-    max_depth: int = Field(6, ge=1, le=64)
+    max_depth: Integer = Field(6, ge=1, le=64)
     """Path tracer maximum depth."""
 
     image_format: Literal["png", "jpg"] = "png"
     """8-bit sRGB training image format."""
 
-    jpeg_quality: int = Field(95, ge=1, le=100)
+    jpeg_quality: Integer = Field(95, ge=1, le=100)
     """JPEG quality when image_format is 'jpg'."""
 
-    exr: bool = False
+    exr: Flag = False
     """Also write a linear EXR with R, G, B, Z (camera depth, metres) and object_id."""
 
 
@@ -375,22 +412,22 @@ class RenderConfig(_Section):
 class LabelsConfig(_Section):
     """How boxes are made (paper 3.2)."""
 
-    corrected: bool = True
+    corrected: Flag = True
     """Corrected boxes centred on the true 3D centre projection; false gives tight
     boxes (the paper's uncorrected ablation, model H)."""
 
-    edge_margin_px: float = Field(10.0, ge=0.0)
+    edge_margin_px: Number = Field(10.0, ge=0.0, le=8192.0)
     """A feature is labeled only if its box lies at least this far inside every border."""
 
-    min_visible_fraction: float = Field(0.0, ge=0.0, le=1.0)
+    min_visible_fraction: Number = Field(0.0, ge=0.0, le=1.0)
     """Drop features whose visible share of points is below this; 0 keeps occluded
     features (the paper's choice)."""
 
-    train_imgsz: int = Field(864, ge=32, le=8192)
+    train_imgsz: Integer = Field(864, ge=32, le=8192)
     """Ultralytics' training image size (the recipe's imgsz; the paper trained at 864):
     label sizes are judged as the trainer sees them there (datagen.training)."""
 
-    min_box_px: float = Field(8.0, ge=0.0, le=512.0)
+    min_box_px: Number = Field(8.0, ge=0.0, le=512.0)
     """Smallest side a label box may have at train_imgsz, in the trainer's pixels (8: the
     finest anchor stride, so every box holds an anchor centre); 0 keeps boxes as they are."""
 
@@ -416,13 +453,13 @@ class LabelsConfig(_Section):
 class DatasetConfig(_Section):
     """Size, sharding, split and seed of the dataset."""
 
-    frames: int = Field(ge=1, le=100_000_000)
+    frames: Integer = Field(ge=1, le=10_000_000)
     """Number of frames."""
 
-    shard_size: int = Field(500, ge=1)
+    shard_size: Integer = Field(500, ge=1, le=100_000)
     """Frames per shard (a shard is the unit of work, resumption and manifest files)."""
 
-    val_fraction: float = Field(0.2, ge=0.0, lt=1.0)
+    val_fraction: Number = Field(0.2, ge=0.0, lt=1.0)
     """Share of frames assigned to the validation split, decided per frame from the seed."""
 
     split_by: Literal["frame", "approach"] = "frame"
@@ -431,7 +468,7 @@ class DatasetConfig(_Section):
     which share a trajectory) in the same split, so that validation frames are not
     near-duplicates of training frames."""
 
-    seed: int = Field(0, ge=0, lt=2**63)
+    seed: Integer = Field(0, ge=0, lt=2**63)
     """Root seed; frame i draws from SeedSequence(seed, spawn_key=(i,))."""
 
 
@@ -441,7 +478,7 @@ class Config(_Section):
     name: str = Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]*$", max_length=100)
     """Short identifier (letters, digits, '_', '-', '.')."""
 
-    description: str = ""
+    description: str = Field("", max_length=10_000)
     """Free text: what the config is for."""
 
     camera: CameraConfig
@@ -495,28 +532,18 @@ def load_config(path: str | Path) -> Config:
     """Read, parse and validate a config file.
 
     Raises:
-        ConfigError: listing every problem found (missing file, YAML syntax,
-            duplicate keys, unknown keys, bad values, missing asset files).
+        ConfigError: listing every problem found (missing file, YAML syntax, input
+            bombs (:mod:`datagen.inputs`), duplicate keys, unknown keys, bad values,
+            missing asset files).
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError([Problem(path, "", "no such file")]) from None
-    except IsADirectoryError:
-        raise ConfigError([Problem(path, "", "is a directory, expected a YAML config file")]) from None
-    except UnicodeDecodeError as exc:
-        raise ConfigError([Problem(path, "", f"not UTF-8 text ({exc.reason})")]) from None
-    except OSError as exc:
-        raise ConfigError([Problem(path, "", f"cannot read: {exc.strerror}")]) from None
-    return parse_config(text, path)
+    return parse_config(read_text(path, "YAML config file"), path)
 
 
 def parse_config(text: str, path: Path) -> Config:
     """Validate config ``text`` read from ``path`` (used in messages and for relative paths)."""
-    data, lines, problems = _parse_yaml(text, path)
-    if problems and data is None:
-        raise ConfigError(problems)
+    data = parse_yaml(text, path)
+    lines, problems = _key_lines(text, path)
     if not isinstance(data, dict):
         kind = "empty" if data is None else f"a {type(data).__name__}"
         raise ConfigError([Problem(path, "", f"expected a mapping of config sections, got {kind}")])
@@ -531,20 +558,10 @@ def parse_config(text: str, path: Path) -> Config:
     return _resolve_paths(config, path.parent)
 
 
-def _parse_yaml(text: str, path: Path) -> tuple[Any, dict[tuple, int], list[Problem]]:
-    """Parse YAML, recording the line of every key path and flagging duplicate keys."""
-    try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-        data = yaml.safe_load(text)
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        line = mark.line + 1 if mark is not None else None
-        what = " ".join(x for x in (exc.context, exc.problem) if x)
-        return None, {}, [Problem(path, "", f"invalid YAML: {what}", line=line)]
-    except yaml.reader.ReaderError as exc:
-        return None, {}, [Problem(path, "", f"invalid YAML: {exc.reason} at character {exc.position}")]
-    except yaml.YAMLError as exc:
-        return None, {}, [Problem(path, "", f"invalid YAML: {exc}")]
+def _key_lines(text: str, path: Path) -> tuple[dict[tuple, int], list[Problem]]:
+    """The line of every key path, and a problem for every duplicate key (on text that
+    :func:`datagen.inputs.parse_yaml` has already checked, so composing it is bounded)."""
+    root = yaml.compose(text, Loader=yaml.SafeLoader)
     lines: dict[tuple, int] = {}
     problems: list[Problem] = []
 
@@ -567,7 +584,7 @@ def _parse_yaml(text: str, path: Path) -> tuple[Any, dict[tuple, int], list[Prob
 
     if root is not None:
         walk(root, ())
-    return data, lines, problems
+    return lines, problems
 
 
 def _dotted(loc: tuple) -> str:
@@ -625,6 +642,8 @@ def _problems_from_validation(
             message = "required key is missing"
         elif kind == "value_error":
             message = message.removeprefix("Value error, ")
+        if isinstance(value, dict):  # a section's own check: its message names the keys
+            found = False
         problems.append(
             Problem(path, _dotted(loc), message, line=_line_of(lines, loc), value=value, has_value=found)
         )
@@ -645,8 +664,9 @@ def _missing_asset_files(data: dict, lines: dict[tuple, int], path: Path) -> lis
             resolved = path.parent / value
             if not resolved.is_file():
                 loc = ("objects", name, field)
+                what = "not a regular file" if resolved.exists() else "file not found"
                 problems.append(
-                    Problem(path, _dotted(loc), f"file not found ({resolved})",
+                    Problem(path, _dotted(loc), f"{what} ({resolved})",
                             line=_line_of(lines, loc), value=value, has_value=True)
                 )
     return problems

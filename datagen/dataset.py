@@ -26,7 +26,7 @@ import hashlib
 import json
 import os
 import platform
-import shutil
+import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 from importlib import metadata
@@ -39,19 +39,22 @@ from datagen.camera import Intrinsics
 from datagen.config import Config
 from datagen.conventions import OBJECT_NAMES, PIXEL_CONVENTION, split_uniform
 from datagen.errors import DatagenError
-from datagen.files import atomic_path
+from datagen.files import atomic_path, is_temporary
 from datagen.manifest import MANIFEST_VERSION
 from datagen.training import TrainView, label_options
 
 __all__ = [
     "DATASET_SCHEMA",
     "DATASET_SCHEMA_VERSION",
+    "MANIFEST_NAME",
     "SPLITS",
     "DatasetLock",
     "Layout",
     "ShardJob",
     "asset_files",
+    "check_folder",
     "config_fingerprint",
+    "owned_files",
     "frame_split",
     "plan_shards",
     "prepare_folder",
@@ -65,10 +68,9 @@ DATASET_SCHEMA: Final = "datagen.dataset"
 #: Version of dataset.json's layout (bumped on any incompatible change).
 DATASET_SCHEMA_VERSION: Final = 1
 SPLITS: Final = ("train", "val")
-#: Everything datagen writes at the top of a dataset folder (``--overwrite`` removes these only).
-OWNED: Final = ("manifests", "images", "labels", "exr", "audit", "preview", "evaluation", "data.yaml",
-                "hyp.yaml", "train.txt", "val.txt", "features.parquet", "dataset.json")
 LOCK_NAME: Final = ".datagen.lock"
+#: The name of a shard's manifest, ``{split}-{shard:05d}.parquet``; nothing else in manifests/ is one.
+MANIFEST_NAME: Final = re.compile(r"(train|val)-[0-9]{5}\.parquet")
 
 
 # --- plan -------------------------------------------------------------------------------
@@ -185,7 +187,7 @@ def _versions() -> dict[str, str]:
 
 # --- metadata files ---------------------------------------------------------------------------
 def dataset_document(config: Config, jobs: list[ShardJob], fingerprint: str, assets: dict,
-                     class_names: list[str]) -> dict:
+                     class_names: list[str], *, render: bool = True) -> dict:
     """The content of ``dataset.json``."""
     cam = config.camera
     k = Intrinsics.from_hfov_deg(cam.width, cam.height, cam.hfov_deg)
@@ -200,6 +202,7 @@ def dataset_document(config: Config, jobs: list[ShardJob], fingerprint: str, ass
         "manifest_version": MANIFEST_VERSION,
         "name": config.name,
         "fingerprint": fingerprint,
+        "render": render,
         "versions": _versions(),
         "image_width": cam.width,
         "image_height": cam.height,
@@ -300,7 +303,7 @@ def write_image_lists(layout: Layout, jobs: list[ShardJob]) -> list[Path]:
 
 
 def write_dataset_files(layout: Layout, config: Config, jobs: list[ShardJob], fingerprint: str,
-                        assets: dict, *, describe: bool) -> None:
+                        assets: dict, *, describe: bool, render: bool = True) -> None:
     """dataset.json (when ``describe``: a new dataset), then data.yaml, hyp.yaml and
     features.parquet, each atomically. dataset.json comes first so that a folder
     with any datagen file in it is recognisable as a dataset; the other three are
@@ -312,7 +315,7 @@ def write_dataset_files(layout: Layout, config: Config, jobs: list[ShardJob], fi
     names = list(features.name)
     root = layout.root
     if describe:
-        document = dataset_document(config, jobs, fingerprint, assets, names)
+        document = dataset_document(config, jobs, fingerprint, assets, names, render=render)
         with atomic_path(layout.dataset_json) as tmp:
             tmp.write_text(json.dumps(document, indent=2) + "\n")
     splits = tuple(sorted({job.split for job in jobs}))
@@ -374,69 +377,187 @@ def _differences(old: object, new: object, key: str = "") -> Iterator[str]:
         yield f"{key} {json.dumps(old)} -> {json.dumps(new)}"
 
 
-def prepare_folder(layout: Layout, fingerprint: str, config: Config, *, overwrite: bool) -> bool:
+def check_folder(layout: Layout) -> bool:
+    """Whether ``layout.root`` may receive a build, looking only (nothing is created):
+    False for a missing or empty folder, True for a datagen dataset; a folder that is
+    not empty and holds no dataset is refused, with or without ``--overwrite`` (it
+    may hold someone's data)."""
+    root = layout.root
+    if root.exists() and not root.is_dir():
+        raise DatagenError(f"{root}: --out is a file, not a folder")
+    try:
+        # The lock and temporaries of an interrupted first run do not make a folder non-empty.
+        entries = [p.name for p in root.iterdir() if p.name != LOCK_NAME and not is_temporary(p.name)] \
+            if root.is_dir() else []
+    except OSError as exc:
+        raise DatagenError(f"{root}: cannot read the folder ({exc.strerror})") from None
+    if not entries:
+        return False
+    if not layout.dataset_json.is_file():
+        raise DatagenError(f"{root}: not empty and not a datagen dataset (no dataset.json); "
+                           "choose an empty or new --out folder")
+    return True
+
+
+def prepare_folder(layout: Layout, fingerprint: str, config: Config, assets: dict, *, render: bool,
+                   overwrite: bool) -> bool:
     """Decide what to do with the output folder; call with the lock held.
 
     Returns True when an earlier build of the same config is resumed. A folder
-    that is not empty and holds no datagen dataset is refused, even with
-    ``overwrite`` (it may hold someone's data); a dataset of another config is
-    refused unless ``overwrite``, which removes what datagen wrote there.
+    that is not empty and holds no datagen dataset is refused (:func:`check_folder`);
+    a dataset of another config, other assets or the other kind of build
+    (rendered or labels-only) is refused unless ``overwrite``, which removes exactly
+    what datagen wrote there (:func:`remove_owned`).
     """
-    root = layout.root
-    # The lock and temporaries of an interrupted first run do not make a folder non-empty.
-    entries = [p.name for p in root.iterdir() if p.name != LOCK_NAME and not _temporary(p.name)] \
-        if root.is_dir() else []
-    if not entries:
+    if not check_folder(layout):
         return False
     path = layout.dataset_json
-    if not path.is_file():
-        raise DatagenError(f"{root}: not empty and not a datagen dataset (no dataset.json); "
-                           "choose an empty or new --out folder")
     try:
         existing = json.loads(path.read_text())
         old_fingerprint, old_config = existing["fingerprint"], existing["config"]
     except (OSError, ValueError, KeyError, TypeError) as exc:
         if not overwrite:
-            raise DatagenError(f"{path}: unreadable dataset description ({exc}); use --overwrite to "
-                               "replace the dataset") from None
-        old_fingerprint, old_config = None, {}
+            raise DatagenError(f"{path}: unreadable dataset description ({type(exc).__name__}); use --overwrite "
+                               "to replace the dataset") from None
+        existing, old_fingerprint, old_config = {}, None, {}
     if old_fingerprint == fingerprint:
         return True
     if not overwrite:
         changes = list(_differences(old_config, config.model_dump(mode="json")))
+        if isinstance(existing.get("render"), bool) and existing["render"] != render:
+            kind = "a labels-only build (--no-render)" if render else "a rendered build"
+            changes.insert(0, f"render {json.dumps(existing['render'])} -> {json.dumps(render)}: the folder "
+                              f"holds {kind}")
+        old_assets = existing.get("assets") if isinstance(existing.get("assets"), dict) else {}
+        for name, files in sorted(assets.items()):
+            old = old_assets.get(name) if isinstance(old_assets.get(name), dict) else {}
+            for kind in ("mesh", "features"):
+                if old.get(f"{kind}_sha256") != files[f"{kind}_sha256"]:
+                    changes.append(f"{name} {kind} file {files[kind]} changed")
         what = "; ".join(changes[:3]) + (f"; and {len(changes) - 3} more" if len(changes) > 3 else "")
-        raise DatagenError(f"{path}: this folder holds a dataset of another config or assets "
-                           f"({what or 'asset files changed'}); use --overwrite to replace it, or "
+        raise DatagenError(f"{path}: this folder holds a dataset of another config, assets or build "
+                           f"({what or 'made by another datagen version'}); use --overwrite to replace it, or "
                            "choose another --out")
-    remove_owned(root)
+    remove_owned(layout, existing)
     return False
 
 
-def _temporary(name: str) -> bool:
-    return name.startswith(".") and name.endswith(".tmp")
+#: Report folders inside a dataset and the record each one's writer keeps of its files
+#: (``files``: paths relative to the folder): what ``--overwrite`` may remove there.
+REPORT_RECORDS: Final = {"audit": "report.json", "evaluation": "evaluation.json", "preview": "preview.json"}
+#: Metadata files at the top of a dataset, in the order ``--overwrite`` removes them (dataset.json last).
+METADATA: Final = ("data.yaml", "hyp.yaml", "train.txt", "val.txt", "features.parquet", "dataset.json")
 
 
-def remove_owned(root: Path) -> None:
-    """Delete what datagen wrote in ``root``: manifests first (so that no shard counts
-    as done if this is interrupted), dataset.json last (so the folder stays
-    recognisable as a dataset until the end)."""
-    for name in OWNED:
-        path = root / name
-        if path.is_dir():
-            shutil.rmtree(path)
-        elif path.exists():
+def _inside(root: Path, rel: object) -> Path | None:
+    """``root / rel`` for a relative path that stays inside ``root``, else None."""
+    if not isinstance(rel, str) or not rel or rel.startswith("/") or "\0" in rel:
+        return None
+    parts = Path(rel).parts
+    if ".." in parts:
+        return None
+    return root.joinpath(*parts)
+
+
+def owned_files(layout: Layout, doc: dict) -> list[Path]:
+    """Every file the dataset's own records say datagen wrote into ``layout.root``, in the
+    order ``--overwrite`` removes them: manifests first (so that no shard counts as done
+    if this is interrupted), then images, labels and EXRs, reports, metadata, and
+    dataset.json last (so that the folder stays recognisable as a dataset until the end).
+
+    The records: the shard plan of the config in dataset.json (every path a build of
+    it writes), the paths each readable manifest names, and the ``files`` list of each
+    report's own record (:data:`REPORT_RECORDS`)."""
+    import pyarrow.parquet as pq
+
+    root = layout.root
+    manifests: list[Path] = []
+    frames: list[str] = []
+    try:
+        config = Config.model_validate(doc.get("config", {}))
+    except (ValueError, TypeError):
+        config = None
+    if config is not None:
+        old = Layout(root, ".jpg" if config.render.image_format == "jpg" else ".png")
+        for job in plan_shards(config):
+            manifests.append(old.manifest(job))
+            for i in job.frames:
+                frames += [old.image_rel(job.split, job.shard, i), old.label_rel(job.split, job.shard, i),
+                           old.exr_rel(job.split, job.shard, i)]
+    named = sorted((root / "manifests").glob("*.parquet")) if (root / "manifests").is_dir() else []
+    for path in named:
+        if not MANIFEST_NAME.fullmatch(path.name):
+            continue
+        manifests.append(path)
+        try:
+            table = pq.read_table(path, columns=["image_path", "label_path", "exr_path"])
+        except Exception:  # noqa: BLE001 (an unreadable manifest names nothing)
+            continue
+        for column in table.columns:
+            frames += [p for p in column.to_pylist() if p]
+    reports: list[Path] = []
+    for folder, record in REPORT_RECORDS.items():
+        path = root / folder / record
+        try:
+            listed = json.loads(path.read_text()).get("files", [])
+        except (OSError, ValueError, AttributeError):
+            listed = []
+        reports += [p for rel in listed if isinstance(listed, list) and (p := _inside(root / folder, rel))]
+        reports.append(path)
+    ordered = manifests + [p for rel in frames if (p := _inside(root, rel))] + reports + [root / m for m in METADATA]
+    return list(dict.fromkeys(ordered))
+
+
+def _links_on_the_way(root: Path, paths: list[Path]) -> Path | None:
+    """The first folder between ``root`` and any of ``paths`` that is a symbolic link."""
+    checked: dict[Path, bool] = {}
+    for path in paths:
+        for parent in reversed(path.relative_to(root).parents[:-1]):
+            folder = root / parent
+            if folder not in checked:
+                checked[folder] = folder.is_symlink()
+            if checked[folder]:
+                return folder
+    return None
+
+
+def remove_owned(layout: Layout, doc: dict) -> int:
+    """Delete exactly the files :func:`owned_files` names (and datagen's temporaries beside
+    them), never a folder with something else in it and never through a symbolic link:
+    a linked folder on the way refuses the whole removal before anything is deleted.
+    Folders left empty are removed. Returns how many files were deleted."""
+    root = layout.root
+    files = owned_files(layout, doc)
+    link = _links_on_the_way(root, files)
+    if link is not None:
+        raise DatagenError(f"{link}: a symbolic link; --overwrite does not delete through links (remove the link "
+                           "or its files yourself, or choose another --out)")
+    folders = dict.fromkeys(p.parent for p in files)
+    removed = 0
+    for path in files:
+        if path.is_file() and not path.is_symlink():
             path.unlink()
+            removed += 1
+    removed += sweep_temporaries(list(folders))
+    for folder in sorted(folders, key=lambda p: len(p.parts), reverse=True):
+        while folder != root and folder.is_relative_to(root):
+            try:
+                folder.rmdir()  # only when empty
+            except OSError:
+                break
+            folder = folder.parent
+    return removed
 
 
 def sweep_temporaries(paths: list[Path]) -> int:
-    """Remove the hidden temporary files (``.NAME.PID.tmp``) an interrupted writer
-    left in these folders (not recursive); returns how many."""
+    """Remove datagen's own temporaries (:func:`datagen.files.is_temporary`) an interrupted
+    writer left in these folders (not recursive); returns how many."""
     removed = 0
     for folder in paths:
-        if not folder.is_dir():
+        if not folder.is_dir() or folder.is_symlink():
             continue
         for entry in folder.iterdir():
-            if _temporary(entry.name) and entry.is_file():
+            if is_temporary(entry.name) and entry.is_file() and not entry.is_symlink():
                 entry.unlink(missing_ok=True)
                 removed += 1
     return removed

@@ -183,6 +183,8 @@ def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_con
     detections: dict[str, int] = {}
     below: dict[str, int] = {}
     for path in sorted(folder.rglob("*.txt")):
+        if not path.is_file():  # a folder or a FIFO named *.txt is not a prediction file
+            continue
         best: dict[int, tuple[float, float, float]] = {}
         try:
             text = path.read_text()
@@ -393,8 +395,6 @@ def write_evaluation(view: DatasetView, runs: list[tuple[dict, dict]], out: Path
     summaries = [{**source, **summarize(result, settings)} for source, result in runs]
     doc = {"dataset": str(view.root), "name": view.doc.get("name"), "frames": len(view),
            "settings": dataclasses.asdict(settings), "reasons": list(REASONS), "runs": summaries}
-    with atomic_path(out / "evaluation.json") as tmp:
-        tmp.write_text(json.dumps(doc, indent=2) + "\n")
     tables = []
     for source, r in runs:
         n = len(r["frame_id"])
@@ -416,4 +416,9 @@ def write_evaluation(view: DatasetView, runs: list[tuple[dict, dict]], out: Path
     with atomic_path(out / "results.parquet") as tmp:
         pq.write_table(pa.concat_tables(tables), tmp, compression="zstd")
     plots = plot_evaluation(runs, summaries, out / "plots", name=str(view.doc.get("name", "")))
+    # evaluation.json last: the record of every file the evaluation wrote (``files``, relative to
+    # its folder), which --overwrite removes and nothing else.
+    doc["files"] = ["results.parquet", *(str(p.relative_to(out)) for p in plots.values())]
+    with atomic_path(out / "evaluation.json") as tmp:
+        tmp.write_text(json.dumps(doc, indent=2) + "\n")
     return {"json": out / "evaluation.json", "parquet": out / "results.parquet", **plots}

@@ -1,16 +1,29 @@
 """Every file datagen writes goes through here: hidden temporary name, then rename.
 
-A reader (or a crash) never sees a half-written file.
+A reader (or a crash) never sees a half-written file. A temporary is named
+``.NAME.PID.datagen-tmp``: a name only datagen uses, so that sweeping the
+temporaries an interrupted writer left can never touch a user's own files.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import re
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Final
 
-__all__ = ["atomic_path", "write_image"]
+__all__ = ["TEMPORARY_SUFFIX", "atomic_path", "is_temporary", "write_image"]
+
+#: The suffix of datagen's temporaries (``.NAME.PID.datagen-tmp``).
+TEMPORARY_SUFFIX: Final = ".datagen-tmp"
+_TEMPORARY: Final = re.compile(r"\..+\.[0-9]+" + re.escape(TEMPORARY_SUFFIX))
+
+
+def is_temporary(name: str) -> bool:
+    """Whether a file name is one of datagen's temporaries."""
+    return _TEMPORARY.fullmatch(name) is not None
 
 
 @contextlib.contextmanager
@@ -19,10 +32,14 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     remove it on failure."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}{TEMPORARY_SUFFIX}")
     try:
         yield tmp
         os.replace(tmp, path)
+    except OSError as exc:  # a full disk mid-write names no file: name the one being written
+        if exc.filename is None or Path(os.fsdecode(exc.filename)) == tmp:
+            exc.filename = str(path)
+        raise
     finally:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()

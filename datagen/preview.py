@@ -33,8 +33,10 @@ def draw_overlay(view: DatasetView, b: int, labels: FrameLabels, *, names: bool 
 
     k = view.intrinsics
     image = None
-    if view.image_path[b]:
+    if view.image_path[b] and (view.root / view.image_path[b]).is_file():  # a FIFO would block the read
         image = cv2.imread(str(view.root / view.image_path[b]), cv2.IMREAD_COLOR)
+        if image is not None and image.shape[:2] != (k.height, k.width):
+            image = None
     if image is None:
         image = np.zeros((k.height, k.width, 3), np.uint8)
     scale = max(1.0, k.width / 1024)
@@ -79,8 +81,10 @@ def draw_overlay(view: DatasetView, b: int, labels: FrameLabels, *, names: bool 
 def write_previews(view: DatasetView, frames: list[int] | None, out: Path, labels: FrameLabels | None = None,
                    *, limit: int = 4) -> list[Path]:
     """Write ``out/{frame:08d}.jpg`` for the given frame ids (default: the first ``limit``)."""
+    import json
+
     from datagen.errors import DatagenError
-    from datagen.files import write_image
+    from datagen.files import atomic_path, write_image
 
     labels = labels if labels is not None else view.recompute()
     index = {int(fid): b for b, fid in enumerate(view.frame_id)}
@@ -89,5 +93,17 @@ def write_previews(view: DatasetView, frames: list[int] | None, out: Path, label
     if missing:
         raise DatagenError(f"--frames: frame {missing[0]} is not in {view.root} "
                            f"(frames {int(view.frame_id.min())}-{int(view.frame_id.max())})")
-    return [write_image(Path(out) / f"{f:08d}.jpg", draw_overlay(view, index[f], labels), jpeg_quality=90)
-            for f in wanted]
+    out = Path(out)
+    written = [write_image(out / f"{f:08d}.jpg", draw_overlay(view, index[f], labels), jpeg_quality=90)
+               for f in wanted]
+    # preview.json: the record of every overlay written here (``files``, relative to the folder),
+    # which --overwrite removes and nothing else.
+    record = out / "preview.json"
+    try:
+        earlier = json.loads(record.read_text()).get("files", [])
+    except (OSError, ValueError, AttributeError):
+        earlier = []
+    files = sorted({*(f for f in earlier if isinstance(f, str)), *(p.name for p in written)})
+    with atomic_path(record) as tmp:
+        tmp.write_text(json.dumps({"dataset": str(view.root), "files": files}, indent=2) + "\n")
+    return written

@@ -9,7 +9,7 @@ intrinsics and ``features.parquet``.
 
 from __future__ import annotations
 
-import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,18 +17,20 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
-import yaml
 from numpy.typing import NDArray
+from pydantic import ValidationError
 
 from datagen.camera import Intrinsics
 from datagen.config import LabelsConfig
+from datagen.dataset import MANIFEST_NAME
 from datagen.errors import DatagenError
 from datagen.features import FeatureTable
+from datagen.inputs import parse_json, parse_yaml, read_text
 from datagen.labels import FrameLabels, compute_labels
 from datagen.manifest import MANIFEST_VERSION, manifest_schema, read_features
 from datagen.training import TrainView, label_options
 
-__all__ = ["DatasetView", "load_dataset"]
+__all__ = ["DatasetView", "image_size", "load_dataset"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,12 +105,42 @@ class DatasetView:
 
 
 def _read_json(path: Path) -> dict:
-    try:
-        return json.loads(path.read_text())
-    except FileNotFoundError:
-        raise DatagenError(f"{path}: no such file; not a datagen dataset folder") from None
-    except (OSError, ValueError) as exc:
-        raise DatagenError(f"{path}: unreadable ({exc})") from None
+    if not path.exists():
+        raise DatagenError(f"{path}: no such file; not a datagen dataset folder")
+    data = parse_json(read_text(path, "dataset description"), path)  # ConfigError: one line, a DatagenError
+    if not isinstance(data, dict):
+        raise DatagenError(f"{path}: expected a JSON object")
+    return data
+
+
+def _relative_inside(rel: str) -> bool:
+    """A manifest path: relative, without ``..``, so that it names a file inside the dataset."""
+    return bool(rel) and not rel.startswith(("/", "\\")) and ".." not in Path(rel).parts and "\0" not in rel
+
+
+def _check_document(doc: dict, path: Path) -> None:
+    """The keys of dataset.json the readers use, with their types (one line per the first problem)."""
+    def number(value: object) -> bool:
+        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+    for key in ("intrinsics", "image_width", "image_height", "edge_margin_px", "corrected", "config"):
+        if key not in doc:
+            raise DatagenError(f"{path}: {key}: missing")
+    for key in ("image_width", "image_height"):
+        value = doc[key]
+        if not isinstance(value, int) or isinstance(value, bool) or not 0 < value <= 16384:
+            raise DatagenError(f"{path}: {key}: value {str(value)[:40]!r}: expected an image size in pixels")
+    k = doc["intrinsics"]
+    for key in ("fx", "fy", "cx", "cy"):
+        if not isinstance(k, dict) or key not in k:
+            raise DatagenError(f"{path}: intrinsics.{key}: missing")
+        if not number(k[key]) or (key in ("fx", "fy") and k[key] <= 0):
+            raise DatagenError(f"{path}: intrinsics.{key}: value {str(k[key])[:40]!r}: expected a finite number"
+                               f"{' above 0' if key in ('fx', 'fy') else ''}")
+    if not number(doc["edge_margin_px"]) or not isinstance(doc["corrected"], bool):
+        raise DatagenError(f"{path}: edge_margin_px or corrected: expected a number and true or false")
+    if not isinstance(doc["config"], dict):
+        raise DatagenError(f"{path}: config: expected a mapping")
 
 
 def _floats(array: pa.Array, shape: tuple[int, ...]) -> NDArray[np.float64]:
@@ -125,8 +157,11 @@ def _floats(array: pa.Array, shape: tuple[int, ...]) -> NDArray[np.float64]:
                       dtype=np.float64).reshape(shape)
 
 
-def load_dataset(root: str | Path) -> DatasetView:
+def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> DatasetView:
     """Read ``root``'s dataset.json, data.yaml, features.parquet and every manifest.
+
+    ``allow_duplicates``: keep rows of a frame that several manifests hold (the audit
+    names them); otherwise they are refused, as they would count the frame twice.
 
     Raises:
         DatagenError: one line naming the file and what is wrong with it.
@@ -135,35 +170,39 @@ def load_dataset(root: str | Path) -> DatasetView:
     if not root.is_dir():
         raise DatagenError(f"{root}: no such dataset folder")
     doc = _read_json(root / "dataset.json")
-    for key in ("intrinsics", "image_width", "image_height", "edge_margin_px", "corrected", "config"):
-        if key not in doc:
-            raise DatagenError(f"{root / 'dataset.json'}: {key}: missing")
+    _check_document(doc, root / "dataset.json")
     try:
-        LabelsConfig.model_validate(doc["config"]["labels"])
-    except (KeyError, TypeError, ValueError) as exc:
-        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise DatagenError(f"{root / 'dataset.json'}: config.labels: invalid ({first})") from None
-    try:
-        data_yaml = yaml.safe_load((root / "data.yaml").read_text()) or {}
-    except (OSError, yaml.YAMLError) as exc:
-        raise DatagenError(f"{root / 'data.yaml'}: unreadable ({exc})") from None
+        LabelsConfig.model_validate(doc["config"].get("labels", {}))
+    except ValidationError as exc:
+        err = exc.errors(include_url=False)[0]
+        key = ".".join(str(part) for part in err["loc"])
+        raise DatagenError(f"{root / 'dataset.json'}: config.labels.{key}: "
+                           f"{err['msg'].removeprefix('Value error, ')}") from None
+    data_yaml = parse_yaml(read_text(root / "data.yaml", "data.yaml"), root / "data.yaml")
+    if not isinstance(data_yaml, dict):
+        raise DatagenError(f"{root / 'data.yaml'}: expected a mapping with train, val, nc and names")
+    if not (root / "features.parquet").is_file():
+        raise DatagenError(f"{root / 'features.parquet'}: missing or not a regular file")
     try:
         features = read_features(root / "features.parquet")
-    except (OSError, pa.ArrowException, KeyError, ValueError) as exc:
-        raise DatagenError(f"{root / 'features.parquet'}: unreadable ({exc})") from None
+    except Exception as exc:  # noqa: BLE001 (pyarrow and numpy raise many kinds on a damaged table)
+        raise DatagenError(f"{root / 'features.parquet'}: unreadable ({type(exc).__name__}: "
+                           f"{' '.join(str(exc).split())[:120]})") from None
     k = doc["intrinsics"]
-    missing = [key for key in ("fx", "fy", "cx", "cy") if not isinstance(k, dict) or key not in k]
-    if missing:
-        raise DatagenError(f"{root / 'dataset.json'}: intrinsics.{missing[0]}: missing")
-    intrinsics = Intrinsics(int(doc["image_width"]), int(doc["image_height"]), k["fx"], k["fy"], k["cx"], k["cy"])
+    intrinsics = Intrinsics(doc["image_width"], doc["image_height"], float(k["fx"]), float(k["fy"]),
+                            float(k["cx"]), float(k["cy"]))
     expected = manifest_schema()
     tables, names = [], []
     for path in sorted((root / "manifests").glob("*.parquet")):
+        if not MANIFEST_NAME.fullmatch(path.name):
+            continue  # not a shard's manifest (the audit names it)
+        if not path.is_file():
+            raise DatagenError(f"{path}: not a regular file")
         try:
             table = pq.read_table(path)
         except (OSError, pa.ArrowException) as exc:
             raise DatagenError(f"{path}: unreadable manifest ({type(exc).__name__})") from None
-        version = (table.schema.metadata or {}).get(b"datagen.manifest_version", b"?").decode()
+        version = (table.schema.metadata or {}).get(b"datagen.manifest_version", b"?").decode(errors="replace")[:20]
         if version != MANIFEST_VERSION:
             raise DatagenError(f"{path}: manifest version {version}, this datagen reads {MANIFEST_VERSION}")
         for field in expected:
@@ -179,7 +218,14 @@ def load_dataset(root: str | Path) -> DatasetView:
         table = pa.concat_tables(tables)
     except pa.ArrowException as exc:
         raise DatagenError(f"{root / 'manifests'}: manifests with different schemas ({exc})") from None
-    order = np.argsort(np.asarray(table.column("frame_id")), kind="stable")
+    frame_ids = np.asarray(table.column("frame_id"))
+    if not allow_duplicates and len(np.unique(frame_ids)) != len(frame_ids):
+        ids, counts = np.unique(frame_ids, return_counts=True)
+        frame = int(ids[np.argmax(counts > 1)])
+        where = sorted({names[i] for i in np.flatnonzero(frame_ids == frame)})
+        raise DatagenError(f"{root / where[0]}: frame {frame} is in {len(where)} manifests ({', '.join(where)}): a "
+                           "manifest copied or renamed by hand; datagen audit names every such frame")
+    order = np.argsort(frame_ids, kind="stable")
     table = table.take(pa.array(order))
     names = [names[i] for i in order]
     b, f = table.num_rows, len(features)
@@ -189,6 +235,11 @@ def load_dataset(root: str | Path) -> DatasetView:
         bad = int(np.argmax(lengths != f))
         raise DatagenError(f"{root / names[bad]}: frame {table.column('frame_id')[bad]}: {lengths[bad]} feature "
                            f"records, features.parquet has {f} classes")
+    for column in ("image_path", "label_path", "exr_path"):
+        for i, rel in enumerate(table.column(column).to_pylist()):
+            if rel is not None and not _relative_inside(rel):
+                raise DatagenError(f"{root / names[i]}: frame {table.column('frame_id')[i]}: {column} {rel[:80]!r} "
+                                   "is not a path inside the dataset")
     flat = lists.flatten()
 
     def matrices(name: str) -> NDArray[np.float64]:
@@ -225,3 +276,25 @@ def load_dataset(root: str | Path) -> DatasetView:
         visible_fraction=_floats(flat.field("visible_fraction"), (b, f)),
         center_visible=_floats(pc.cast(flat.field("center_visible"), pa.float64()), (b, f)),
     )
+
+
+def image_size(head: bytes) -> tuple[int, int] | None:
+    """``(width, height)`` from the first bytes of a PNG or JPEG file (its header alone, so
+    that a file claiming a huge size is refused before it is decoded), or None."""
+    if head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR" and len(head) >= 24:
+        return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    if head[:2] != b"\xff\xd8":
+        return None
+    i = 2
+    while i + 9 < len(head):
+        if head[i] != 0xFF:
+            return None
+        marker = head[i + 1]
+        if marker == 0xFF:  # fill byte
+            i += 1
+            continue
+        length = int.from_bytes(head[i + 2:i + 4], "big")
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):  # a start-of-frame segment
+            return int.from_bytes(head[i + 7:i + 9], "big"), int.from_bytes(head[i + 5:i + 7], "big")
+        i += 2 + length
+    return None

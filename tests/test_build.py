@@ -27,6 +27,7 @@ from datagen.camera import Intrinsics
 from datagen.config import LabelsConfig, load_config, override_config
 from datagen.dataset import SPLITS, DatasetLock, frame_split, plan_shards
 from datagen.errors import ConfigError, DatagenError
+from datagen.files import is_temporary
 from datagen.labels import compute_labels
 from datagen.manifest import RUN_COLUMNS, features_schema, manifest_schema, read_features
 from datagen.training import label_options
@@ -73,8 +74,13 @@ def label_files(root: Path) -> dict[str, bytes]:
     return {str(p.relative_to(root)): p.read_bytes() for p in sorted((root / "labels").rglob("*.txt"))}
 
 
+def image_files(root: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(root)): p.read_bytes() for tree in ("images", "exr") for p in sorted((root / tree).rglob("*"))
+            if p.is_file()}
+
+
 def temporaries(root: Path) -> list[Path]:
-    return [p for p in root.rglob(".*") if p.name.endswith(".tmp")]
+    return [p for p in root.rglob(".*") if is_temporary(p.name)]
 
 
 # --- the plan --------------------------------------------------------------------------
@@ -194,7 +200,7 @@ def test_a_folder_that_is_not_a_dataset_is_never_touched(tmp_path: Path) -> None
     for overwrite in (False, True):
         with pytest.raises(DatagenError, match="not a datagen dataset"):
             build_dataset(config, tmp_path / "ds", render=False, overwrite=overwrite)
-    assert sorted(p.name for p in (tmp_path / "ds").iterdir()) == [".datagen.lock", "thesis.tex"]
+    assert sorted(p.name for p in (tmp_path / "ds").iterdir()) == ["thesis.tex"]  # not even a lock
     assert precious.read_text() == "years of work"
 
 
@@ -257,10 +263,10 @@ def test_bad_executor_is_one_line(tmp_path: Path) -> None:
 # --- rendered builds ---------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory) -> tuple[Path, object]:
-    """A tiny rendered build (with EXR), one worker, in this process."""
+    """A tiny rendered build (with EXR), one worker with one Mitsuba thread, in this process."""
     tmp = tmp_path_factory.mktemp("reference")
     config = tiny_config(tmp, exr=True)
-    report = build_dataset(config, tmp / "ds", workers=1)
+    report = build_dataset(config, tmp / "ds", workers=1, threads=1)
     assert report.rendered == 8 and not report.interrupted
     return tmp / "ds", config
 
@@ -385,7 +391,8 @@ def test_resume_after_an_interruption_finishes_only_the_missing_shards(reference
     config_path = tmp_path / "tiny.yaml"
     tiny_config(tmp_path, exr=True)
     out = tmp_path / "ds"
-    args = [sys.executable, "-m", "datagen", "build", "--config", str(config_path), "--out", str(out)]
+    args = [sys.executable, "-m", "datagen", "build", "--config", str(config_path), "--out", str(out),
+            "--threads", "1"]
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
@@ -420,6 +427,9 @@ def test_resume_after_an_interruption_finishes_only_the_missing_shards(reference
     assert not temporaries(out)
     rendered = [r for r in manifest_rows(out).values() if r["render_s"] is not None]
     assert len(rendered) < 8  # frames whose image survived the kill were not rendered again
+    # One Mitsuba thread: the images (and EXRs) are byte for byte those of the uninterrupted build,
+    # although the resumed process rendered its frames in another order after another start.
+    assert image_files(out) == image_files(root) and len(image_files(out)) == 16
 
 
 def test_out_must_be_a_folder_and_temporaries_do_not_make_it_foreign(tmp_path: Path) -> None:
@@ -429,7 +439,7 @@ def test_out_must_be_a_folder_and_temporaries_do_not_make_it_foreign(tmp_path: P
         build_dataset(config, tmp_path / "file", render=False)
     # A first run killed while writing dataset.json leaves only its temporary: not someone's data.
     (tmp_path / "ds").mkdir()
-    (tmp_path / "ds" / ".dataset.json.123.tmp").write_text("{")
+    (tmp_path / "ds" / ".dataset.json.123.datagen-tmp").write_text("{")
     report = build_dataset(config, tmp_path / "ds", render=False)
     assert report.frames == 8 and not temporaries(tmp_path / "ds")
 
