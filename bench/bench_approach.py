@@ -14,8 +14,8 @@ import os
 import platform
 import time
 
-from datagen.approach import _chain_states, frame_states
-from datagen.config import load_config
+from datagen.scene.approach import _chain_states, frame_states
+from datagen.config.schema import load_config
 
 
 def main() -> None:

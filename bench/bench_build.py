@@ -35,10 +35,10 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 
-from datagen.approach import frame_state
-from datagen.config import load_config, override_config
-from datagen.conventions import frame_rng
-from datagen.render import Renderer, draw_look, render_seed
+from datagen.scene.approach import frame_state
+from datagen.config.schema import load_config, override_config
+from datagen.core.conventions import frame_rng
+from datagen.render.renderer import Renderer, draw_look, render_seed
 
 
 def pure_render_s(config, frames: int) -> float:

@@ -48,8 +48,8 @@ def main() -> None:
         wall = build(args.config, Path(tmp) / "eval", args.eval_frames, args.workers)
         print(f"(evaluation dataset: {args.eval_frames} frames built in {wall:.1f} s)")
         os.sched_setaffinity(0, {0})
-        from datagen.evaluate import evaluate, summarize
-        from datagen.reader import load_dataset
+        from datagen.analysis.evaluate import evaluate, summarize
+        from datagen.dataset.reader import load_dataset
 
         view = load_dataset(Path(tmp) / "eval")
         start = time.perf_counter()

@@ -20,11 +20,11 @@ import tempfile
 import time
 from pathlib import Path
 
-from datagen.approach import frame_state
-from datagen.assets import feature_table
-from datagen.config import load_config
-from datagen.conventions import frame_rng
-from datagen.render import Renderer, draw_look, render_seed, write_png
+from datagen.scene.approach import frame_state
+from datagen.assets.files import feature_table
+from datagen.config.schema import load_config
+from datagen.core.conventions import frame_rng
+from datagen.render.renderer import Renderer, draw_look, render_seed, write_png
 
 
 def main() -> None:

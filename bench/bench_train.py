@@ -9,7 +9,7 @@ Needs the ``train`` extra (``pip install -e '.[train]'``). Default run:
    held-out seed (not the config's) and its train.txt / val.txt;
 2. runs every image of both splits through Ultralytics' own training dataloader
    with the dataset's hyp.yaml and counts the label lines it keeps and those that
-   hold an anchor centre of the detection head (``datagen.yolo``), beside what
+   hold an anchor centre of the detection head (``datagen.analysis.ultralytics``), beside what
    ``datagen audit`` computes without Ultralytics;
 3. trains ``yolo11n.yaml`` (from scratch: nothing is downloaded) for ``--epochs``
    epochs on the CPU with the dataset's recipe, counting the instances the trainer
@@ -22,7 +22,7 @@ which equals Ultralytics' dataloader line for line: tests/test_train.py), the sh
 of learnable boxes whose every anchor centre also lies in another box of the frame
 (the assigner then gives those anchors to one box only), edge-margin exclusions,
 labels per frame, and the share of label lines to which Ultralytics' own
-detection loss gives a positive anchor on an untrained yolo11n (``datagen.yolo``).
+detection loss gives a positive anchor on an untrained yolo11n (``datagen.analysis.ultralytics``).
 """
 
 from __future__ import annotations
@@ -39,10 +39,10 @@ from pathlib import Path
 
 import numpy as np
 
-from datagen.build import build_dataset
-from datagen.config import load_config, override_config
-from datagen.reader import load_dataset
-from datagen.training import ANCHOR_STRIDES
+from datagen.build.run import build_dataset
+from datagen.config.schema import load_config, override_config
+from datagen.dataset.reader import load_dataset
+from datagen.core.training import ANCHOR_STRIDES
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -92,7 +92,7 @@ def blank_images(root: Path, config) -> None:
 
     import cv2
 
-    from datagen.dataset import Layout, plan_shards, write_image_lists
+    from datagen.dataset.layout import Layout, plan_shards, write_image_lists
 
     layout, jobs = Layout(root), plan_shards(config)
     grey = root / ".grey.png"
@@ -108,8 +108,8 @@ def blank_images(root: Path, config) -> None:
 
 
 def sweep(args) -> None:
-    from datagen.audit import audit
-    from datagen.yolo import assigner_positives
+    from datagen.analysis.audit import audit
+    from datagen.analysis.ultralytics import assigner_positives
 
     print(f"min_box_px sweep: wingcam55, {args.sweep_frames} labels-only frames, seed {args.seed}, imgsz 864, "
           f"{platform.machine()} {platform.node()}; assigner: untrained yolo11n.yaml (torch seed 0) on the first "
@@ -170,8 +170,8 @@ def train_and_count(root: Path, runs: Path, epochs: int, batch: int) -> dict:
 
 
 def end_to_end(args) -> None:
-    from datagen.audit import audit
-    from datagen.yolo import assigner_positives, dataloader_learnability
+    from datagen.analysis.audit import audit
+    from datagen.analysis.ultralytics import assigner_positives, dataloader_learnability
 
     out = Path(args.out or tempfile.mkdtemp(prefix="bench-train-"))
     root = out / "w55"

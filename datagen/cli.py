@@ -20,9 +20,9 @@ from typing import Annotated, TypeVar
 import typer
 
 from datagen import __version__
-from datagen.camera import Intrinsics
-from datagen.config import load_config
-from datagen.errors import ConfigError, DatagenError
+from datagen.core.camera import Intrinsics
+from datagen.config.schema import load_config
+from datagen.core.errors import ConfigError, DatagenError
 
 app = typer.Typer(
     name="datagen",
@@ -109,7 +109,7 @@ def validate(
 ) -> None:
     """Check configs against the schema, and their meshes and feature files;
     print every problem, one line each."""
-    from datagen.assets import check_assets
+    from datagen.assets.files import check_assets
 
     failed = []
     for path in configs:
@@ -142,7 +142,7 @@ def approach(
     seed: Annotated[int | None, typer.Option("--seed", min=0, help="Override the config's seed.")] = None,
 ) -> None:
     """Simulate Monte Carlo refueling approaches; plot a few, print frame states."""
-    from datagen.approach import frame_state, trace_approach
+    from datagen.scene.approach import frame_state, trace_approach
 
     if plot is not None:
         output_path(plot, "--plot")
@@ -157,7 +157,7 @@ def approach(
         typer.echo(f"frame {i:5d}: approach {st.approach_index}.{st.approach_number} t={st.time_s:7.2f} s "
                    f"distance {st.distance_m:8.3f} m  PtD_receiver [{x:8.3f} {y:7.3f} {z:7.3f}] m")
     if plot is not None:
-        from datagen.plots import plot_approaches
+        from datagen.report.plots import plot_approaches
 
         plot_approaches(cfg, plot, approaches, seed)
         typer.echo(f"wrote {plot}")
@@ -189,8 +189,8 @@ def build(
     """Render a sharded, resumable dataset with YOLO labels and parquet manifests.
 
     Rerunning the same command after an interruption finishes the missing shards."""
-    from datagen.build import BuildProgress, build_dataset
-    from datagen.config import override_config
+    from datagen.build.run import BuildProgress, build_dataset
+    from datagen.config.schema import override_config
 
     if executor not in ("local", "ray"):
         raise DatagenError(f"--executor: unknown executor {executor!r} (choose local or ray)")
@@ -221,9 +221,9 @@ def audit(
 ) -> None:
     """Check a dataset's labels against the true centre projections; write
     report.json, plots and report.html. Exit 1 when a check fails."""
-    from datagen.audit import audit as run_audit
-    from datagen.audit import write_report
-    from datagen.reader import load_dataset
+    from datagen.analysis.audit import audit as run_audit
+    from datagen.analysis.audit import write_report
+    from datagen.dataset.reader import load_dataset
 
     folder = output_path(out if out is not None else Path(dataset) / "audit", "--out")
     view = load_dataset(dataset, allow_duplicates=True)
@@ -259,8 +259,8 @@ def preview(
     = None,
 ) -> None:
     """Draw overlays of true centres, tight and corrected boxes (paper Fig. 11)."""
-    from datagen.preview import write_previews
-    from datagen.reader import load_dataset
+    from datagen.report.overlays import write_previews
+    from datagen.dataset.reader import load_dataset
 
     folder = output_path(out if out is not None else Path(dataset) / "preview", "--out")
     wanted = _frame_list(frames) if frames else None
@@ -288,9 +288,9 @@ def evaluate(
 ) -> None:
     """PtD vectors by dual-object PnP from true centres (with noise) or detections;
     accuracy and reliability against distance (paper 3.3-3.6)."""
-    from datagen.evaluate import covered_splits, parse_predictions, summarize, write_evaluation
-    from datagen.evaluate import evaluate as run_evaluate
-    from datagen.reader import load_dataset
+    from datagen.analysis.evaluate import covered_splits, parse_predictions, summarize, write_evaluation
+    from datagen.analysis.evaluate import evaluate as run_evaluate
+    from datagen.dataset.reader import load_dataset
 
     if split not in (None, "all", "train", "val"):
         raise DatagenError(f"--split: {split!r}: choose all, train or val")
@@ -347,7 +347,7 @@ def evaluate(
     typer.echo(f"wrote {written['json']}")
 
 
-#: How ``datagen evaluate`` names a failure reason of :data:`datagen.evaluate.REASONS`.
+#: How ``datagen evaluate`` names a failure reason of :data:`datagen.analysis.evaluate.REASONS`.
 _REASON_TEXT = {
     "too_few_matches": "with fewer than 3 matched features of an object",
     "pnp_failed": "where PnP found no pose",
@@ -376,7 +376,7 @@ def render(
     seed: Annotated[int | None, typer.Option("--seed", min=0, help="Override the config's seed.")] = None,
 ) -> None:
     """Render single frames of a config (no labels): for looking, not for datasets."""
-    from datagen.render import render_frames
+    from datagen.render.renderer import render_frames
 
     output_path(out, "--out")
     cfg = load_config(config)
@@ -391,7 +391,7 @@ def gallery(
     spp: Annotated[int, typer.Option("--spp", min=1, max=MAX_SPP, help="Samples per pixel.")] = 16,
 ) -> None:
     """Render four frames each of wingcam55, podcam15 and dashcam75 into one sheet."""
-    from datagen.render import write_gallery
+    from datagen.render.renderer import write_gallery
 
     output_path(out, "--out")
     root = Path(__file__).resolve().parent.parent / "scenes"
@@ -425,14 +425,14 @@ def assets_build(
     out: Annotated[Path | None, typer.Option("--out", help="Assets folder (default: the built-in one).")] = None,
 ) -> None:
     """Regenerate every built-in mesh and feature file, byte for byte."""
-    from datagen.assets import BUILTIN_DIR, build_assets
+    from datagen.assets.files import BUILTIN_DIR, build_assets
 
     for path in build_assets(output_path(out, "--out") if out else BUILTIN_DIR):
         typer.echo(f"wrote {path} ({path.stat().st_size:,} bytes)")
 
 
 def _object_name(name: str) -> str:
-    from datagen.assets import RIGID_OBJECTS
+    from datagen.assets.files import RIGID_OBJECTS
 
     if name not in RIGID_OBJECTS:
         raise DatagenError(f"unknown object {name!r} (choose from {', '.join(RIGID_OBJECTS)})")
@@ -454,7 +454,7 @@ def assets_show(
                                        "(as features.random_per_object).")] = 40,
 ) -> None:
     """Print the feature table of an object."""
-    from datagen.assets import builtin_paths, describe_features, load_object_features, object_paths
+    from datagen.assets.files import builtin_paths, describe_features, load_object_features, object_paths
 
     name = _object_name(name)
     if variant not in _VARIANTS:
@@ -480,8 +480,8 @@ def assets_preview(
     config: Annotated[Path | None, typer.Option("--config", help="Use this config's mesh and feature files.")] = None,
 ) -> None:
     """Render a contact sheet of each object from six views, feature centres marked."""
-    from datagen.assets import BUILTIN_DIR, RIGID_OBJECTS, builtin_paths, load_features, load_mesh, object_paths
-    from datagen.previews import write_contact_sheet
+    from datagen.assets.files import BUILTIN_DIR, RIGID_OBJECTS, builtin_paths, load_features, load_mesh, object_paths
+    from datagen.report.contact_sheets import write_contact_sheet
 
     cfg = load_config(config) if config is not None else None
     folder = output_path(out, "--out") if out else BUILTIN_DIR / "previews"

@@ -6,8 +6,8 @@ import numpy as np
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from datagen.camera import Intrinsics
-from datagen.transforms import make_transform
+from datagen.core.camera import Intrinsics
+from datagen.core.transforms import make_transform
 
 finite = dict(allow_nan=False, allow_infinity=False)
 

@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from datagen import approach as ap
-from datagen.config import Config, load_config
-from datagen.rig import HOSE_ATTACH_DROGUE_M, HOSE_PORT_TANKER_M, MOUNTS
-from datagen.transforms import invert_rigid, rotvec_from_rotation
+from datagen.scene import approach as ap
+from datagen.config.schema import Config, load_config
+from datagen.scene.rig import HOSE_ATTACH_DROGUE_M, HOSE_PORT_TANKER_M, MOUNTS
+from datagen.core.transforms import invert_rigid, rotvec_from_rotation
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = load_config(ROOT / "scenes" / "wingcam55.yaml")

@@ -12,7 +12,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from datagen.assets import (
+from datagen.assets.files import (
     BUILTIN_DIR,
     RIGID_OBJECTS,
     STORED_VARIANTS,
@@ -24,11 +24,11 @@ from datagen.assets import (
     load_mesh,
     load_object_features,
 )
-from datagen.config import load_config
-from datagen.errors import ConfigError
-from datagen.models import material_class
-from datagen.models.drogue import HOSE_RADIUS_M, hose_faces, hose_mesh, hose_vertices
-from datagen.rig import HOSE_PORT_TANKER_M, MOUNTS
+from datagen.config.schema import load_config
+from datagen.core.errors import ConfigError
+from datagen.assets.models import material_class
+from datagen.assets.models.drogue import HOSE_RADIUS_M, hose_faces, hose_mesh, hose_vertices
+from datagen.scene.rig import HOSE_PORT_TANKER_M, MOUNTS
 
 from .strategies import finite
 
@@ -140,7 +140,7 @@ def test_parts_are_named_for_materials(meshes) -> None:
 def test_meshes_load_in_mitsuba(meshes) -> None:
     import mitsuba as mi
 
-    from datagen.mitsuba_util import mitsuba_mesh, select_variant
+    from datagen.render.mitsuba import mitsuba_mesh, select_variant
 
     select_variant("auto")
     for name, mesh in meshes.items():

@@ -21,16 +21,16 @@ import yaml
 from hypothesis import given
 from hypothesis import strategies as st
 
-from datagen.assets import feature_table
-from datagen.build import build_dataset
-from datagen.camera import Intrinsics
-from datagen.config import LabelsConfig, load_config, override_config
-from datagen.dataset import SPLITS, DatasetLock, frame_split, plan_shards
-from datagen.errors import ConfigError, DatagenError
-from datagen.files import is_temporary
-from datagen.labels import compute_labels
-from datagen.manifest import RUN_COLUMNS, features_schema, manifest_schema, read_features
-from datagen.training import label_options
+from datagen.assets.files import feature_table
+from datagen.build.run import build_dataset
+from datagen.core.camera import Intrinsics
+from datagen.config.schema import LabelsConfig, load_config, override_config
+from datagen.dataset.layout import SPLITS, DatasetLock, frame_split, plan_shards
+from datagen.core.errors import ConfigError, DatagenError
+from datagen.dataset.files import is_temporary
+from datagen.core.labels import compute_labels
+from datagen.dataset.schema import RUN_COLUMNS, features_schema, manifest_schema, read_features
+from datagen.core.training import label_options
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -139,7 +139,7 @@ def test_manifest_readme_documents_every_column() -> None:
 
 
 def test_features_parquet_round_trips(tmp_path: Path) -> None:
-    from datagen.manifest import write_features
+    from datagen.dataset.schema import write_features
 
     config = load_config(ROOT / "scenes/wingcam55-random.yaml")
     table = feature_table(config)
@@ -232,7 +232,7 @@ def test_a_running_build_locks_the_folder(tmp_path: Path) -> None:
     tiny_config(tmp_path)
     root = tmp_path / "ds"
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time; from pathlib import Path; from datagen.dataset import "
+        [sys.executable, "-c", "import sys, time; from pathlib import Path; from datagen.dataset.layout import "
          "DatasetLock; DatasetLock(Path(sys.argv[1])).acquire(); print('locked', flush=True); time.sleep(120)",
          str(root)], stdout=subprocess.PIPE, text=True)
     try:

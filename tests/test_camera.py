@@ -13,8 +13,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from datagen.camera import Intrinsics, in_front, project_points
-from datagen.transforms import apply_transform, make_transform
+from datagen.core.camera import Intrinsics, in_front, project_points
+from datagen.core.transforms import apply_transform, make_transform
 
 from .strategies import intrinsics, point_sets
 

@@ -8,8 +8,8 @@ import pytest
 import yaml
 from pydantic import BaseModel, ValidationError
 
-from datagen.config import Config, load_config
-from datagen.errors import ConfigError
+from datagen.config.schema import Config, load_config
+from datagen.core.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = sorted((ROOT / "scenes").glob("*.yaml"))

@@ -10,9 +10,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from datagen.camera import Intrinsics, project_points
-from datagen.conventions import CVCAM_FROM_MICAM, MICAM_FROM_CVCAM, frame_rng
-from datagen.transforms import Transform, apply_transform, invert_rigid, make_transform, rotation_from_ypr
+from datagen.core.camera import Intrinsics, project_points
+from datagen.core.conventions import CVCAM_FROM_MICAM, MICAM_FROM_CVCAM, frame_rng
+from datagen.core.transforms import Transform, apply_transform, invert_rigid, make_transform, rotation_from_ypr
 
 from .strategies import finite, rotations
 

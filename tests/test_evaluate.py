@@ -14,15 +14,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from datagen.approach import frame_state
-from datagen.assets import feature_table
-from datagen.build import build_dataset
-from datagen.camera import Intrinsics, project_points
-from datagen.config import load_config, override_config
-from datagen.errors import DatagenError
-from datagen.evaluate import evaluate, parse_predictions, ptd_from_points, summarize
-from datagen.reader import load_dataset
-from datagen.transforms import apply_transform, invert_rigid, make_transform, rotation_from_ypr
+from datagen.scene.approach import frame_state
+from datagen.assets.files import feature_table
+from datagen.build.run import build_dataset
+from datagen.core.camera import Intrinsics, project_points
+from datagen.config.schema import load_config, override_config
+from datagen.core.errors import DatagenError
+from datagen.analysis.evaluate import evaluate, parse_predictions, ptd_from_points, summarize
+from datagen.dataset.reader import load_dataset
+from datagen.core.transforms import apply_transform, invert_rigid, make_transform, rotation_from_ypr
 
 ROOT = Path(__file__).resolve().parents[1]
 

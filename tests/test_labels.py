@@ -9,10 +9,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from datagen.camera import Intrinsics
-from datagen.features import FeatureTable
-from datagen.labels import YOLO_DECIMALS, Exclusion, boxes_from_uv, compute_labels, yolo_lines
-from datagen.transforms import make_transform, rotation_from_ypr
+from datagen.core.camera import Intrinsics
+from datagen.core.features import FeatureTable
+from datagen.core.labels import YOLO_DECIMALS, Exclusion, boxes_from_uv, compute_labels, yolo_lines
+from datagen.core.transforms import make_transform, rotation_from_ypr
 
 from .strategies import cam_from_model_in_front, finite, intrinsics, point_sets, rotations
 

@@ -11,22 +11,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from datagen.approach import frame_state
-from datagen.assets import feature_table, load_mesh, object_paths
-from datagen.camera import Intrinsics, project_points
-from datagen.config import load_config, override_config
-from datagen.conventions import frame_rng
-from datagen.errors import DatagenError
-from datagen.render import Renderer, draw_look, object_ids, render_seed, to_srgb8, write_exr
-from datagen.rig import body_from_cam_looking
-from datagen.transforms import apply_transform, invert_rigid, make_transform, rotation_from_ypr
+from datagen.scene.approach import frame_state
+from datagen.assets.files import feature_table, load_mesh, object_paths
+from datagen.core.camera import Intrinsics, project_points
+from datagen.config.schema import load_config, override_config
+from datagen.core.conventions import frame_rng
+from datagen.core.errors import DatagenError
+from datagen.render.renderer import Renderer, draw_look, object_ids, render_seed, to_srgb8, write_exr
+from datagen.scene.rig import body_from_cam_looking
+from datagen.core.transforms import apply_transform, invert_rigid, make_transform, rotation_from_ypr
 
 pytestmark = pytest.mark.render
 ROOT = Path(__file__).resolve().parents[1]
 
 import mitsuba as mi  # noqa: E402  (after the marker: every test here needs Mitsuba)
 
-from datagen.mitsuba_util import select_variant, sensor_dict  # noqa: E402
+from datagen.render.mitsuba import select_variant, sensor_dict  # noqa: E402
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -248,7 +248,7 @@ def test_srgb_transfer() -> None:
 
 
 def test_missing_llvm_gets_an_install_hint(monkeypatch) -> None:
-    from datagen import mitsuba_util
+    from datagen.render import mitsuba as mitsuba_util
 
     monkeypatch.setattr(mitsuba_util, "_has_backend", lambda name: False)
     with pytest.raises(DatagenError, match=r"apt-get install -y libllvm19"):
@@ -275,7 +275,7 @@ def test_render_command_writes_png_and_exr(tmp_path: Path) -> None:
 
 
 def test_a_visibility_threshold_excludes_occluded_features() -> None:
-    from datagen.labels import Exclusion, compute_labels
+    from datagen.core.labels import Exclusion, compute_labels
 
     renderer, config = _renderer("podcam15.yaml")
     state = frame_state(config, 0)
@@ -313,7 +313,7 @@ def test_scalar_fallback_agrees_with_the_vectorized_variant() -> None:
 
 
 def test_haze_fades_distance_towards_the_sky() -> None:
-    from datagen.render import _haze
+    from datagen.render.renderer import _haze
 
     rgb = np.zeros((2, 3, 3), dtype=np.float32)
     rgb[0, :] = [1.0, 0.5, 0.25]  # sky row (nothing hit)

@@ -19,16 +19,16 @@ import numpy as np
 import pytest
 import yaml
 
-from datagen.audit import audit
-from datagen.build import build_dataset
-from datagen.config import load_config, override_config
-from datagen.dataset import Layout, plan_shards, write_image_lists
-from datagen.reader import load_dataset
+from datagen.analysis.audit import audit
+from datagen.build.run import build_dataset
+from datagen.config.schema import load_config, override_config
+from datagen.dataset.layout import Layout, plan_shards, write_image_lists
+from datagen.dataset.reader import load_dataset
 
 pytestmark = pytest.mark.train
 pytest.importorskip("ultralytics", reason="needs the train extra: pip install -e '.[train]'")
 
-from datagen.yolo import dataloader_learnability  # noqa: E402  (imports Ultralytics lazily)
+from datagen.analysis.ultralytics import dataloader_learnability  # noqa: E402  (imports Ultralytics lazily)
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Not a seed any shipped config uses: the labels are checked on frames nobody tuned on.

@@ -1,4 +1,4 @@
-"""How Ultralytics' trainer sees a label (datagen.training): the resize and centring onto
+"""How Ultralytics' trainer sees a label (datagen.core.training): the resize and centring onto
 the square input, the 2 px rule and the anchor grid, against brute force."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from datagen.training import ANCHOR_STRIDES, TrainView
+from datagen.core.training import ANCHOR_STRIDES, TrainView
 
 from .strategies import finite
 

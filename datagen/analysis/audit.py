@@ -1,0 +1,741 @@
+"""``datagen audit``: prove a dataset's labels are what they claim, and measure the
+parallax that corrected boxes remove.
+
+Every check recomputes from the manifests and ``features.parquet`` alone
+(:meth:`datagen.dataset.reader.DatasetView.recompute`) and names its worst offenders by
+file. The statistics show how far the *tight* box centre (the perceived centre)
+lies from the projection of the true 3D centre, as a function of distance,
+feature size and view obliqueness (paper Fig. 8).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import stat
+from collections import Counter
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from datagen.dataset.layout import MANIFEST_NAME
+from datagen.dataset.files import is_temporary
+from datagen.core.labels import YOLO_DECIMALS, Exclusion, FrameLabels
+from datagen.dataset.reader import DatasetView, image_size
+
+__all__ = [
+    "DRIFT_LIMIT_PX",
+    "AuditResult",
+    "Check",
+    "audit",
+    "feature_normals",
+    "obliqueness_deg",
+    "tight_centre_drift_px",
+]
+
+#: The corrected-box centre of a label line may lie this far from the true centre projection.
+DRIFT_LIMIT_PX: Final = 1e-3
+#: Manifest boxes and centres must match the recomputation this closely.
+MANIFEST_TOLERANCE_PX: Final = 1e-6
+#: A label line's values may differ from the manifest box by the rounding of
+#: :data:`datagen.core.labels.YOLO_DECIMALS` decimals (normalized units).
+LINE_TOLERANCE: Final = 0.5 * 10.0 ** -YOLO_DECIMALS + 1e-12
+#: Offenders listed per check (the worst first).
+MAX_OFFENDERS: Final = 20
+#: PnP needs at least this many labeled features of an object in a frame.
+PNP_MIN_FEATURES: Final = 3
+#: The ``learnable`` check fails when a smaller share of label lines can teach the detector.
+MIN_LEARNABLE_SHARE: Final = 0.95
+#: Files Ultralytics writes into a dataset it trains on: label caches beside the label
+#: folders (``labels/train/00000.cache``, and ``.cache.npy`` while it writes one) and
+#: ``.npy`` image caches beside the images (``cache=disk``). They are not orphans.
+ULTRALYTICS_SUFFIXES: Final = (".cache", ".cache.npy", ".npy")
+
+
+@dataclass
+class Check:
+    """One audit check: what it verifies, over how many items, and who failed it."""
+
+    name: str
+    description: str
+    checked: int = 0
+    failures: int = 0
+    worst: float | None = None  # the largest error, where the check measures one
+    offenders: list[str] = field(default_factory=list)  # "file: what", worst first
+    applicable: bool = True
+    #: None: any failure fails the check; else the check passes while at least this share passes.
+    min_pass_share: float | None = None
+    _scored: list[tuple[float, str]] = field(default_factory=list, repr=False)
+
+    @property
+    def pass_share(self) -> float | None:
+        return (self.checked - self.failures) / self.checked if self.checked else None
+
+    @property
+    def passed(self) -> bool:
+        if self.min_pass_share is None:
+            return self.failures == 0
+        return self.checked == 0 or self.pass_share >= self.min_pass_share
+
+    def fail(self, where: str, what: str, score: float = math.inf) -> None:
+        self.failures += 1
+        self._scored.append((score, f"{where}: {what}"))
+
+    def finish(self) -> Check:
+        self._scored.sort(key=lambda s: -s[0])
+        self.offenders = [text for _, text in self._scored[:MAX_OFFENDERS]]
+        self._scored = []
+        return self
+
+    def as_dict(self) -> dict:
+        out = {k: v for k, v in asdict(self).items() if not k.startswith("_")}
+        out["passed"] = self.passed
+        out["pass_share"] = self.pass_share
+        return out
+
+
+@dataclass
+class AuditResult:
+    root: Path
+    name: str
+    frames: int
+    checks: list[Check]
+    stats: dict
+    labels: FrameLabels  # the recomputation the checks ran against (reused by the report's overlays)
+
+    @property
+    def passed(self) -> bool:
+        return all(c.passed for c in self.checks)
+
+
+# --- geometry of the statistics (pure functions) ---------------------------------------
+def tight_centre_drift_px(tight_xyxy: NDArray[np.float64], center_px: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(...)`` distance in pixels between the tight box's centre (the perceived centre)
+    and the projection of the true 3D centre."""
+    tight_centre = 0.5 * (tight_xyxy[..., :2] + tight_xyxy[..., 2:])
+    return np.hypot(*np.moveaxis(tight_centre - center_px, -1, 0))
+
+
+def feature_normals(points_model: NDArray[np.float64], n_points: NDArray[np.int64]) -> NDArray[np.float64]:
+    """``(F, 3)`` unit normal of each feature's point set: the direction of least spread
+    (the ring of a surface feature lies in the surface's tangent plane)."""
+    normals = np.empty((len(points_model), 3))
+    for i, (pts, n) in enumerate(zip(points_model, n_points, strict=True)):
+        p = pts[:n] - pts[:n].mean(axis=0)
+        normals[i] = np.linalg.svd(p, full_matrices=True)[2][-1]
+    return normals
+
+
+def obliqueness_deg(cam_from_model: NDArray[np.float64], normal_model: NDArray[np.float64],
+                    center_model: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Angle between a feature's normal and the line of sight to its centre, degrees:
+    0 when the camera looks straight at the feature, 90 when it is seen edge-on.
+
+    Args:
+        cam_from_model: ``(..., F, 4, 4)``.
+        normal_model, center_model: ``(F, 3)`` in the feature's object frame.
+    """
+    rot = cam_from_model[..., :3, :3]
+    n_cam = np.einsum("...ij,...j->...i", rot, normal_model)
+    c_cam = np.einsum("...ij,...j->...i", rot, center_model) + cam_from_model[..., :3, 3]
+    cos = np.abs(np.sum(n_cam * c_cam, axis=-1)) / np.maximum(np.linalg.norm(c_cam, axis=-1), 1e-12)
+    return np.degrees(np.arccos(np.clip(cos, 0.0, 1.0)))
+
+
+def _binned(values: NDArray, keys: NDArray, edges: NDArray) -> list[dict]:
+    """Count, mean, median, p95 and max of ``values`` per bin of ``keys``."""
+    out = []
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        v = values[(keys >= lo) & (keys < hi)]
+        out.append({"lo": float(lo), "hi": float(hi), "count": int(v.size),
+                    **({"mean": float(v.mean()), "median": float(np.median(v)), "p95": float(np.percentile(v, 95)),
+                        "max": float(v.max())} if v.size else {})})
+    return out
+
+
+# --- label files --------------------------------------------------------------------------
+def _parse_label_file(path: Path) -> tuple[list[list[str]], str | None]:
+    if path.exists() and not path.is_file():
+        return [], "not a regular file"
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        return [], "missing"
+    except (OSError, UnicodeDecodeError) as exc:
+        return [], f"unreadable ({exc})"
+    return [line.split() for line in text.splitlines() if line.strip()], None
+
+
+
+
+# --- the audit -----------------------------------------------------------------------------
+def audit(view: DatasetView, *, min_learnable: float = MIN_LEARNABLE_SHARE) -> AuditResult:
+    """Run every check and compute every statistic of a loaded dataset.
+
+    ``min_learnable``: the share of label lines that must be learnable by Ultralytics'
+    trainer at ``labels.train_imgsz`` (:mod:`datagen.core.training`)."""
+    labels = view.recompute()
+    line_checks, lines = _check_label_files(view, labels)
+    learnable, learnable_stats = _check_learnable(view, lines, min_learnable)
+    checks = [
+        _check_manifest(view, labels),
+        *line_checks,
+        learnable,
+        _check_files(view),
+        _check_images(view),
+        _check_names(view),
+    ]
+    stats = _statistics(view, labels)
+    stats["learnable"] = learnable_stats
+    return AuditResult(view.root, str(view.doc.get("name", view.root.name)), len(view), [c.finish() for c in checks],
+                       stats, labels)
+
+
+def _check_manifest(view: DatasetView, labels) -> Check:
+    check = Check("manifest_boxes", "manifest centres, tight, corrected and label boxes and exclusions equal a "
+                  f"recomputation from the poses and features.parquet (to {MANIFEST_TOLERANCE_PX:g} px)")
+    expected_k = np.array([view.intrinsics.width, view.intrinsics.height, view.intrinsics.fx, view.intrinsics.fy,
+                           view.intrinsics.cx, view.intrinsics.cy])
+    worst = 0.0
+    labeled = labels.labeled  # a whole-dataset array: computed once
+    for b in range(len(view)):
+        where = f"{view.manifest_file[b]} frame {view.frame_id[b]}"
+        check.checked += 1
+        if not np.allclose(view.row_intrinsics[b], expected_k, rtol=0, atol=1e-9):
+            check.fail(where, f"intrinsics {view.row_intrinsics[b].tolist()} differ from dataset.json's")
+            continue
+        if not np.array_equal(view.class_id[b], view.features.class_id):
+            check.fail(where, "feature records are not one per class in class-id order")
+            continue
+        errors = []
+        for name in ("center_px", "tight_xyxy", "corrected_xyxy", "label_xyxy"):
+            stored, fresh = getattr(view, name)[b], getattr(labels, name)[b]
+            if name == "label_xyxy":  # stored only for labeled features
+                fresh = np.where(labeled[b][:, None], fresh, np.nan)
+            both_nan = np.isnan(stored) & np.isnan(fresh)
+            err = np.where(both_nan, 0.0, np.abs(stored - fresh))
+            err = np.where(np.isnan(err), np.inf, err).max(axis=-1)
+            errors.append(err)
+        err = np.max(errors, axis=0)
+        worst = max(worst, float(err[np.isfinite(err)].max(initial=0.0)))
+        reasons = np.array([Exclusion(int(e)).reason for e in labels.exclusion[b]], dtype=object)
+        bad = np.flatnonzero((err > MANIFEST_TOLERANCE_PX) | (reasons != view.exclusion[b])
+                             | (view.labeled[b] != labeled[b]))
+        for f in bad[:3]:
+            what = (f"class {f}: stored exclusion {view.exclusion[b][f]!r}, recomputed {reasons[f]!r}"
+                    if reasons[f] != view.exclusion[b][f] else f"class {f}: box or centre off by {err[f]:.3g} px")
+            check.fail(where, what, float(err[f]))
+    check.worst = worst
+    return check
+
+
+def _check_label_files(view: DatasetView, labels) -> tuple[list[Check], NDArray[np.float64]]:
+    """The per-line checks, and every well-formed line as a row ``(frame row, class, cx, cy, w, h)``."""
+    k = view.intrinsics
+    w, h, m = k.width, k.height, view.edge_margin_px
+    nc = len(view.features)
+    lines = Check("label_lines", "every label line equals its manifest box (class, centre, size; to the "
+                  "file's rounding) and every labeled feature has exactly one line")
+    drift = Check("centre_drift", f"label-file box centres lie within {DRIFT_LIMIT_PX:g} px of the projection "
+                  "of the feature's true 3D centre (corrected datasets)", applicable=view.corrected)
+    margin = Check("edge_margin_and_front", f"labeled boxes lie at least edge_margin_px ({m:g} px) inside every "
+                   "border and no labeled feature has a point at or behind the camera plane")
+    rules = Check("ultralytics_rules", "label files follow Ultralytics' rules: 5 columns, integer class < nc, "
+                  "values in [0, 1], positive size, no duplicate rows")
+    label_centre = labels.label_center_px
+    box = labels.label_xyxy
+    labeled_all = labels.labeled  # a whole-dataset array: computed once, not per line
+    worst_drift = worst_line = 0.0
+    parsed: list[tuple[float, ...]] = []
+    for b in range(len(view)):
+        rel = view.label_path[b]
+        rows, problem = _parse_label_file(view.root / rel)
+        if problem:
+            lines.fail(rel, problem)
+            continue
+        seen: Counter = Counter()
+        per_class: Counter = Counter()
+        for n, tokens in enumerate(rows, start=1):
+            where = f"{rel}:{n}"
+            rules.checked += 1
+            lines.checked += 1
+            try:
+                values = [float(t) for t in tokens]
+            except ValueError:
+                rules.fail(where, f"not numbers: {' '.join(tokens)!r}")
+                continue
+            if not all(math.isfinite(v) for v in values):
+                rules.fail(where, f"not finite: {' '.join(tokens)!r}")
+                continue
+            if len(values) != 5:
+                rules.fail(where, f"{len(values)} columns, Ultralytics needs 5")
+                continue
+            cls = values[0]
+            if cls != int(cls) or not 0 <= cls < nc:
+                rules.fail(where, f"class {tokens[0]} is not an integer in [0, {nc})")
+                continue
+            if min(values[1:]) < 0 or max(values[1:]) > 1 or values[3] <= 0 or values[4] <= 0:
+                rules.fail(where, f"values {tokens[1:]} outside [0, 1] or a size not positive")
+            parsed.append((b, *values))
+            key = tuple(tokens)
+            seen[key] += 1
+            if seen[key] == 2:
+                rules.fail(where, "duplicate row")
+            f = int(cls)
+            per_class[f] += 1
+            if per_class[f] == 2:
+                lines.fail(where, f"class {f} has more than one line")
+            if not labeled_all[b, f]:
+                reason = Exclusion(int(labels.exclusion[b, f])).reason
+                lines.fail(where, f"class {f} has a line but the feature is excluded ({reason})")
+                if labels.exclusion[b, f] == Exclusion.BEHIND_CAMERA:
+                    margin.fail(where, f"class {f} is behind the camera")
+            else:
+                expected = np.array([label_centre[b, f, 0] / w, label_centre[b, f, 1] / h,
+                                     (box[b, f, 2] - box[b, f, 0]) / w, (box[b, f, 3] - box[b, f, 1]) / h])
+                err = np.abs(np.array(values[1:]) - expected)
+                if np.all(np.isfinite(err)):
+                    worst_line = max(worst_line, float((err * [w, h, w, h]).max()))
+                if not np.all(err <= LINE_TOLERANCE):
+                    lines.fail(where, f"class {f} differs from the manifest box by "
+                               f"{(err * [w, h, w, h]).max():.3g} px", float((err * [w, h, w, h]).max()))
+            cx, cy, bw, bh = (values[1] * w, values[2] * h, values[3] * w, values[4] * h)
+            drift.checked += 1
+            d = math.hypot(cx - labels.center_px[b, f, 0], cy - labels.center_px[b, f, 1])
+            if np.isfinite(d):
+                worst_drift = max(worst_drift, d)
+            if view.corrected and not d <= DRIFT_LIMIT_PX:
+                drift.fail(where, f"class {f} centre is {d:.3g} px from the true centre projection", d)
+            margin.checked += 1
+            x0, y0, x1, y1 = cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2
+            inside = min(x0, y0, w - x1, h - y1)
+            if inside < m - 1e-3:
+                margin.fail(where, f"class {f} box is {inside:.2f} px from the border, margin {m:g} px", m - inside)
+        labeled = set(np.flatnonzero(labeled_all[b]).tolist())
+        for f in sorted(labeled - set(per_class)):
+            lines.fail(rel, f"class {f} is labeled in the manifest but has no line")
+    lines.worst, drift.worst = worst_line, worst_drift
+    return [lines, drift, margin, rules], np.array(parsed, dtype=np.float64).reshape(-1, 6)
+
+
+def _check_learnable(view: DatasetView, lines: NDArray[np.float64], min_share: float) -> tuple[Check, dict]:
+    """Which label lines Ultralytics' trainer keeps at ``labels.train_imgsz`` and can assign
+    to an anchor (:mod:`datagen.core.training`); the check passes while at least ``min_share`` can."""
+    rules = view.label_rules
+    train = view.train_view
+    check = Check("learnable", f"at least {100 * min_share:g}% of label lines survive Ultralytics' training "
+                  f"transforms at imgsz {rules.train_imgsz} (both sides above 2 px) and hold an anchor centre "
+                  "(strides 8/16/32)", min_pass_share=min_share)
+    k = view.intrinsics
+    b, cls = lines[:, 0].astype(np.int64), lines[:, 1].astype(np.int64)
+    cx, cy, bw, bh = lines[:, 2] * k.width, lines[:, 3] * k.height, lines[:, 4] * k.width, lines[:, 5] * k.height
+    xyxy = np.stack([cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2], axis=-1)
+    survives, anchored = train.survives(xyxy), train.has_anchor(xyxy)
+    ok = survives & anchored
+    check.checked = int(ok.size)
+    check.worst = None if not ok.size else float(1.0 - ok.mean())
+    names = view.features.name
+    by_class = {}
+    for c in np.unique(cls):
+        mine = ok[cls == c]
+        by_class[names[c]] = {"lines": int(mine.size), "share": float(mine.mean())}
+        if not mine.all():
+            check.fail(f"class {c} {names[c]}", f"{mine.mean():.1%} of {mine.size} lines learnable",
+                       float(1.0 - mine.mean()))
+    check.failures = int((~ok).sum())  # offenders are the classes above; the count is of label lines
+
+    def share(mask: NDArray[np.bool_]) -> dict:
+        return {"lines": int(mask.sum()), "share": float(ok[mask].mean()) if mask.any() else None}
+
+    distance = view.distance_m[b] if b.size else np.zeros(0)
+    top = max(10.0, float(np.ceil(view.distance_m.max() / 10.0) * 10.0)) if len(view) else 10.0
+    edges = np.arange(0.0, top + 10.0, 10.0)
+    size = np.array(view.features.size, dtype=object)[cls] if cls.size else np.zeros(0, dtype=object)
+    train_w = np.minimum(bw * train.scale[0], bh * train.scale[1])
+    stats = {
+        "train_imgsz": rules.train_imgsz,
+        "min_box_px": rules.min_box_px,
+        "small_boxes": rules.small_boxes,
+        "threshold": min_share,
+        "lines": int(ok.size),
+        "share": float(ok.mean()) if ok.size else None,
+        "share_survive_2px": float(survives.mean()) if ok.size else None,
+        "share_with_anchor": float(anchored.mean()) if ok.size else None,
+        "min_side_train_px": {"median": float(np.median(train_w)) if ok.size else None,
+                              "min": float(train_w.min()) if ok.size else None},
+        "by_distance_m": [{"lo": float(lo), "hi": float(hi), **share((distance >= lo) & (distance < hi))}
+                          for lo, hi in zip(edges[:-1], edges[1:], strict=True)],
+        "by_size": {(tag or "untagged"): share(size == tag) for tag in sorted(set(view.features.size))},
+        "by_class": by_class,
+        "worst_classes": [{"class": n, **v} for n, v in sorted(by_class.items(), key=lambda kv: kv[1]["share"])
+                          if v["share"] < 1.0][:10],
+    }
+    return check, stats
+
+
+
+
+
+def _check_files(view: DatasetView) -> Check:
+    check = Check("files", "every image, label and EXR a manifest names exists, no file in images/, labels/ "
+                  "or exr/ is unnamed, no temporary file is left, and every planned shard is finished")
+    root = view.root
+    referenced = {p for paths in (view.image_path, view.label_path, view.exr_path) for p in paths if p}
+    for rel in sorted(referenced):
+        check.checked += 1
+        if not (root / rel).is_file():
+            check.fail(rel, "named in a manifest but missing")
+    for tree in ("images", "labels", "exr"):
+        for dirpath, _, files in os.walk(root / tree):
+            for name in files:
+                rel = str((Path(dirpath) / name).relative_to(root))
+                check.checked += 1
+                if is_temporary(name):
+                    check.fail(rel, "temporary file left by an interrupted writer")
+                elif rel not in referenced and not name.endswith(ULTRALYTICS_SUFFIXES):
+                    check.fail(rel, "orphan: no manifest names it")
+    for name in sorted(os.listdir(root / "manifests")):
+        if is_temporary(name):
+            check.fail(f"manifests/{name}", "temporary file left by an interrupted writer")
+        elif not MANIFEST_NAME.fullmatch(name):
+            check.fail(f"manifests/{name}", "not a shard manifest ({split}-{shard:05d}.parquet): an orphan")
+    rows = sorted(zip(view.frame_id.tolist(), view.split, view.image_path, strict=True))
+    for split in ("train", "val"):  # the image lists Ultralytics trains on: every image, in frame order
+        want = [f"./{rel}" for _, s, rel in rows if s == split and rel]
+        if not want:
+            continue
+        listed = root / f"{split}.txt"
+        check.checked += 1
+        try:
+            have = listed.read_text().splitlines() if listed.is_file() else None
+        except (OSError, UnicodeDecodeError):
+            have = None
+        if have is None:
+            check.fail(f"{split}.txt", f"missing or unreadable; it lists the {split} images for Ultralytics")
+        elif have != want:
+            extra = sorted(set(have) - set(want))[:1]
+            what = f"names {extra[0]!r}, which no manifest does" if extra else "misses images or lists them out of order"
+            check.fail(f"{split}.txt", f"{what} ({len(have)} lines, {len(want)} {split} images)")
+    ids, counts = np.unique(view.frame_id, return_counts=True)
+    for frame in ids[counts > 1][:MAX_OFFENDERS]:
+        rows = [view.manifest_file[b] for b in np.flatnonzero(view.frame_id == frame)]
+        check.fail(rows[0], f"frame {frame} is in {len(rows)} manifest rows ({', '.join(sorted(set(rows)))}): a "
+                   "manifest copied or renamed by hand")
+    splits = view.doc.get("splits", {})
+    for split, planned in (splits.items() if isinstance(splits, dict) else []):
+        have = len({int(f) for f, s in zip(view.frame_id, view.split, strict=True) if s == split})
+        want = planned.get("frames", have) if isinstance(planned, dict) else have
+        check.checked += 1
+        if have < want:
+            check.fail("dataset.json", f"splits.{split}: {want} frames planned, {have} in the manifests "
+                       "(an unfinished build: rerun it)")
+        elif have > want:
+            check.fail("dataset.json", f"splits.{split}: {want} frames planned, {have} in the manifests "
+                       "(manifests from another build?)")
+    return check
+
+
+#: Bytes read to find an image's size in its header (a JPEG's frame header may follow its EXIF).
+_HEADER_BYTES: Final = 65536
+
+
+def _check_images(view: DatasetView) -> Check:
+    """Open every image a manifest names: its header states the dataset's size, and it
+    decodes fully (a truncated file or one that is not an image fails). Missing files
+    are the ``files`` check's."""
+    import cv2
+
+    k = view.intrinsics
+    check = Check("images", f"every image a manifest names decodes fully, {k.width}x{k.height} 8-bit colour as "
+                  "dataset.json states")
+    paths = [p for p in view.image_path if p]
+    # A decoded frame is at most its raw size; a file far larger than that is not one.
+    max_bytes = 4 * k.width * k.height * 3 + (1 << 20)
+
+    def one(rel: str) -> str | None:
+        path = view.root / rel
+        try:
+            info = path.stat()
+            size = info.st_size
+            if not stat.S_ISREG(info.st_mode):
+                return "not a regular file"
+            if size > max_bytes:
+                return f"{size:,} bytes, more than a {k.width}x{k.height} image can take"
+            data = path.read_bytes()
+        except FileNotFoundError:
+            return None
+        except OSError as exc:
+            return f"unreadable ({exc.strerror})"
+        found = image_size(data[:_HEADER_BYTES])
+        if found is None:
+            return "not a PNG or JPEG image"
+        if found != (k.width, k.height):
+            return f"{found[0]}x{found[1]} px, dataset.json says {k.width}x{k.height}"
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            return "does not decode (truncated or corrupt)"
+        if image.dtype != np.uint8 or image.shape != (k.height, k.width, 3):
+            return f"decodes to {image.dtype} {image.shape}, expected uint8 ({k.height}, {k.width}, 3)"
+        return None
+
+    from concurrent.futures import ThreadPoolExecutor
+
+    with _quiet_stderr(), ThreadPoolExecutor(max(1, os.cpu_count() or 1)) as pool:  # OpenCV decodes without the GIL
+        for rel, problem in zip(paths, pool.map(one, paths), strict=True):
+            check.checked += 1
+            if problem:
+                check.fail(rel, problem)
+    return check
+
+
+@contextlib.contextmanager
+def _quiet_stderr():
+    """Silence what libpng prints to the process's stderr about a damaged file (the check
+    names the file itself)."""
+    try:
+        saved = os.dup(2)
+    except OSError:
+        yield
+        return
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+def _check_names(view: DatasetView) -> Check:
+    check = Check("class_names", "data.yaml's nc and names match features.parquet class for class")
+    names = view.data_yaml.get("names")
+    expected = dict(zip(view.features.class_id.tolist(), view.features.name, strict=True))
+    check.checked = len(expected)
+    if isinstance(names, list):
+        names = dict(enumerate(names))
+    if not isinstance(names, dict):
+        check.fail("data.yaml", f"names: expected a mapping of class ids, got {type(names).__name__}")
+        return check
+    for cid, name in expected.items():
+        if names.get(cid) != name:
+            check.fail("data.yaml", f"names.{cid}: {names.get(cid)!r}, features.parquet says {name!r}")
+    for cid in sorted(set(names) - set(expected), key=str):
+        check.fail("data.yaml", f"names.{cid}: {names[cid]!r} is not a class of features.parquet")
+    if view.data_yaml.get("nc", len(expected)) != len(expected):
+        check.fail("data.yaml", f"nc: {view.data_yaml.get('nc')}, features.parquet has {len(expected)} classes")
+    return check
+
+
+# --- statistics ------------------------------------------------------------------------------
+def _statistics(view: DatasetView, labels) -> dict:
+    features = view.features
+    k = view.intrinsics
+    in_image = labels.exclusion != Exclusion.BEHIND_CAMERA
+    tight = labels.tight_xyxy
+    inside = in_image & (tight[..., 0] >= 0) & (tight[..., 1] >= 0) & (tight[..., 2] <= k.width) \
+        & (tight[..., 3] <= k.height)
+    drift = tight_centre_drift_px(tight, labels.center_px)
+    cam_from_model = view.cam_from_objects()[:, features.object_index]
+    oblique = obliqueness_deg(cam_from_model, feature_normals(features.points_model, features.n_points),
+                              features.center_model)
+    distance = np.broadcast_to(view.distance_m[:, None], drift.shape)
+    d, dist, obl = drift[inside], distance[inside], oblique[inside]
+    size = np.broadcast_to(np.array(features.size, dtype=object)[None, :], drift.shape)[inside]
+    top = max(10.0, float(np.ceil(view.distance_m.max() / 10.0) * 10.0)) if len(view) else 10.0
+    by_size = {}
+    for tag in sorted(set(features.size)):
+        v = d[size == tag]
+        by_size[tag or "untagged"] = {"count": int(v.size), **({"mean": float(v.mean()), "median": float(np.median(v)),
+                                                                 "p95": float(np.percentile(v, 95)),
+                                                                 "max": float(v.max())} if v.size else {})}
+    reasons = Counter(Exclusion(int(e)).reason or "labeled" for e in labels.exclusion.ravel())
+    per_class = labels.labeled.sum(axis=0)
+    pnp = {}
+    for j, obj in enumerate(features.objects):
+        count = labels.labeled[:, features.object_index == j].sum(axis=1)
+        pnp[obj] = {"frames_below_3": int((count < PNP_MIN_FEATURES).sum()),
+                    "share_below_3": float((count < PNP_MIN_FEATURES).mean()) if len(view) else 0.0,
+                    "median_labeled": float(np.median(count)) if len(view) else 0.0}
+    vis = view.visible_fraction[labels.labeled]
+    vis = vis[np.isfinite(vis)]
+    cv = view.center_visible[labels.labeled]
+    cv = cv[np.isfinite(cv)]
+    coverage_edges = np.arange(0.0, top + 5.0, 5.0)
+    return {
+        "tight_drift_px": {
+            "features": int(d.size),
+            "mean": float(d.mean()) if d.size else None,
+            "median": float(np.median(d)) if d.size else None,
+            "p95": float(np.percentile(d, 95)) if d.size else None,
+            "max": float(d.max()) if d.size else None,
+            "by_distance_m": _binned(d, dist, np.arange(0.0, top + 10.0, 10.0)),
+            "by_size": by_size,
+            "by_obliqueness_deg": _binned(d, obl, np.arange(0.0, 91.0, 15.0)),
+        },
+        "labels_per_class": {features.name[i]: int(per_class[i]) for i in range(len(features))},
+        "exclusions": {r.reason or "labeled": int(reasons.get(r.reason or "labeled", 0)) for r in Exclusion},
+        "visibility": {
+            "labeled_features_rendered": int(vis.size),
+            "visible_fraction_histogram": np.histogram(vis, bins=10, range=(0.0, 1.0))[0].tolist(),
+            "share_fully_visible": float((vis >= 1.0).mean()) if vis.size else None,
+            "share_centre_visible": float(cv.mean()) if cv.size else None,
+        },
+        "pnp_below_3_features": pnp,
+        "distance_coverage": {"edges_m": coverage_edges.tolist(),
+                              "frames": np.histogram(view.distance_m, bins=coverage_edges)[0].tolist()},
+        "_arrays": {"drift": d, "distance": dist, "obliqueness": obl, "size": size,
+                    "visible_fraction": vis},
+    }
+
+
+# --- the report --------------------------------------------------------------------------------
+def report_document(result: AuditResult) -> dict:
+    """report.json: machine-readable, for gating in CI (``passed`` and each check's)."""
+    stats = {k: v for k, v in result.stats.items() if not k.startswith("_")}
+    return {
+        "dataset": str(result.root),
+        "name": result.name,
+        "frames": result.frames,
+        "passed": result.passed,
+        "checks": [c.as_dict() for c in result.checks],
+        "stats": stats,
+    }
+
+
+def write_report(result: AuditResult, view: DatasetView, out: Path, *, overlays: int = 3) -> dict[str, Path]:
+    """Write report.json, plots/*.png and a self-contained report.html into ``out``."""
+    import base64
+    import html
+    import json
+
+    import cv2
+
+    from datagen.dataset.files import atomic_path
+    from datagen.report.plots import plot_audit
+    from datagen.report.overlays import draw_overlay
+
+    out = Path(out)
+    plots = plot_audit(result.stats, out / "plots")
+
+    def data_uri(data: bytes, kind: str) -> str:
+        return f"data:image/{kind};base64,{base64.b64encode(data).decode()}"
+
+    esc = html.escape
+    rows = []
+    for c in result.checks:
+        status = "n/a" if not c.applicable else ("pass" if c.passed else "FAIL")
+        offenders = "".join(f"<li><code>{esc(o)}</code></li>" for o in c.offenders)
+        worst = "" if c.worst is None else f"{c.worst:.3g}"
+        rows.append(f"<tr class='{status.lower().replace('/', '')}'><td>{esc(c.name)}</td><td>{status}</td>"
+                    f"<td>{c.checked}</td><td>{c.failures}</td><td>{worst}</td><td>{esc(c.description)}"
+                    f"{'<ul>' + offenders + '</ul>' if offenders else ''}</td></tr>")
+    drift = result.stats["tight_drift_px"]
+
+    def cells(stat: dict) -> str:
+        """Count, mean, median, p95 and max cells of one drift bin (empty where no feature)."""
+        return f"<td>{stat['count']}</td>" + "".join(
+            f"<td>{stat[k]:.3f}</td>" if k in stat else "<td></td>" for k in ("mean", "median", "p95", "max"))
+
+    def table(bins: list[dict], label: str) -> str:
+        body = "".join(f"<tr><td>{b['lo']:g}-{b['hi']:g}</td>{cells(b)}</tr>" for b in bins)
+        return (f"<table><tr><th>{label}</th><th>features</th><th>mean</th><th>median</th><th>p95</th>"
+                f"<th>max</th></tr>{body}</table>")
+
+    sizes = "".join(f"<tr><td>{esc(s)}</td>{cells(v)}</tr>" for s, v in drift["by_size"].items())
+    figures = "".join(f"<figure><img alt='{esc(name)}' src='{data_uri(path.read_bytes(), 'png')}'>"
+                      f"<figcaption>{esc(name)}</figcaption></figure>" for name, path in plots.items())
+    overlay_html = []
+    for b in np.linspace(0, len(view) - 1, min(overlays, len(view))).round().astype(int) if len(view) else []:
+        image = draw_overlay(view, int(b), result.labels)
+        scale = min(1.0, 1200 / image.shape[1])
+        image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 85])
+        overlay_html.append(f"<figure><img alt='overlay frame {view.frame_id[b]}' "
+                            f"src='{data_uri(data.tobytes(), 'jpeg')}'><figcaption>frame {view.frame_id[b]} "
+                            f"({esc(view.split[b])})</figcaption></figure>")
+    verdict = "PASSED" if result.passed else "FAILED"
+    page = f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>datagen audit: {esc(result.name)}</title>
+<style>
+body {{ font: 14px/1.4 system-ui, sans-serif; margin: 2em; max-width: 1300px; }}
+table {{ border-collapse: collapse; margin: 1em 0; }} td, th {{ border: 1px solid #ccc; padding: 3px 8px; }}
+tr.fail td {{ background: #fdd; }} tr.pass td:nth-child(2) {{ color: #080; }} code {{ font-size: 12px; }}
+figure {{ display: inline-block; margin: 0.5em; }} img {{ max-width: 100%; border: 1px solid #ddd; }}
+.verdict {{ font-weight: bold; color: {'#080' if result.passed else '#c00'}; }}
+</style></head>
+<body>
+<h1>datagen audit: {esc(result.name)}</h1>
+<p><code>{esc(str(result.root))}</code>: {result.frames} frames, {len(view.features)} classes,
+{'corrected' if view.corrected else 'tight (uncorrected)'} boxes, edge margin {view.edge_margin_px:g} px.
+Verdict: <span class="verdict">{verdict}</span></p>
+<h2>Checks</h2>
+<table><tr><th>check</th><th>result</th><th>checked</th><th>failures</th><th>worst</th><th>what (worst offenders)</th></tr>
+{''.join(rows)}</table>
+{_learnable_html(result.stats["learnable"], esc)}
+<h2>Parallax: tight-box centre drift from the true centre projection</h2>
+<p>{drift['features']} features in view; median {_fmt(drift['median'])} px, 95th percentile {_fmt(drift['p95'])} px,
+max {_fmt(drift['max'])} px. Corrected boxes are centred on the true centre; a detector trained on tight
+boxes learns this drift.</p>
+{table(drift['by_distance_m'], 'distance (m)')}
+<table><tr><th>size</th><th>features</th><th>mean</th><th>median</th><th>p95</th><th>max</th></tr>{sizes}</table>
+{table(drift['by_obliqueness_deg'], 'obliqueness (deg)')}
+<h2>Plots</h2>
+{figures}
+<h2>Overlays</h2>
+<p>Magenta crosshair: true centre projection; amber: tight box; green: corrected box (the paper's label); cyan: the label box where it was grown to the minimum training size; grey: excluded.</p>
+{''.join(overlay_html)}
+<script>
+window.addEventListener("load", () => {{
+  const images = Array.from(document.images);
+  const shown = images.filter(i => i.complete && i.naturalWidth > 0).length;
+  document.body.dataset.images = shown + "/" + images.length;
+}});
+</script>
+</body></html>
+"""
+    with atomic_path(out / "report.html") as tmp:
+        tmp.write_text(page)
+    # report.json last: it is the record of every file the report wrote (``files``, relative to
+    # the report folder), which --overwrite removes and nothing else.
+    doc = report_document(result)
+    doc["files"] = ["report.html", *(str(p.relative_to(out)) for p in plots.values())]
+    with atomic_path(out / "report.json") as tmp:
+        tmp.write_text(json.dumps(doc, indent=2, allow_nan=False, default=_json_default) + "\n")
+    return {"json": out / "report.json", "html": out / "report.html", **plots}
+
+
+def _learnable_html(stats: dict, esc) -> str:
+    """The report's section on what Ultralytics' trainer can learn of the label lines."""
+    def pct(v: float | None) -> str:
+        return "-" if v is None else f"{100 * v:.1f}%"
+
+    def rows(items) -> str:
+        return "".join(f"<tr><td>{esc(str(k))}</td><td>{v['lines']}</td><td>{pct(v['share'])}</td></tr>"
+                       for k, v in items)
+
+    head = "<tr><th>{}</th><th>lines</th><th>learnable</th></tr>"
+    distance = [(f"{b['lo']:g}-{b['hi']:g}", b) for b in stats["by_distance_m"] if b["lines"]]
+    worst = [(w["class"], w) for w in stats["worst_classes"]]
+    return f"""<h2>Learnable by the detector</h2>
+<p>{stats['lines']} label lines; {pct(stats['share'])} survive Ultralytics' training transforms at imgsz
+{stats['train_imgsz']} ({pct(stats['share_survive_2px'])} have both sides above 2 px) and hold an anchor centre
+({pct(stats['share_with_anchor'])}); the check asks for {pct(stats['threshold'])}. Label boxes are at least
+{stats['min_box_px']:g} px there ({esc(stats['small_boxes'])} smaller ones).</p>
+<table>{head.format('distance (m)')}{rows(distance)}</table>
+<table>{head.format('size')}{rows(stats['by_size'].items())}</table>
+<table>{head.format('worst classes')}{rows(worst) or '<tr><td colspan=3>every class fully learnable</td></tr>'}</table>
+"""
+
+
+def _fmt(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3f}"
+
+
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"not JSON: {type(value).__name__}")

@@ -1,0 +1,141 @@
+"""A dataset seen through Ultralytics' own code (the optional ``train`` extra).
+
+:mod:`datagen.core.training` restates what Ultralytics' trainer does to a label so that
+``datagen audit`` can judge learnability without importing it. This module asks
+Ultralytics itself: it builds the trainer's own dataset object from the dataset's
+``data.yaml`` and ``hyp.yaml``, draws every image through the training
+transforms and counts which label lines come out, and which of those hold an
+anchor centre of the detection head. Tests and ``bench/bench_train.py`` compare
+the two.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from datagen.core.errors import DatagenError
+from datagen.core.training import ANCHOR_STRIDES
+
+__all__ = ["assigner_positives", "dataloader_learnability", "require_ultralytics"]
+
+
+def require_ultralytics():
+    """The ``ultralytics`` module, or one line saying how to install it."""
+    try:
+        import ultralytics
+    except ImportError:
+        raise DatagenError("Ultralytics is not installed; install it with `pip install -e '.[train]'`") from None
+    return ultralytics
+
+
+def _training_dataset(root: Path, split: str):
+    """Ultralytics' training ``YOLODataset`` of ``root`` (its data.yaml, its hyp.yaml)."""
+    require_ultralytics()
+    from ultralytics.cfg import get_cfg
+    from ultralytics.data.build import build_yolo_dataset
+    from ultralytics.data.utils import check_det_dataset
+
+    data = check_det_dataset(str(root / "data.yaml"))
+    hyp = yaml.safe_load((root / "hyp.yaml").read_text())
+    cfg = get_cfg(overrides={**hyp, "task": "detect", "mode": "train", "cache": False, "workers": 0})
+    return build_yolo_dataset(cfg, data[split], batch=1, data=data, mode="train", stride=max(ANCHOR_STRIDES)), cfg
+
+
+def dataloader_learnability(root: str | Path, split: str = "train") -> dict:
+    """Run every image of ``split`` through Ultralytics' training transforms (the dataset's
+    own ``hyp.yaml``) and count label lines, the instances that come out, and those
+    that hold an anchor centre (``make_anchors``: strictly inside the box) or get
+    candidate anchors from Ultralytics' own assigner (``select_candidates_in_gts``,
+    which widens boxes under 16 px).
+
+    Returns totals (``lines``, ``kept``, ``anchored``, ``assigner_candidates``,
+    ``images``, ``imgsz``), the image files in dataset order (``im_files``) and
+    per-instance arrays: ``image`` (index into ``im_files``), ``classes``,
+    ``xyxy_train`` (pixels on the square training input) and ``anchored_mask``.
+    """
+    import torch
+    from ultralytics.utils.tal import TaskAlignedAssigner, make_anchors
+
+    root = Path(root)
+    dataset, cfg = _training_dataset(root, split)
+    imgsz = int(cfg.imgsz)
+    sizes = torch.tensor([[imgsz // s, imgsz // s] for s in ANCHOR_STRIDES])
+    points, strides = make_anchors(sizes, torch.tensor(ANCHOR_STRIDES, dtype=torch.float32), 0.5)
+    centres = points * strides  # (A, 2) pixels
+    assigner = TaskAlignedAssigner(stride=list(ANCHOR_STRIDES))
+    lines = kept = 0
+    classes, boxes, images = [], [], []
+    for i in range(len(dataset)):
+        lines += len(dataset.labels[i]["cls"])
+        item = dataset[i]
+        if not len(item["cls"]):
+            continue
+        h, w = item["img"].shape[1:]
+        xywh = item["bboxes"].double() * torch.tensor([w, h, w, h], dtype=torch.float64)
+        xyxy = torch.cat([xywh[:, :2] - xywh[:, 2:] / 2, xywh[:, :2] + xywh[:, 2:] / 2], dim=1)
+        kept += len(xyxy)
+        classes.append(item["cls"].view(-1).numpy().astype(np.int64))
+        boxes.append(xyxy.numpy())
+        images.append(np.full(len(xyxy), i, dtype=np.int64))
+    xyxy = np.concatenate(boxes) if boxes else np.zeros((0, 4))
+    gt = torch.from_numpy(xyxy).float()
+    inside = ((centres[None, :, 0] > gt[:, None, 0]) & (centres[None, :, 1] > gt[:, None, 1])
+              & (centres[None, :, 0] < gt[:, None, 2]) & (centres[None, :, 1] < gt[:, None, 3]))
+    candidates = assigner.select_candidates_in_gts(centres, gt[None], torch.ones(1, len(gt), 1))[0]
+    return {
+        "im_files": list(dataset.im_files),
+        "images": len(dataset),
+        "imgsz": imgsz,
+        "lines": lines,
+        "kept": kept,
+        "anchored": int(inside.any(dim=1).sum()),
+        "assigner_candidates": int(candidates.any(dim=1).sum()),
+        "image": np.concatenate(images) if images else np.zeros(0, np.int64),
+        "classes": np.concatenate(classes) if classes else np.zeros(0, np.int64),
+        "xyxy_train": xyxy,
+        "anchored_mask": inside.any(dim=1).numpy(),
+    }
+
+
+def assigner_positives(root: str | Path, split: str = "train", *, images: int | None = None, batch: int = 8,
+                       model: str = "yolo11n.yaml", seed: int = 0) -> dict:
+    """How many label lines Ultralytics' own detection loss gives at least one positive
+    anchor, on an untrained ``model`` (built from its YAML, seeded): the assigner of
+    ``v8DetectionLoss`` run on the trainer's own batches of ``split``.
+
+    The task-aligned assigner weighs anchors by the network's predictions, so this is
+    the state at the start of training; an anchor inside several boxes goes to one of
+    them. Returns ``label_lines`` (in the label files), ``instances`` (what the
+    dataloader produced of them) and ``positive`` (instances given a positive anchor)."""
+    import torch
+    from ultralytics.nn.tasks import DetectionModel
+
+    root = Path(root)
+    dataset, cfg = _training_dataset(root, split)
+    torch.manual_seed(seed)
+    network = DetectionModel(model, nc=len(dataset.data["names"]), verbose=False)
+    network.args = cfg
+    criterion = network.init_criterion()
+    seen: dict = {}
+    forward = criterion.assigner.forward
+
+    def capture(*args, **kwargs):
+        out = forward(*args, **kwargs)
+        seen["fg"], seen["gt_idx"], seen["mask_gt"] = out[3], out[4], args[5]
+        return out
+
+    criterion.assigner.forward = capture
+    count = len(dataset) if images is None else min(images, len(dataset))
+    label_lines = sum(len(dataset.labels[i]["cls"]) for i in range(count))
+    lines = positive = 0
+    with torch.no_grad():
+        for start in range(0, count, batch):
+            items = dataset.collate_fn([dataset[i] for i in range(start, min(start + batch, count))])
+            items["img"] = items["img"].float() / 255
+            criterion(network(items["img"]), items)
+            lines += int(seen["mask_gt"].sum())
+            positive += sum(len(seen["gt_idx"][b][seen["fg"][b]].unique()) for b in range(seen["fg"].shape[0]))
+    return {"images": count, "label_lines": label_lines, "instances": lines, "positive": positive}

@@ -1,0 +1,104 @@
+"""The built-in procedural models: tanker, receiver with probe, drogue, hose.
+
+Each builder returns a :class:`Model`: meshes by part name in the object's body
+frame (:mod:`datagen.core.conventions`), and the feature anchors from which
+:mod:`datagen.assets.files` derives the feature point sets. The models are built
+around the mounts and hose port of :mod:`datagen.scene.rig`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final, Literal
+
+import numpy as np
+import trimesh
+
+__all__ = [
+    "MATERIAL_CLASSES",
+    "SIZE_SCALE",
+    "FeatureAnchor",
+    "InternalFeature",
+    "Model",
+    "material_class",
+]
+
+Size = Literal["small", "medium", "large"]
+
+#: Ring radius of a feature relative to its model's small radius: each size has
+#: four times the area of the one before (paper models J, K, L).
+SIZE_SCALE: Final[dict[str, float]] = {"small": 1.0, "medium": 2.0, "large": 4.0}
+
+#: Material class of each built-in part name; the renderer randomizes a material
+#: per class. Unknown part names (a user's mesh) fall back on keywords, then paint.
+MATERIAL_CLASSES: Final[dict[str, str]] = {
+    "paint": "paint",
+    "radome": "paint",
+    "stores": "paint",
+    "pod": "paint",
+    "glass": "glass",
+    "metal": "metal",
+    "probe": "metal",
+    "markings": "markings",
+    "engine_inlets": "dark",
+    "engine_exhausts": "dark",
+    "fabric": "fabric",
+    "hose": "rubber",
+}
+
+_KEYWORDS: Final = (("glass", "glass"), ("canopy", "glass"), ("window", "glass"), ("metal", "metal"),
+                    ("chrome", "metal"), ("marking", "markings"), ("decal", "markings"),
+                    ("inlet", "dark"), ("intake", "dark"), ("exhaust", "dark"), ("nozzle", "metal"),
+                    ("fabric", "fabric"), ("hose", "rubber"))
+
+
+def material_class(part: str) -> str:
+    """Material class of a part name: exact built-in name, else a keyword in it, else paint."""
+    if part in MATERIAL_CLASSES:
+        return MATERIAL_CLASSES[part]
+    lowered = part.lower()
+    return next((cls for key, cls in _KEYWORDS if key in lowered), "paint")
+
+
+@dataclass(frozen=True)
+class FeatureAnchor:
+    """A feature defined by a point on (or near) the surface.
+
+    Its point set is the anchor snapped to the surface plus a ring of surface
+    points around it, of radius ``model.small_radius_m * SIZE_SCALE[size]``;
+    its true centre is the snapped anchor.
+    """
+
+    name: str
+    anchor_m: tuple[float, float, float]
+    size: Size = "small"
+
+    @staticmethod
+    def at(name: str, point, size: Size = "small") -> FeatureAnchor:
+        return FeatureAnchor(name, tuple(float(v) for v in np.asarray(point, dtype=np.float64)), size)
+
+
+@dataclass(frozen=True)
+class InternalFeature:
+    """A feature whose centre is not on the surface (a ring centre): explicit
+    surface points around it and an explicit centre inside their convex hull."""
+
+    name: str
+    points_m: tuple[tuple[float, float, float], ...]
+    center_m: tuple[float, float, float]
+    size: Size = "medium"
+
+
+@dataclass(frozen=True)
+class Model:
+    """A built-in object: meshes by part and the features that define its classes."""
+
+    name: str
+    parts: dict[str, trimesh.Trimesh]
+    anchors: tuple[FeatureAnchor, ...]
+    internal: tuple[InternalFeature, ...] = ()
+    small_radius_m: float = 0.1
+
+    def combined(self) -> trimesh.Trimesh:
+        """All parts as one mesh."""
+        return trimesh.util.concatenate(list(self.parts.values()))

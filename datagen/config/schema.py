@@ -1,0 +1,711 @@
+"""The configuration schema: validated once at the boundary, frozen afterwards.
+
+A scene config is a YAML file (see ``scenes/``). :func:`load_config` reads it,
+checks it against :class:`Config` (unknown keys are errors, so typos cannot
+pass silently) and either returns the frozen model or raises
+:class:`~datagen.core.errors.ConfigError` listing every problem, one line each, with
+the file, the line, the key path, the value and what is wrong.
+
+Angles are degrees in configs and radians in code; lengths are metres; pixel
+quantities are continuous pixels (:mod:`datagen.core.conventions`).
+"""
+
+from __future__ import annotations
+
+import difflib
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import yaml
+from pydantic import (
+    AfterValidator,
+    BeforeValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    Strict,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+from datagen.core.errors import ConfigError, Problem
+from datagen.config.inputs import parse_yaml, read_text
+
+__all__ = [
+    "ApproachConfig",
+    "CameraConfig",
+    "Config",
+    "DatasetConfig",
+    "DrogueConfig",
+    "FeaturesConfig",
+    "LabelsConfig",
+    "MaterialsConfig",
+    "MountJitterConfig",
+    "ObjectSpec",
+    "ObjectsConfig",
+    "RandomizationConfig",
+    "RenderConfig",
+    "SkyConfig",
+    "TankerConfig",
+    "load_config",
+    "override_config",
+    "parse_config",
+]
+
+Mount = Literal["wingcam", "dashcam", "podcam"]
+LabeledObject = Literal["tanker", "receiver", "drogue"]
+
+
+def _real(value: Any) -> Any:
+    """Numbers only: YAML ``true`` or ``"55"`` is not a number (pydantic would take both)."""
+    if isinstance(value, str):
+        try:
+            float(value)
+        except ValueError:
+            pass
+        else:  # YAML 1.1 reads 1e12 (no dot) and quoted numbers as text
+            raise ValueError(f"must be a number, got the text {value!r} (write exponents with a dot, as 1.0e12, "
+                             "and numbers without quotes)")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"must be a number, got {type(value).__name__}")
+    return value
+
+
+#: A finite number (an integer is a number too; booleans and strings are not).
+Number = Annotated[float, BeforeValidator(_real)]
+#: An integer (not a boolean, not a float, not a string).
+Integer = Annotated[int, Strict()]
+#: true or false (not 0, 1 or a string).
+Flag = Annotated[bool, Strict()]
+
+
+def _ordered(bounds: tuple[float, float]) -> tuple[float, float]:
+    lo, hi = bounds
+    if lo > hi:
+        raise ValueError(f"range must be [low, high] with low <= high, got [{lo}, {hi}]")
+    return bounds
+
+
+#: A closed interval ``[low, high]`` written as a two-element list in YAML.
+Range = Annotated[tuple[Number, Number], AfterValidator(_ordered)]
+
+
+def _within(low: float, high: float) -> AfterValidator:
+    """A :data:`Range` whose ends must lie in ``[low, high]``: every range has a documented bound."""
+    def check(bounds: tuple[float, float]) -> tuple[float, float]:
+        lo, hi = bounds
+        if lo < low or hi > high:
+            raise ValueError(f"must lie within [{low:g}, {high:g}], got [{lo:g}, {hi:g}]")
+        return bounds
+
+    return AfterValidator(check)
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, use_attribute_docstrings=True, validate_default=True,
+        allow_inf_nan=False,
+    )
+
+
+# --- camera --------------------------------------------------------------------
+class MountJitterConfig(_Section):
+    """Per-approach perturbation of the camera mount: extrinsics are unknown and drift."""
+
+    translation_m: Number = Field(0.02, ge=0.0, le=1.0)
+    """Each mount offset component is drawn uniformly in [-t, t] metres per approach."""
+
+    rotation_deg: Number = Field(1.0, ge=0.0, le=30.0)
+    """Each of yaw, pitch, roll of the mount is drawn uniformly in [-r, r] degrees per approach."""
+
+
+class CameraConfig(_Section):
+    """The pinhole camera (paper Table 1) and where it is mounted."""
+
+    mount: Mount
+    """wingcam: receiver right wing pod, forward; dashcam: receiver cockpit, forward;
+    podcam: tanker hose pod next to the hose port, rearward."""
+
+    hfov_deg: Number = Field(gt=0.0, lt=180.0)
+    """Horizontal field of view in degrees; fx = fy = (W/2) / tan(hFOV/2)."""
+
+    width: Integer = Field(2048, gt=0, le=16384)
+    """Image width in pixels (Table 1: 2048)."""
+
+    height: Integer = Field(1080, gt=0, le=16384)
+    """Image height in pixels (Table 1: 1080)."""
+
+    mount_jitter: MountJitterConfig = MountJitterConfig()
+    """Bounds of the per-approach mount pose perturbation."""
+
+
+# --- objects and features ------------------------------------------------------
+class ObjectSpec(_Section):
+    """Which mesh and feature file an object uses; null means the built-in asset."""
+
+    mesh: Path | None = None
+    """OBJ, PLY or GLB mesh in the object's body frame (metres); relative to the config file."""
+
+    features: Path | None = None
+    """Feature set file for this object; relative to the config file."""
+
+
+class ObjectsConfig(_Section):
+    """The rigid objects of the scene. The hose is procedural and needs no entry."""
+
+    tanker: ObjectSpec = ObjectSpec()
+    """Tanker aircraft (origin at the average drogue centre)."""
+
+    receiver: ObjectSpec = ObjectSpec()
+    """Receiver aircraft with its probe (origin at the probe tip)."""
+
+    drogue: ObjectSpec = ObjectSpec()
+    """Drogue basket (origin at the drogue centre)."""
+
+
+class FeaturesConfig(_Section):
+    """Which feature sets become YOLO classes."""
+
+    objects: tuple[LabeledObject, ...] = Field(("receiver", "tanker"), min_length=1)
+    """Objects whose features are labeled; class ids follow this order."""
+
+    variant: Literal["baseline", "small", "medium", "large", "random"] = "baseline"
+    """Feature set variant: the paper's baseline, the co-located size variants
+    (models J, K, L) or seeded random surface features (model I)."""
+
+    random_per_object: Integer = Field(40, ge=3, le=1000)
+    """Number of random surface features per object when variant is 'random'."""
+
+    @field_validator("objects")
+    @classmethod
+    def _unique_objects(cls, objects: tuple[str, ...]) -> tuple[str, ...]:
+        if len(set(objects)) != len(objects):
+            raise ValueError("objects must not repeat")
+        return objects
+
+
+# --- approach ------------------------------------------------------------------
+class ApproachConfig(_Section):
+    """Monte Carlo refueling approaches (paper 3.1) and how frames are taken from them."""
+
+    range_m: Annotated[Range, _within(0.0, 10_000.0)] = (0.0, 120.0)
+    """Probe-to-drogue distance range the dataset covers, metres."""
+
+    yaw_deg: Number = Field(10.0, ge=0.0, le=180.0)
+    """Initial receiver yaw perturbation, uniform in [-yaw, yaw] degrees."""
+
+    pitch_deg: Number = Field(15.0, ge=0.0, le=90.0)
+    """Initial receiver pitch perturbation, uniform in [-pitch, pitch] degrees."""
+
+    roll_deg: Number = Field(45.0, ge=0.0, le=180.0)
+    """Initial receiver roll perturbation, uniform in [-roll, roll] degrees."""
+
+    start_azimuth_deg: Number = Field(15.0, ge=0.0, le=90.0)
+    """Start position bearing from the drogue, uniform in [-a, a] degrees off dead astern."""
+
+    start_elevation_deg: Annotated[Range, _within(-90.0, 90.0)] = (-12.0, 3.0)
+    """Start position elevation from the drogue, degrees (negative: the receiver starts below)."""
+
+    sampling: Literal["distance", "time"] = "distance"
+    """'distance': each approach starts at the range's far end and contributes one frame per
+    distance stratum, so the dataset covers its range evenly; 'time': approaches start at a
+    uniform distance in range and frames are taken every stride_steps simulation steps,
+    through contact and the next approach."""
+
+    frames_per_approach: Integer = Field(16, ge=1, le=100_000)
+    """Consecutive frames taken from one approach (the unit of simulation)."""
+
+    stride_steps: Integer = Field(15, ge=1, le=100_000)
+    """Simulation steps between frames in 'time' sampling."""
+
+    dt_s: Number = Field(1.0 / 30.0, gt=0.0, le=0.2)
+    """Simulation time step, seconds."""
+
+    forward_gain: Number = Field(0.12, gt=0.0, le=10.0)
+    """Convergence rate of the PtD vector's forward (receiver x) component, 1/s."""
+
+    lateral_gain_ratio: Number = Field(2.0, gt=0.0, le=10.0)
+    """Lateral and vertical convergence rates relative to the forward one (paper: about 2)."""
+
+    max_closure_mps: Number = Field(4.0, gt=0.0, le=100.0)
+    """Speed limit of the receiver relative to the drogue along its x axis, m/s."""
+
+    max_lateral_mps: Number = Field(2.0, gt=0.0, le=100.0)
+    """Speed limit of the receiver relative to the drogue along its y and z axes, m/s."""
+
+    attitude_time_constant_s: Number = Field(6.0, gt=0.0, le=3600.0)
+    """Time constant of the attitude slerp back to the tanker's orientation, s."""
+
+    contact_m: Number = Field(0.01, gt=0.0, le=10.0)
+    """PtD distance that counts as contact (paper: 1 cm)."""
+
+    max_steps: Integer = Field(100_000, ge=100, le=1_000_000)
+    """Safety limit on the steps of one approach."""
+
+    @model_validator(mode="after")
+    def _non_negative_range(self) -> ApproachConfig:
+        if self.range_m[0] < 0.0:
+            raise ValueError(f"range_m must not be negative, got {list(self.range_m)}")
+        if self.range_m[1] <= 0.0:
+            raise ValueError(f"range_m upper bound must be positive, got {list(self.range_m)}")
+        return self
+
+
+class DrogueConfig(_Section):
+    """Drogue motion about its average position under turbulence.
+
+    Each axis of the tanker frame carries a gust state that is a first-order
+    Gauss-Markov process (the Dryden longitudinal gust filter driven by white
+    noise) with standard deviation ``rms_m * intensity`` and correlation time
+    ``gust_time_s``; the drogue's displacement follows it through a damped
+    second-order hose-drogue response (natural frequency ``natural_hz``,
+    damping ratio ``damping``)."""
+
+    rms_m: tuple[Number, Number, Number] = (0.15, 0.4, 0.3)
+    """Gust-equilibrium RMS displacement along tanker x, y, z at intensity 1, metres."""
+
+    intensity: Annotated[Range, _within(0.0, 100.0)] = (0.0, 1.0)
+    """Turbulence intensity multiplier, drawn once per approach."""
+
+    gust_time_s: Number = Field(3.0, gt=0.0, le=3600.0)
+    """Gust correlation time (Dryden L / V), seconds."""
+
+    natural_hz: Number = Field(0.5, gt=0.0, le=10.0)
+    """Natural frequency of the hose-drogue response, Hz."""
+
+    damping: Number = Field(0.4, gt=0.0, le=5.0)
+    """Damping ratio of the hose-drogue response."""
+
+    @field_validator("rms_m")
+    @classmethod
+    def _non_negative(cls, rms: tuple[float, float, float]) -> tuple[float, float, float]:
+        if min(rms) < 0.0 or max(rms) > 100.0:
+            raise ValueError(f"rms_m components must lie within [0, 100] m, got {list(rms)}")
+        return rms
+
+
+class TankerConfig(_Section):
+    """Tanker flight: straight and level, or a coordinated banking turn."""
+
+    speed_mps: Number = Field(150.0, gt=0.0, le=400.0)
+    """True airspeed, m/s."""
+
+    altitude_m: Annotated[Range, _within(0.0, 20_000.0)] = (4000.0, 8000.0)
+    """Altitude above the sea surface (world z = 0), metres, drawn per approach."""
+
+    turn_probability: Number = Field(0.3, ge=0.0, le=1.0)
+    """Share of approaches flown in a banking turn instead of straight and level."""
+
+    bank_deg: Range = (15.0, 30.0)
+    """Bank angle magnitude of a turn, degrees (left or right with equal odds)."""
+
+    @model_validator(mode="after")
+    def _physical(self) -> TankerConfig:
+        lo, hi = self.bank_deg
+        if lo < 0.0 or hi >= 80.0:
+            raise ValueError(f"bank_deg must lie within [0, 80), got [{lo}, {hi}]")
+        if self.altitude_m[0] <= 0.0:
+            raise ValueError(f"altitude_m must be positive, got {list(self.altitude_m)}")
+        return self
+
+
+# --- randomization -------------------------------------------------------------
+class SkyConfig(_Section):
+    """Physically based sky (Mitsuba ``sunsky``) and sun."""
+
+    sun_elevation_deg: Range = (15.0, 70.0)
+    """Sun elevation above the horizon, degrees."""
+
+    sun_azimuth_deg: Annotated[Range, _within(-720.0, 720.0)] = (0.0, 360.0)
+    """Sun azimuth, degrees counter-clockwise from the tanker's initial heading."""
+
+    turbidity: Range = (2.0, 5.0)
+    """Atmospheric turbidity (sunsky accepts 1 to 10)."""
+
+    sun_scale: Range = (0.8, 1.2)
+    """Multiplier on the sun's radiance, drawn from 5 evenly spaced levels across the
+    range (Mitsuba bakes it into the compiled kernel: a continuous draw would compile
+    a new kernel for every frame)."""
+
+    sky_scale: Range = (0.8, 1.2)
+    """Multiplier on the sky's radiance, drawn from 5 evenly spaced levels across the range."""
+
+    @model_validator(mode="after")
+    def _physical(self) -> SkyConfig:
+        checks = [
+            ("sun_elevation_deg", self.sun_elevation_deg, -90.0, 90.0),
+            ("turbidity", self.turbidity, 1.0, 10.0),
+            ("sun_scale", self.sun_scale, 0.0, 100.0),
+            ("sky_scale", self.sky_scale, 0.0, 100.0),
+        ]
+        for name, (lo, hi), low, high in checks:
+            if lo < low or hi > high:
+                raise ValueError(f"{name} must lie within [{low}, {high}], got [{lo}, {hi}]")
+        return self
+
+
+class MaterialsConfig(_Section):
+    """Per-part principled-BSDF draws."""
+
+    paint_value: Range = (0.25, 0.75)
+    """Brightness (HSV value) of the paint base colour."""
+
+    paint_saturation: Range = (0.0, 0.15)
+    """Saturation of the paint base colour (military greys are nearly neutral)."""
+
+    paint_roughness: Range = (0.25, 0.7)
+    """Principled roughness of painted parts."""
+
+    metal_roughness: Range = (0.1, 0.4)
+    """Principled roughness of bare-metal parts."""
+
+    @model_validator(mode="after")
+    def _unit(self) -> MaterialsConfig:
+        for name in type(self).model_fields:
+            lo, hi = getattr(self, name)
+            if lo < 0.0 or hi > 1.0:
+                raise ValueError(f"{name} must lie within [0, 1], got [{lo}, {hi}]")
+        return self
+
+
+class RandomizationConfig(_Section):
+    """Per-frame appearance randomization; every range is drawn from the frame's RNG."""
+
+    sky: SkyConfig = SkyConfig()
+    """Sky and sun."""
+
+    materials: MaterialsConfig = MaterialsConfig()
+    """Materials of the airframes."""
+
+    exposure_ev: Annotated[Range, _within(-20.0, 20.0)] = (-0.5, 0.5)
+    """Exposure compensation in stops applied before the sRGB transform."""
+
+    haze: Flag = False
+    """Add a homogeneous haze between the camera and the scene."""
+
+
+# --- render --------------------------------------------------------------------
+class RenderConfig(_Section):
+    """Mitsuba rendering settings."""
+
+    variant: Literal["auto", "llvm_ad_rgb", "cuda_ad_rgb", "scalar_rgb"] = "auto"
+    """Mitsuba variant; 'auto' picks cuda_ad_rgb with a GPU, else llvm_ad_rgb, else scalar_rgb."""
+
+    spp: Integer = Field(16, ge=1, le=65536)
+    """Samples per pixel."""
+
+    max_depth: Integer = Field(6, ge=1, le=64)
+    """Path tracer maximum depth."""
+
+    image_format: Literal["png", "jpg"] = "png"
+    """8-bit sRGB training image format."""
+
+    jpeg_quality: Integer = Field(95, ge=1, le=100)
+    """JPEG quality when image_format is 'jpg'."""
+
+    exr: Flag = False
+    """Also write a linear EXR with R, G, B, Z (camera depth, metres) and object_id."""
+
+
+# --- labels --------------------------------------------------------------------
+class LabelsConfig(_Section):
+    """How boxes are made (paper 3.2)."""
+
+    corrected: Flag = True
+    """Corrected boxes centred on the true 3D centre projection; false gives tight
+    boxes (the paper's uncorrected ablation, model H)."""
+
+    edge_margin_px: Number = Field(10.0, ge=0.0, le=8192.0)
+    """A feature is labeled only if its box lies at least this far inside every border."""
+
+    min_visible_fraction: Number = Field(0.0, ge=0.0, le=1.0)
+    """Drop features whose visible share of points is below this; 0 keeps occluded
+    features (the paper's choice)."""
+
+    train_imgsz: Integer = Field(864, ge=32, le=8192)
+    """Ultralytics' training image size (the recipe's imgsz; the paper trained at 864):
+    label sizes are judged as the trainer sees them there (datagen.core.training)."""
+
+    min_box_px: Number = Field(8.0, ge=0.0, le=512.0)
+    """Smallest side a label box may have at train_imgsz, in the trainer's pixels (8: the
+    finest anchor stride, so every box holds an anchor centre); 0 keeps boxes as they are."""
+
+    small_boxes: Literal["grow", "exclude"] = "grow"
+    """A label box with a side under min_box_px: 'grow' widens it symmetrically about its
+    centre (the true centre stays exact); 'exclude' drops the feature as too_small."""
+
+    @field_validator("train_imgsz")
+    @classmethod
+    def _stride_multiple(cls, imgsz: int) -> int:
+        if imgsz % 32:
+            raise ValueError(f"must be a multiple of 32 (the detector's largest stride), got {imgsz}")
+        return imgsz
+
+    @model_validator(mode="after")
+    def _box_fits_input(self) -> LabelsConfig:
+        if self.min_box_px >= self.train_imgsz:
+            raise ValueError(f"min_box_px {self.min_box_px:g} must be smaller than train_imgsz {self.train_imgsz}")
+        return self
+
+
+# --- dataset -------------------------------------------------------------------
+class DatasetConfig(_Section):
+    """Size, sharding, split and seed of the dataset."""
+
+    frames: Integer = Field(ge=1, le=10_000_000)
+    """Number of frames."""
+
+    shard_size: Integer = Field(500, ge=1, le=100_000)
+    """Frames per shard (a shard is the unit of work, resumption and manifest files)."""
+
+    val_fraction: Number = Field(0.2, ge=0.0, lt=1.0)
+    """Share of frames assigned to the validation split, decided per frame from the seed."""
+
+    split_by: Literal["frame", "approach"] = "frame"
+    """Unit of the train/val split: 'frame' decides every frame on its own; 'approach'
+    keeps the frames of one approach chain (frames_per_approach consecutive frames,
+    which share a trajectory) in the same split, so that validation frames are not
+    near-duplicates of training frames."""
+
+    seed: Integer = Field(0, ge=0, lt=2**63)
+    """Root seed; frame i draws from SeedSequence(seed, spawn_key=(i,))."""
+
+
+class Config(_Section):
+    """A datagen scene config."""
+
+    name: str = Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]*$", max_length=100)
+    """Short identifier (letters, digits, '_', '-', '.')."""
+
+    description: str = Field("", max_length=10_000)
+    """Free text: what the config is for."""
+
+    camera: CameraConfig
+    """The camera."""
+
+    objects: ObjectsConfig = ObjectsConfig()
+    """Meshes and feature sets of the objects."""
+
+    features: FeaturesConfig = FeaturesConfig()
+    """Labeled feature sets."""
+
+    approach: ApproachConfig = ApproachConfig()
+    """Approach sampling."""
+
+    drogue: DrogueConfig = DrogueConfig()
+    """Drogue turbulence response."""
+
+    tanker: TankerConfig = TankerConfig()
+    """Tanker flight."""
+
+    randomization: RandomizationConfig = RandomizationConfig()
+    """Appearance randomization."""
+
+    render: RenderConfig = RenderConfig()
+    """Rendering."""
+
+    labels: LabelsConfig = LabelsConfig()
+    """Label generation."""
+
+    dataset: DatasetConfig
+    """Dataset size, split and seed."""
+
+    @model_validator(mode="after")
+    def _margin_fits(self) -> Config:
+        from datagen.core.training import TrainView
+
+        m = self.labels.edge_margin_px
+        w, h = self.camera.width, self.camera.height
+        if 2.0 * m >= min(w, h):
+            raise ValueError(f"labels.edge_margin_px {m} leaves no room inside a {w}x{h} image")
+        box_w, box_h = TrainView(w, h, self.labels.train_imgsz).min_label_size_px(self.labels.min_box_px)
+        if box_w + 2.0 * m > w or box_h + 2.0 * m > h:
+            raise ValueError(f"labels.min_box_px {self.labels.min_box_px:g} at train_imgsz {self.labels.train_imgsz} "
+                             f"is a {box_w:.0f}x{box_h:.0f} px box, which does not fit inside the edge margin "
+                             f"of a {w}x{h} image")
+        return self
+
+
+# --- loading -------------------------------------------------------------------
+def load_config(path: str | Path) -> Config:
+    """Read, parse and validate a config file.
+
+    Raises:
+        ConfigError: listing every problem found (missing file, YAML syntax, input
+            bombs (:mod:`datagen.config.inputs`), duplicate keys, unknown keys, bad values,
+            missing asset files).
+    """
+    path = Path(path)
+    return parse_config(read_text(path, "YAML config file"), path)
+
+
+def parse_config(text: str, path: Path) -> Config:
+    """Validate config ``text`` read from ``path`` (used in messages and for relative paths)."""
+    data = parse_yaml(text, path)
+    lines, problems = _key_lines(text, path)
+    if not isinstance(data, dict):
+        kind = "empty" if data is None else f"a {type(data).__name__}"
+        raise ConfigError([Problem(path, "", f"expected a mapping of config sections, got {kind}")])
+    try:
+        config = Config.model_validate(data)
+    except ValidationError as exc:
+        problems += _problems_from_validation(exc, data, lines, path)
+        config = None
+    problems += _missing_asset_files(data, lines, path)
+    if problems or config is None:
+        raise ConfigError(problems)
+    return _resolve_paths(config, path.parent)
+
+
+def _key_lines(text: str, path: Path) -> tuple[dict[tuple, int], list[Problem]]:
+    """The line of every key path, and a problem for every duplicate key (on text that
+    :func:`datagen.config.inputs.parse_yaml` has already checked, so composing it is bounded)."""
+    root = yaml.compose(text, Loader=yaml.SafeLoader)
+    lines: dict[tuple, int] = {}
+    problems: list[Problem] = []
+
+    def walk(node: yaml.Node, key_path: tuple) -> None:
+        lines[key_path] = node.start_mark.line + 1
+        if isinstance(node, yaml.MappingNode):
+            seen: set[str] = set()
+            for key_node, value_node in node.value:
+                key = key_node.value
+                if key in seen:
+                    problems.append(
+                        Problem(path, _dotted(key_path + (key,)), "duplicate key",
+                                line=key_node.start_mark.line + 1)
+                    )
+                seen.add(key)
+                walk(value_node, key_path + (key,))
+        elif isinstance(node, yaml.SequenceNode):
+            for i, item in enumerate(node.value):
+                walk(item, key_path + (i,))
+
+    if root is not None:
+        walk(root, ())
+    return lines, problems
+
+
+def _dotted(loc: tuple) -> str:
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out
+
+
+def _line_of(lines: dict[tuple, int], loc: tuple) -> int | None:
+    while loc:
+        if loc in lines:
+            return lines[loc]
+        loc = loc[:-1]
+    return lines.get(())
+
+
+def _lookup(data: Any, loc: tuple) -> tuple[bool, Any]:
+    for part in loc:
+        try:
+            data = data[part]
+        except (KeyError, IndexError, TypeError):
+            return False, None
+    return True, data
+
+
+def _model_at(loc: tuple) -> type[BaseModel] | None:
+    """The pydantic model that owns the mapping at ``loc`` (for listing allowed keys)."""
+    model: type[BaseModel] | None = Config
+    for part in loc:
+        if model is None or not isinstance(part, str) or part not in model.model_fields:
+            return None
+        annotation = model.model_fields[part].annotation
+        model = annotation if isinstance(annotation, type) and issubclass(annotation, BaseModel) else None
+    return model
+
+
+def _problems_from_validation(
+    exc: ValidationError, data: dict, lines: dict[tuple, int], path: Path
+) -> list[Problem]:
+    problems = []
+    for err in exc.errors(include_url=False):
+        loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and p.startswith("function-")))
+        found, value = _lookup(data, loc)
+        kind = err["type"]
+        message = err["msg"]
+        if kind == "extra_forbidden":
+            owner = _model_at(loc[:-1])
+            allowed = sorted(owner.model_fields) if owner else []
+            close = difflib.get_close_matches(str(loc[-1]), allowed, n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            message = f"unknown key (allowed: {', '.join(allowed)}){hint}"
+            found = False
+        elif kind == "missing":
+            message = "required key is missing"
+        elif kind == "value_error":
+            message = message.removeprefix("Value error, ")
+        if isinstance(value, dict):  # a section's own check: its message names the keys
+            found = False
+        problems.append(
+            Problem(path, _dotted(loc), message, line=_line_of(lines, loc), value=value, has_value=found)
+        )
+    return problems
+
+
+def _missing_asset_files(data: dict, lines: dict[tuple, int], path: Path) -> list[Problem]:
+    """Asset paths that name no file, checked on the raw mapping so that they are
+    reported together with schema problems."""
+    problems = []
+    objects = data.get("objects")
+    for name in ObjectsConfig.model_fields:
+        spec = objects.get(name) if isinstance(objects, dict) else None
+        for field in ("mesh", "features"):
+            value = spec.get(field) if isinstance(spec, dict) else None
+            if not isinstance(value, str):
+                continue
+            resolved = path.parent / value
+            if not resolved.is_file():
+                loc = ("objects", name, field)
+                what = "not a regular file" if resolved.exists() else "file not found"
+                problems.append(
+                    Problem(path, _dotted(loc), f"{what} ({resolved})",
+                            line=_line_of(lines, loc), value=value, has_value=True)
+                )
+    return problems
+
+
+def _resolve_paths(config: Config, base: Path) -> Config:
+    """Make asset paths absolute, so that the config means the same from any directory."""
+    objects = {}
+    for name in ObjectsConfig.model_fields:
+        spec: ObjectSpec = getattr(config.objects, name)
+        update = {
+            field: (base / value).resolve()
+            for field in ("mesh", "features")
+            if (value := getattr(spec, field)) is not None
+        }
+        objects[name] = spec.model_copy(update=update)
+    return config.model_copy(update={"objects": config.objects.model_copy(update=objects)})
+
+
+def override_config(config: Config, updates: dict[str, object], source: str = "command line") -> Config:
+    """``config`` with dotted keys replaced (``{"dataset.frames": 8}``), validated again.
+
+    Raises:
+        ConfigError: one problem per bad value, naming ``source`` and the key.
+    """
+    data = config.model_dump()
+    for dotted, value in updates.items():
+        *parents, leaf = dotted.split(".")
+        section = data
+        for part in parents:
+            section = section[part]
+        if leaf not in section:
+            raise KeyError(f"override of unknown config key {dotted!r}")
+        section[leaf] = value
+    try:
+        return Config.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError([
+            Problem(Path(source), _dotted(tuple(err["loc"])), err["msg"].removeprefix("Value error, "),
+                    value=err.get("input"), has_value="input" in err)
+            for err in exc.errors(include_url=False)
+        ]) from None

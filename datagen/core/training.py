@@ -1,0 +1,140 @@
+"""How Ultralytics' YOLO trainer sees a label, written down once (no Ultralytics import).
+
+A label teaches a detector only if it survives the trainer's own transforms and
+the detection head can assign it to an anchor. Ultralytics 8.4 with the recipe of
+:func:`datagen.dataset.layout.hyp_yaml` (mosaic, scale, translate, rotation, shear and
+perspective all off) does this to a ``W x H`` image at ``imgsz``:
+
+1. **resize** (``BaseDataset.load_image``): the long side becomes ``imgsz``,
+   ``r = imgsz / max(W, H)``, each side ``min(ceil(side * r), imgsz)``; a box
+   scales by ``w_t / W`` along x and ``h_t / H`` along y;
+2. **centre on the square input** (``RandomPerspective`` with
+   ``size=(imgsz, imgsz)``): the resized image is shifted by
+   ``((imgsz - w_t) / 2, (imgsz - h_t) / 2)``;
+3. **drop small boxes** (``RandomPerspective.box_candidates``): a box survives
+   only if both sides exceed 2 px there, its aspect ratio stays under 100 (and
+   its area ratio to the pre-transform box exceeds 0.1, which an identity
+   transform always satisfies);
+4. **anchors** (``make_anchors``, ``TaskAlignedAssigner.select_candidates_in_gts``):
+   the head's anchor centres lie at ``(i + 0.5) * s`` for strides ``s`` of 8, 16
+   and 32 over the square input; a box can be assigned a positive only where
+   an anchor centre lies strictly inside it.
+
+A label is *learnable* when it passes 3 and contains an anchor centre of 4.
+(Ultralytics 8.4.190's assigner also widens boxes under 16 px to 16 px when it
+picks candidate anchors; this module keeps the stricter rule that the box itself
+contains an anchor, so that learnability does not hang on that detail.)
+
+The smallest side a label box may have at the training size
+(``labels.min_box_px``) converts to original pixels per axis with
+:meth:`TrainView.min_label_size_px`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "ANCHOR_STRIDES",
+    "MAX_ASPECT_RATIO",
+    "MIN_TRAIN_SIDE_PX",
+    "TrainView",
+    "label_options",
+]
+
+#: Strides of the YOLO detection head's three levels (P3, P4, P5).
+ANCHOR_STRIDES: Final[tuple[int, ...]] = (8, 16, 32)
+#: Ultralytics drops a box whose width or height at the training size is not above this (``wh_thr``).
+MIN_TRAIN_SIDE_PX: Final[float] = 2.0
+#: ... or whose aspect ratio is not below this (``ar_thr``).
+MAX_ASPECT_RATIO: Final[float] = 100.0
+#: An anchor centre counts as inside a box when it is further than this from every side (the assigner's eps).
+_ANCHOR_EPS: Final[float] = 1e-9
+
+
+@dataclass(frozen=True)
+class TrainView:
+    """A ``width`` x ``height`` image as Ultralytics' trainer feeds it at ``imgsz``."""
+
+    width: int
+    height: int
+    imgsz: int
+
+    def __post_init__(self) -> None:
+        if self.width <= 0 or self.height <= 0 or self.imgsz <= 0:
+            raise ValueError(f"sizes must be positive, got {self.width}x{self.height} at imgsz {self.imgsz}")
+
+    @property
+    def resized(self) -> tuple[int, int]:
+        """``(w_t, h_t)``: the image after the long side is resized to ``imgsz``."""
+        r = self.imgsz / max(self.width, self.height)
+        if r == 1:
+            return self.width, self.height
+        return min(math.ceil(self.width * r), self.imgsz), min(math.ceil(self.height * r), self.imgsz)
+
+    @property
+    def scale(self) -> tuple[float, float]:
+        """``(sx, sy)``: training pixels per original pixel along x and y."""
+        w_t, h_t = self.resized
+        return w_t / self.width, h_t / self.height
+
+    @property
+    def offset(self) -> tuple[float, float]:
+        """Where the resized image's top-left corner lies on the square training input."""
+        w_t, h_t = self.resized
+        return (self.imgsz - w_t) / 2.0, (self.imgsz - h_t) / 2.0
+
+    def min_label_size_px(self, min_box_px: float) -> tuple[float, float]:
+        """The smallest label box ``(width, height)`` in original pixels whose sides are
+        ``min_box_px`` at the training size."""
+        sx, sy = self.scale
+        return min_box_px / sx, min_box_px / sy
+
+    def to_train(self, xyxy: ArrayLike) -> NDArray[np.float64]:
+        """``(..., 4)`` boxes in original continuous pixels to training-input pixels."""
+        box = np.asarray(xyxy, dtype=np.float64)
+        (sx, sy), (ox, oy) = self.scale, self.offset
+        return box * np.array([sx, sy, sx, sy]) + np.array([ox, oy, ox, oy])
+
+    def survives(self, xyxy: ArrayLike) -> NDArray[np.bool_]:
+        """``(...)`` whether Ultralytics keeps each box (original pixels): both sides above
+        :data:`MIN_TRAIN_SIDE_PX` and an aspect ratio below :data:`MAX_ASPECT_RATIO` at the training size."""
+        t = self.to_train(xyxy)
+        w, h = t[..., 2] - t[..., 0], t[..., 3] - t[..., 1]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            aspect = np.maximum(w / (h + 1e-16), h / (w + 1e-16))
+            return (w > MIN_TRAIN_SIDE_PX) & (h > MIN_TRAIN_SIDE_PX) & (aspect < MAX_ASPECT_RATIO)
+
+    def has_anchor(self, xyxy: ArrayLike) -> NDArray[np.bool_]:
+        """``(...)`` whether an anchor centre of some stride lies strictly inside each box
+        (original pixels)."""
+        t = self.to_train(xyxy)
+        found = np.zeros(t.shape[:-1], dtype=bool)
+        for s in ANCHOR_STRIDES:
+            cells = self.imgsz // s
+            inside = np.ones(t.shape[:-1], dtype=bool)
+            for lo, hi in ((t[..., 0], t[..., 2]), (t[..., 1], t[..., 3])):
+                with np.errstate(invalid="ignore"):
+                    # The first anchor centre (i + 0.5) * s strictly right of lo + eps.
+                    i = np.clip(np.floor((lo + _ANCHOR_EPS) / s - 0.5) + 1.0, 0, cells - 1)
+                    centre = (i + 0.5) * s
+                    inside &= (centre - lo > _ANCHOR_EPS) & (hi - centre > _ANCHOR_EPS)
+            found |= inside
+        return found
+
+    def learnable(self, xyxy: ArrayLike) -> NDArray[np.bool_]:
+        """``(...)`` :meth:`survives` and :meth:`has_anchor`: the box can teach the detector."""
+        return self.survives(xyxy) & self.has_anchor(xyxy)
+
+
+def label_options(labels, width: int, height: int) -> dict:
+    """The keyword arguments of :func:`datagen.core.labels.compute_labels` that a config's
+    ``labels`` section (:class:`datagen.config.schema.LabelsConfig`) gives a ``width`` x ``height`` camera."""
+    view = TrainView(width, height, labels.train_imgsz)
+    return {"edge_margin_px": labels.edge_margin_px, "corrected": labels.corrected,
+            "min_size_px": view.min_label_size_px(labels.min_box_px), "small_boxes": labels.small_boxes}

@@ -1,0 +1,300 @@
+"""Read a built dataset back into arrays: the manifests, the feature table and the
+metadata, for the audit and the previews.
+
+Every frame of a dataset has the same feature list (one record per class, in
+class-id order), so the per-feature manifest columns become ``(B, F, ...)``
+arrays. Labels recomputed here use nothing but the manifest poses and
+intrinsics and ``features.parquet``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+from numpy.typing import NDArray
+from pydantic import ValidationError
+
+from datagen.core.camera import Intrinsics
+from datagen.config.schema import LabelsConfig
+from datagen.dataset.layout import MANIFEST_NAME
+from datagen.core.errors import DatagenError
+from datagen.core.features import FeatureTable
+from datagen.config.inputs import parse_json, parse_yaml, read_text
+from datagen.core.labels import FrameLabels, compute_labels
+from datagen.dataset.schema import MANIFEST_VERSION, manifest_schema, read_features
+from datagen.core.training import TrainView, label_options
+
+__all__ = ["DatasetView", "image_size", "load_dataset"]
+
+
+@dataclass(frozen=True, eq=False)
+class DatasetView:
+    """A dataset's metadata and manifest rows, per-feature columns as ``(B, F)`` arrays
+    (rows sorted by frame id)."""
+
+    root: Path
+    doc: dict  # dataset.json
+    data_yaml: dict
+    features: FeatureTable
+    intrinsics: Intrinsics
+    manifest_file: list[str]  # per row: the manifest it came from (relative to root)
+    frame_id: NDArray[np.int64]
+    split: list[str]
+    image_path: list[str | None]
+    label_path: list[str]
+    exr_path: list[str | None]
+    row_intrinsics: NDArray[np.float64]  # (B, 6): width, height, fx, fy, cx, cy
+    cam_from_world: NDArray[np.float64]  # (B, 4, 4)
+    world_from: dict[str, NDArray[np.float64]]  # object -> (B, 4, 4)
+    distance_m: NDArray[np.float64]
+    ptd_receiver_m: NDArray[np.float64]  # (B, 3)
+    approach_index: NDArray[np.int64]
+    approach_number: NDArray[np.int64]
+    class_id: NDArray[np.int64]  # (B, F)
+    center_px: NDArray[np.float64]  # (B, F, 2)
+    tight_xyxy: NDArray[np.float64]  # (B, F, 4)
+    corrected_xyxy: NDArray[np.float64]  # (B, F, 4)
+    label_xyxy: NDArray[np.float64]  # (B, F, 4) the box written to the label file, NaN where not labeled
+    labeled: NDArray[np.bool_]  # (B, F)
+    exclusion: NDArray[np.object_]  # (B, F) reason or None
+    visible_fraction: NDArray[np.float64]  # (B, F), NaN where not rendered
+    center_visible: NDArray[np.float64]  # (B, F) 1, 0 or NaN
+
+    def __len__(self) -> int:
+        return len(self.frame_id)
+
+    @property
+    def corrected(self) -> bool:
+        return bool(self.doc["corrected"])
+
+    @property
+    def edge_margin_px(self) -> float:
+        return float(self.doc["edge_margin_px"])
+
+    @property
+    def label_rules(self) -> LabelsConfig:
+        """The ``labels`` section of the config the dataset was built with."""
+        return LabelsConfig.model_validate(self.doc["config"]["labels"])
+
+    @property
+    def train_view(self) -> TrainView:
+        """How Ultralytics' trainer sees this dataset's images (``labels.train_imgsz``)."""
+        return TrainView(self.intrinsics.width, self.intrinsics.height, self.label_rules.train_imgsz)
+
+    def cam_from_objects(self) -> NDArray[np.float64]:
+        """``(B, O, 4, 4)`` in the order of ``features.objects``."""
+        return np.stack([self.cam_from_world @ self.world_from[o] for o in self.features.objects], axis=1)
+
+    def recompute(self) -> FrameLabels:
+        """The labels of every frame from the poses and features.parquet alone (with the
+        manifest's visibility for the optional occlusion rule)."""
+        rules = self.label_rules
+        labels = compute_labels(self.features, self.cam_from_objects(), self.intrinsics,
+                                **label_options(rules, self.intrinsics.width, self.intrinsics.height))
+        threshold = rules.min_visible_fraction
+        if threshold > 0:
+            fraction = np.where(np.isnan(self.visible_fraction), 1.0, self.visible_fraction)
+            labels = labels.with_visibility(fraction, threshold)
+        return labels
+
+
+def _read_json(path: Path) -> dict:
+    if not path.exists():
+        raise DatagenError(f"{path}: no such file; not a datagen dataset folder")
+    data = parse_json(read_text(path, "dataset description"), path)  # ConfigError: one line, a DatagenError
+    if not isinstance(data, dict):
+        raise DatagenError(f"{path}: expected a JSON object")
+    return data
+
+
+def _relative_inside(rel: str) -> bool:
+    """A manifest path: relative, without ``..``, so that it names a file inside the dataset."""
+    return bool(rel) and not rel.startswith(("/", "\\")) and ".." not in Path(rel).parts and "\0" not in rel
+
+
+def _check_document(doc: dict, path: Path) -> None:
+    """The keys of dataset.json the readers use, with their types (one line per the first problem)."""
+    def number(value: object) -> bool:
+        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+    for key in ("intrinsics", "image_width", "image_height", "edge_margin_px", "corrected", "config"):
+        if key not in doc:
+            raise DatagenError(f"{path}: {key}: missing")
+    for key in ("image_width", "image_height"):
+        value = doc[key]
+        if not isinstance(value, int) or isinstance(value, bool) or not 0 < value <= 16384:
+            raise DatagenError(f"{path}: {key}: value {str(value)[:40]!r}: expected an image size in pixels")
+    k = doc["intrinsics"]
+    for key in ("fx", "fy", "cx", "cy"):
+        if not isinstance(k, dict) or key not in k:
+            raise DatagenError(f"{path}: intrinsics.{key}: missing")
+        if not number(k[key]) or (key in ("fx", "fy") and k[key] <= 0):
+            raise DatagenError(f"{path}: intrinsics.{key}: value {str(k[key])[:40]!r}: expected a finite number"
+                               f"{' above 0' if key in ('fx', 'fy') else ''}")
+    if not number(doc["edge_margin_px"]) or not isinstance(doc["corrected"], bool):
+        raise DatagenError(f"{path}: edge_margin_px or corrected: expected a number and true or false")
+    if not isinstance(doc["config"], dict):
+        raise DatagenError(f"{path}: config: expected a mapping")
+
+
+def _floats(array: pa.Array, shape: tuple[int, ...]) -> NDArray[np.float64]:
+    """A float column (or fixed-size lists of floats) as an array of ``shape``, NaN where null."""
+    if pa.types.is_fixed_size_list(array.type):
+        n = array.type.list_size
+        values = _floats(array.values.slice(array.offset * n, len(array) * n), (len(array), n))
+        null = np.asarray(array.is_null())
+        if null.any():
+            values = values.copy()
+            values[null] = np.nan  # a null list hides its (arbitrary) values
+        return values.reshape(shape)
+    return np.asarray(pc.fill_null(array, float("nan")).to_numpy(zero_copy_only=False),
+                      dtype=np.float64).reshape(shape)
+
+
+def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> DatasetView:
+    """Read ``root``'s dataset.json, data.yaml, features.parquet and every manifest.
+
+    ``allow_duplicates``: keep rows of a frame that several manifests hold (the audit
+    names them); otherwise they are refused, as they would count the frame twice.
+
+    Raises:
+        DatagenError: one line naming the file and what is wrong with it.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise DatagenError(f"{root}: no such dataset folder")
+    doc = _read_json(root / "dataset.json")
+    _check_document(doc, root / "dataset.json")
+    try:
+        LabelsConfig.model_validate(doc["config"].get("labels", {}))
+    except ValidationError as exc:
+        err = exc.errors(include_url=False)[0]
+        key = ".".join(str(part) for part in err["loc"])
+        raise DatagenError(f"{root / 'dataset.json'}: config.labels.{key}: "
+                           f"{err['msg'].removeprefix('Value error, ')}") from None
+    data_yaml = parse_yaml(read_text(root / "data.yaml", "data.yaml"), root / "data.yaml")
+    if not isinstance(data_yaml, dict):
+        raise DatagenError(f"{root / 'data.yaml'}: expected a mapping with train, val, nc and names")
+    if not (root / "features.parquet").is_file():
+        raise DatagenError(f"{root / 'features.parquet'}: missing or not a regular file")
+    try:
+        features = read_features(root / "features.parquet")
+    except Exception as exc:  # noqa: BLE001 (pyarrow and numpy raise many kinds on a damaged table)
+        raise DatagenError(f"{root / 'features.parquet'}: unreadable ({type(exc).__name__}: "
+                           f"{' '.join(str(exc).split())[:120]})") from None
+    k = doc["intrinsics"]
+    intrinsics = Intrinsics(doc["image_width"], doc["image_height"], float(k["fx"]), float(k["fy"]),
+                            float(k["cx"]), float(k["cy"]))
+    expected = manifest_schema()
+    tables, names = [], []
+    for path in sorted((root / "manifests").glob("*.parquet")):
+        if not MANIFEST_NAME.fullmatch(path.name):
+            continue  # not a shard's manifest (the audit names it)
+        if not path.is_file():
+            raise DatagenError(f"{path}: not a regular file")
+        try:
+            table = pq.read_table(path)
+        except (OSError, pa.ArrowException) as exc:
+            raise DatagenError(f"{path}: unreadable manifest ({type(exc).__name__})") from None
+        version = (table.schema.metadata or {}).get(b"datagen.manifest_version", b"?").decode(errors="replace")[:20]
+        if version != MANIFEST_VERSION:
+            raise DatagenError(f"{path}: manifest version {version}, this datagen reads {MANIFEST_VERSION}")
+        for field in expected:
+            have = table.schema.field(field.name) if field.name in table.schema.names else None
+            if have is None or not have.type.equals(field.type):
+                what = "missing" if have is None else f"type {have.type}, expected {field.type}"
+                raise DatagenError(f"{path}: column {field.name}: {what}")
+        tables.append(table.select(expected.names).cast(expected))
+        names += [str(path.relative_to(root))] * table.num_rows
+    if not tables:
+        raise DatagenError(f"{root / 'manifests'}: no manifest; the dataset has no finished shard")
+    try:
+        table = pa.concat_tables(tables)
+    except pa.ArrowException as exc:
+        raise DatagenError(f"{root / 'manifests'}: manifests with different schemas ({exc})") from None
+    frame_ids = np.asarray(table.column("frame_id"))
+    if not allow_duplicates and len(np.unique(frame_ids)) != len(frame_ids):
+        ids, counts = np.unique(frame_ids, return_counts=True)
+        frame = int(ids[np.argmax(counts > 1)])
+        where = sorted({names[i] for i in np.flatnonzero(frame_ids == frame)})
+        raise DatagenError(f"{root / where[0]}: frame {frame} is in {len(where)} manifests ({', '.join(where)}): a "
+                           "manifest copied or renamed by hand; datagen audit names every such frame")
+    order = np.argsort(frame_ids, kind="stable")
+    table = table.take(pa.array(order))
+    names = [names[i] for i in order]
+    b, f = table.num_rows, len(features)
+    lists = table.column("features").combine_chunks()
+    lengths = np.asarray(pc.list_value_length(lists))
+    if not np.all(lengths == f):
+        bad = int(np.argmax(lengths != f))
+        raise DatagenError(f"{root / names[bad]}: frame {table.column('frame_id')[bad]}: {lengths[bad]} feature "
+                           f"records, features.parquet has {f} classes")
+    for column in ("image_path", "label_path", "exr_path"):
+        for i, rel in enumerate(table.column(column).to_pylist()):
+            if rel is not None and not _relative_inside(rel):
+                raise DatagenError(f"{root / names[i]}: frame {table.column('frame_id')[i]}: {column} {rel[:80]!r} "
+                                   "is not a path inside the dataset")
+    flat = lists.flatten()
+
+    def matrices(name: str) -> NDArray[np.float64]:
+        return _floats(table.column(name).combine_chunks(), (b, 4, 4))
+
+    exclusion = np.array(flat.field("exclusion").to_pylist(), dtype=object).reshape(b, f)
+    return DatasetView(
+        root=root,
+        doc=doc,
+        data_yaml=data_yaml,
+        features=features,
+        intrinsics=intrinsics,
+        manifest_file=names,
+        frame_id=np.asarray(table.column("frame_id"), dtype=np.int64),
+        split=table.column("split").to_pylist(),
+        image_path=table.column("image_path").to_pylist(),
+        label_path=table.column("label_path").to_pylist(),
+        exr_path=table.column("exr_path").to_pylist(),
+        row_intrinsics=np.stack([np.asarray(table.column(c), dtype=np.float64)
+                                 for c in ("width", "height", "fx", "fy", "cx", "cy")], axis=1),
+        cam_from_world=matrices("cam_from_world"),
+        world_from={o: matrices(f"world_from_{o}") for o in ("tanker", "receiver", "drogue")},
+        distance_m=np.asarray(table.column("distance_m"), dtype=np.float64),
+        ptd_receiver_m=_floats(table.column("ptd_receiver_m").combine_chunks(), (b, 3)),
+        approach_index=np.asarray(table.column("approach_index"), dtype=np.int64),
+        approach_number=np.asarray(table.column("approach_number"), dtype=np.int64),
+        class_id=np.asarray(flat.field("class_id"), dtype=np.int64).reshape(b, f),
+        center_px=_floats(flat.field("center_px"), (b, f, 2)),
+        tight_xyxy=_floats(flat.field("tight_xyxy"), (b, f, 4)),
+        corrected_xyxy=_floats(flat.field("corrected_xyxy"), (b, f, 4)),
+        label_xyxy=_floats(flat.field("label_xyxy"), (b, f, 4)),
+        labeled=np.asarray(flat.field("labeled").to_numpy(zero_copy_only=False), dtype=bool).reshape(b, f),
+        exclusion=exclusion,
+        visible_fraction=_floats(flat.field("visible_fraction"), (b, f)),
+        center_visible=_floats(pc.cast(flat.field("center_visible"), pa.float64()), (b, f)),
+    )
+
+
+def image_size(head: bytes) -> tuple[int, int] | None:
+    """``(width, height)`` from the first bytes of a PNG or JPEG file (its header alone, so
+    that a file claiming a huge size is refused before it is decoded), or None."""
+    if head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR" and len(head) >= 24:
+        return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    if head[:2] != b"\xff\xd8":
+        return None
+    i = 2
+    while i + 9 < len(head):
+        if head[i] != 0xFF:
+            return None
+        marker = head[i + 1]
+        if marker == 0xFF:  # fill byte
+            i += 1
+            continue
+        length = int.from_bytes(head[i + 2:i + 4], "big")
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):  # a start-of-frame segment
+            return int.from_bytes(head[i + 7:i + 9], "big"), int.from_bytes(head[i + 5:i + 7], "big")
+        i += 2 + length
+    return None

@@ -1,0 +1,289 @@
+"""Parquet schemas of a dataset: the per-frame manifests and the feature table.
+
+The one place that knows the column names and types. ``manifests/README.md``
+documents every column; a test checks that the two agree.
+
+- ``manifests/{split}-{shard:05d}.parquet``: one row per frame (:func:`manifest_schema`).
+  The schema metadata carries ``datagen.manifest_version`` and the shard's
+  label counts (``datagen.shard_summary``, JSON).
+- ``features.parquet``: one row per class (:func:`features_schema`): the 3D point
+  set and true centre of every feature in its object's frame, which is all
+  that PnP (and a label audit) needs besides the manifest poses.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+from numpy.typing import NDArray
+
+from datagen.core.features import FeatureTable
+from datagen.dataset.files import atomic_path
+
+__all__ = [
+    "MANIFEST_VERSION",
+    "FeatureColumns",
+    "RUN_COLUMNS",
+    "feature_records",
+    "features_schema",
+    "manifest_schema",
+    "matrix_field",
+    "read_features",
+    "read_manifest_summary",
+    "write_features",
+    "write_manifest",
+]
+
+#: Version of the manifest and feature-table schemas (bumped on any incompatible change).
+MANIFEST_VERSION: Final = "2"
+#: Manifest columns that describe the run rather than the frame: they differ between
+#: two builds of the same config; every other column is identical.
+RUN_COLUMNS: Final = ("render_s", "frame_s", "worker", "worker_rss_mib")
+
+_F64 = pa.float64()
+
+
+def _vec(n: int) -> pa.DataType:
+    return pa.list_(_F64, n)
+
+
+#: A 4x4 homogeneous transform, row-major.
+MATRIX: Final = _vec(16)
+
+FEATURE_RECORD: Final = pa.struct([
+    ("class_id", pa.int32()),
+    ("center_px", _vec(2)),
+    ("tight_xyxy", _vec(4)),
+    ("corrected_xyxy", _vec(4)),
+    ("label_xyxy", _vec(4)),
+    ("labeled", pa.bool_()),
+    ("exclusion", pa.string()),
+    ("visible_fraction", _F64),
+    ("center_visible", pa.bool_()),
+])
+
+MATERIAL_RECORD: Final = pa.struct([
+    ("object", pa.string()),
+    ("part_class", pa.string()),
+    ("base_color", _vec(3)),
+    ("roughness", _F64),
+    ("metallic", _F64),
+    ("specular", _F64),
+])
+
+
+def manifest_schema() -> pa.Schema:
+    """The schema of a manifest shard (version in the metadata)."""
+    fields = [
+        pa.field("frame_id", pa.int64(), nullable=False),
+        pa.field("split", pa.string(), nullable=False),
+        pa.field("shard", pa.int32(), nullable=False),
+        pa.field("image_path", pa.string()),
+        pa.field("label_path", pa.string(), nullable=False),
+        pa.field("exr_path", pa.string()),
+        pa.field("width", pa.int32(), nullable=False),
+        pa.field("height", pa.int32(), nullable=False),
+        pa.field("fx", _F64, nullable=False),
+        pa.field("fy", _F64, nullable=False),
+        pa.field("cx", _F64, nullable=False),
+        pa.field("cy", _F64, nullable=False),
+        pa.field("cam_from_world", MATRIX, nullable=False),
+        pa.field("world_from_tanker", MATRIX, nullable=False),
+        pa.field("world_from_receiver", MATRIX, nullable=False),
+        pa.field("world_from_drogue", MATRIX, nullable=False),
+        pa.field("ptd_receiver_m", _vec(3), nullable=False),
+        pa.field("distance_m", _F64, nullable=False),
+        pa.field("seed", pa.int64(), nullable=False),
+        pa.field("render_seed", pa.int64(), nullable=False),
+        pa.field("spp", pa.int32()),
+        pa.field("mount", pa.string(), nullable=False),
+        pa.field("approach_index", pa.int64(), nullable=False),
+        pa.field("approach_number", pa.int32(), nullable=False),
+        pa.field("time_s", _F64, nullable=False),
+        pa.field("turbulence_intensity", _F64, nullable=False),
+        pa.field("bank_deg", _F64, nullable=False),
+        pa.field("sun_elevation_deg", _F64, nullable=False),
+        pa.field("sun_azimuth_deg", _F64, nullable=False),
+        pa.field("sun_direction_world", _vec(3), nullable=False),
+        pa.field("turbidity", _F64, nullable=False),
+        pa.field("sun_scale", _F64, nullable=False),
+        pa.field("sky_scale", _F64, nullable=False),
+        pa.field("exposure_ev", _F64, nullable=False),
+        pa.field("sea_roughness", _F64, nullable=False),
+        pa.field("haze_visibility_m", _F64),
+        pa.field("materials", pa.list_(MATERIAL_RECORD), nullable=False),
+        pa.field("n_labeled", pa.int32(), nullable=False),
+        pa.field("features", pa.list_(FEATURE_RECORD), nullable=False),
+        pa.field("render_s", _F64),
+        pa.field("frame_s", _F64),
+        pa.field("worker", pa.string()),
+        pa.field("worker_rss_mib", _F64),
+    ]
+    return pa.schema(fields, metadata={"datagen.manifest_version": MANIFEST_VERSION})
+
+
+def write_manifest(path: Path, rows: Sequence[dict], summary: dict) -> Path:
+    """Write one shard's manifest atomically; ``summary`` (label counts, JSON-able)
+    goes into the schema metadata."""
+    schema = manifest_schema()
+    meta = dict(schema.metadata)
+    meta[b"datagen.shard_summary"] = json.dumps(summary, sort_keys=True).encode()
+    index = schema.get_field_index("features")
+    scalars = pa.Table.from_pylist([{k: v for k, v in row.items() if k != "features"} for row in rows],
+                                   schema=schema.remove(index))
+    table = scalars.add_column(index, schema.field("features"), _features_column([r["features"] for r in rows]))
+    table = table.replace_schema_metadata(meta)
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+    return Path(path)
+
+
+def read_manifest_summary(path: Path) -> dict:
+    """The label counts a shard's manifest carries in its metadata (no row is read)."""
+    meta = pq.read_schema(path).metadata or {}
+    return json.loads(meta.get(b"datagen.shard_summary", b"{}"))
+
+
+# --- features.parquet ----------------------------------------------------------------
+def features_schema() -> pa.Schema:
+    return pa.schema([
+        pa.field("class_id", pa.int32(), nullable=False),
+        pa.field("name", pa.string(), nullable=False),
+        pa.field("object", pa.string(), nullable=False),
+        pa.field("points_m", pa.list_(_vec(3)), nullable=False),
+        pa.field("center_m", _vec(3), nullable=False),
+        pa.field("size", pa.string(), nullable=False),
+    ], metadata={"datagen.manifest_version": MANIFEST_VERSION})
+
+
+def write_features(path: Path, features: FeatureTable) -> Path:
+    """One row per class: the point set (unpadded) and true centre in its object's frame."""
+    rows = [
+        {
+            "class_id": int(features.class_id[i]),
+            "name": features.name[i],
+            "object": features.objects[features.object_index[i]],
+            "points_m": features.point_set(i).tolist(),
+            "center_m": features.center_model[i].tolist(),
+            "size": features.size[i],
+        }
+        for i in range(len(features))
+    ]
+    table = pa.Table.from_pylist(rows, schema=features_schema())
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp)
+    return Path(path)
+
+
+def read_features(path: Path) -> FeatureTable:
+    """The :class:`FeatureTable` a dataset was labeled with, from its ``features.parquet``."""
+    table = pq.read_table(path).to_pylist()
+    table.sort(key=lambda r: r["class_id"])
+    return FeatureTable.from_point_sets(
+        [np.asarray(r["points_m"], dtype=np.float64) for r in table],
+        objects=[r["object"] for r in table],
+        class_ids=[r["class_id"] for r in table],
+        names=[r["name"] for r in table],
+        centers=[np.asarray(r["center_m"], dtype=np.float64) for r in table],
+        sizes=[r["size"] for r in table],
+    )
+
+
+def matrix_field(m: np.ndarray) -> list[float]:
+    """A 4x4 transform as the 16 row-major floats of a manifest column."""
+    return np.asarray(m, dtype=np.float64).reshape(16).tolist()
+
+
+@dataclass(frozen=True)
+class FeatureColumns:
+    """The ``features`` column of one frame as arrays (``F`` records, class-id order):
+    a manifest row carries this until its shard is written in one columnar pass."""
+
+    class_id: NDArray[np.int64]
+    center_px: NDArray[np.float64]  # (F, 2)
+    tight_xyxy: NDArray[np.float64]  # (F, 4)
+    corrected_xyxy: NDArray[np.float64]  # (F, 4)
+    label_xyxy: NDArray[np.float64]  # (F, 4) the box written to the label file (null where not labeled)
+    exclusion: NDArray[np.int8]  # Exclusion codes
+    visible_fraction: NDArray[np.float64] | None  # None: not rendered
+    center_visible: NDArray[np.bool_] | None
+
+    @property
+    def labeled(self) -> NDArray[np.bool_]:
+        return self.exclusion == 0
+
+    def exclusion_counts(self) -> dict[str, int]:
+        from datagen.core.labels import Exclusion
+
+        codes, counts = np.unique(self.exclusion[self.exclusion != 0], return_counts=True)
+        return {Exclusion(int(c)).reason: int(n) for c, n in zip(codes, counts, strict=True)}
+
+
+def feature_records(labels, class_ids, visible_fraction=None, center_visible=None) -> FeatureColumns:
+    """The ``features`` column of one frame from its :class:`~datagen.core.labels.FrameLabels`."""
+    return FeatureColumns(
+        class_id=np.asarray(class_ids, dtype=np.int64),
+        center_px=np.asarray(labels.center_px, dtype=np.float64),
+        tight_xyxy=np.asarray(labels.tight_xyxy, dtype=np.float64),
+        corrected_xyxy=np.asarray(labels.corrected_xyxy, dtype=np.float64),
+        label_xyxy=np.asarray(labels.label_xyxy, dtype=np.float64),
+        exclusion=np.asarray(labels.exclusion, dtype=np.int8),
+        visible_fraction=None if visible_fraction is None else np.asarray(visible_fraction, dtype=np.float64),
+        center_visible=None if center_visible is None else np.asarray(center_visible, dtype=bool),
+    )
+
+
+def _features_column(frames: Sequence[FeatureColumns]) -> pa.Array:
+    """One ``list<struct>`` column from per-frame arrays, without a Python object per record."""
+    from datagen.core.labels import Exclusion
+
+    counts = np.array([len(f.class_id) for f in frames], dtype=np.int32)
+    offsets = pa.array(np.concatenate([[0], np.cumsum(counts)]).astype(np.int32))
+    n = int(counts.sum())
+
+    def cat(name: str, width: int = 0) -> NDArray:
+        arrays = [getattr(f, name) for f in frames]
+        if not arrays:
+            return np.zeros((0, width) if width else 0)
+        return np.concatenate(arrays) if width == 0 else np.concatenate(arrays).reshape(-1, width)
+
+    def fixed(values: NDArray, width: int, mask: NDArray | None = None) -> pa.Array:
+        return pa.FixedSizeListArray.from_arrays(pa.array(values.reshape(-1), _F64), width,
+                                                 mask=None if mask is None else pa.array(mask))
+
+    def optional(name: str, dtype) -> pa.Array:
+        values = np.zeros(n, dtype=dtype)
+        mask = np.ones(n, dtype=bool)
+        start = 0
+        for f, c in zip(frames, counts, strict=True):
+            v = getattr(f, name)
+            if v is not None:
+                values[start:start + c] = v
+                mask[start:start + c] = False
+            start += c
+        return pa.array(values, mask=mask)
+
+    reasons = np.array([None] + [e.reason for e in list(Exclusion)[1:]], dtype=object)
+    codes = cat("exclusion").astype(np.int64)
+    struct = pa.StructArray.from_arrays(
+        [
+            pa.array(cat("class_id").astype(np.int32)),
+            fixed(cat("center_px", 2), 2),
+            fixed(cat("tight_xyxy", 4), 4),
+            fixed(cat("corrected_xyxy", 4), 4),
+            fixed(cat("label_xyxy", 4), 4, mask=codes != 0),
+            pa.array(codes == 0),
+            pa.array(reasons[codes].tolist(), pa.string()),
+            optional("visible_fraction", np.float64),
+            optional("center_visible", bool),
+        ],
+        fields=list(FEATURE_RECORD),
+    )
+    return pa.ListArray.from_arrays(offsets, struct).cast(pa.list_(FEATURE_RECORD))

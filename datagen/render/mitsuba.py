@@ -1,0 +1,171 @@
+"""Mitsuba 3 plumbing shared by the renderer and the asset previews.
+
+- :func:`select_variant` picks ``cuda_ad_rgb``, ``llvm_ad_rgb`` or ``scalar_rgb``
+  and explains how to install LLVM 19 instead of crashing when it is missing.
+- :func:`mitsuba_mesh` turns triangle arrays into a ``mi.Mesh`` (any file format
+  trimesh reads can thus be rendered, parts kept apart).
+- :func:`sensor_dict` places a perspective sensor whose intrinsics are exactly
+  :class:`datagen.core.camera.Intrinsics` (``fov_axis='x'``, principal point at the
+  image centre) at an OpenCV-convention ``world_from_cam``.
+- :func:`visible` casts rays to test which 3D points the camera sees.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Final
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from datagen.core.camera import Intrinsics
+from datagen.core.conventions import CVCAM_FROM_MICAM
+from datagen.core.errors import DatagenError
+
+__all__ = [
+    "LLVM_HINT",
+    "aligned_float32",
+    "jit_vectors",
+    "mitsuba_mesh",
+    "select_variant",
+    "sensor_dict",
+    "visible",
+    "world_from_micam",
+]
+
+VARIANTS: Final = ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
+LLVM_HINT: Final = (
+    "Mitsuba's llvm_ad_rgb variant needs LLVM 19: install it with `apt-get install -y libllvm19` "
+    "(LLVM 15/16 crash and 14 is too old), or set render.variant: scalar_rgb"
+)
+
+
+@functools.cache
+def _has_backend(name: str) -> bool:
+    import drjit as dr
+
+    backend = {"cuda": dr.JitBackend.CUDA, "llvm": dr.JitBackend.LLVM}[name]
+    try:
+        return bool(dr.has_backend(backend))
+    except Exception:  # an unusable driver or library reads as absent
+        return False
+
+
+def select_variant(requested: str = "auto") -> str:
+    """Set and return the Mitsuba variant: ``auto`` prefers CUDA, then LLVM, then scalar."""
+    import mitsuba as mi
+
+    if requested == "auto":
+        chosen = "cuda_ad_rgb" if _has_backend("cuda") else "llvm_ad_rgb" if _has_backend("llvm") else "scalar_rgb"
+    elif requested in VARIANTS:
+        chosen = requested
+        if requested == "llvm_ad_rgb" and not _has_backend("llvm"):
+            raise DatagenError(f"render.variant: llvm_ad_rgb is unavailable: {LLVM_HINT}")
+        if requested == "cuda_ad_rgb" and not _has_backend("cuda"):
+            raise DatagenError("render.variant: cuda_ad_rgb is unavailable: no CUDA GPU or driver found")
+    else:
+        raise DatagenError(f"render.variant: unknown Mitsuba variant {requested!r} (use auto or {', '.join(VARIANTS)})")
+    if mi.variant() != chosen:
+        mi.set_variant(chosen)
+    return chosen
+
+
+def mitsuba_mesh(name: str, vertices: ArrayLike, faces: ArrayLike, bsdf=None):
+    """A ``mi.Mesh`` from ``(V, 3)`` vertices and ``(F, 3)`` faces (current variant)."""
+    import mitsuba as mi
+
+    v = np.ascontiguousarray(vertices, dtype=np.float32)
+    f = np.ascontiguousarray(faces, dtype=np.uint32)
+    props = mi.Properties()
+    props.set_id(name)
+    if bsdf is not None:
+        props["bsdf"] = bsdf
+    mesh = mi.Mesh(name, len(v), len(f), props=props, has_vertex_normals=False)
+    params = mi.traverse(mesh)
+    set_buffer(params, "vertex_positions", v)
+    set_buffer(params, "faces", f)
+    params.update()
+    return mesh
+
+
+def set_buffer(params, key: str, array: ArrayLike) -> None:
+    """Assign a flat numpy buffer to a mesh parameter in any variant (scalar
+    variants take their own dynamic array type, vectorized ones mi.Float/UInt32)."""
+    flat = np.ascontiguousarray(array).ravel()
+    params[key] = type(params[key])(flat)
+
+
+def aligned_float32(values: ArrayLike) -> NDArray[np.float32]:
+    """A contiguous float32 copy of ``values`` that starts on a 64-byte boundary.
+
+    Dr.Jit maps numpy memory into a kernel without copying, and compiles the kernel
+    for the buffer's alignment: with numpy's arbitrary alignment every ray-casting
+    kernel would exist in aligned and unaligned variants, compiled anew by chance."""
+    flat = np.asarray(values, dtype=np.float32).ravel()
+    buffer = np.empty(flat.size + 16, dtype=np.float32)
+    start = (-buffer.ctypes.data % 64) // 4
+    out = buffer[start:start + flat.size]
+    out[...] = flat
+    return out
+
+
+def jit_vectors(cls, xyz: ArrayLike):
+    """``cls`` (``mi.Point3f``, ``mi.Vector3f``) of the rows of an ``(N, 3)`` array."""
+    import mitsuba as mi
+
+    xyz = np.asarray(xyz).reshape(-1, 3)
+    return cls(*(mi.Float(aligned_float32(xyz[:, i])) for i in range(3)))
+
+
+def world_from_micam(world_from_cam: ArrayLike) -> NDArray[np.float64]:
+    """A sensor's Mitsuba ``to_world`` for an OpenCV-convention ``world_from_cam``."""
+    return np.asarray(world_from_cam, dtype=np.float64) @ CVCAM_FROM_MICAM
+
+
+def sensor_dict(intrinsics: Intrinsics, world_from_cam: ArrayLike, spp: int, *,
+                rfilter: str = "box", pixel_format: str = "rgb") -> dict:
+    """A perspective sensor matching ``intrinsics`` at the OpenCV ``world_from_cam``."""
+    import mitsuba as mi
+
+    return {
+        "type": "perspective",
+        "fov": float(np.degrees(intrinsics.hfov_rad)),
+        "fov_axis": "x",
+        "near_clip": 0.01,
+        "far_clip": 1.0e8,  # beyond the sea plane's edge (see datagen.render.renderer.SEA_SIZE_M)
+        "to_world": mi.ScalarTransform4f(world_from_micam(world_from_cam).tolist()),
+        "sampler": {"type": "independent", "sample_count": int(spp)},
+        "film": {
+            "type": "hdrfilm",
+            "width": int(intrinsics.width),
+            "height": int(intrinsics.height),
+            "rfilter": {"type": rfilter},
+            "pixel_format": pixel_format,
+        },
+    }
+
+
+def visible(scene, origin: ArrayLike, points: ArrayLike, tolerance_m: float | ArrayLike = 0.01) -> NDArray[np.bool_]:
+    """Which ``points`` ``(N, 3)`` are seen from ``origin``: nothing is hit on the way
+    to them, up to ``tolerance_m`` (one value, or one per point) before them (the
+    point's own surface)."""
+    import mitsuba as mi
+
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    o = np.asarray(origin, dtype=np.float64)
+    d = p - o
+    dist = np.linalg.norm(d, axis=1)
+    d /= np.maximum(dist, 1e-12)[:, None]
+    max_t = np.maximum(dist - np.broadcast_to(np.asarray(tolerance_m, dtype=np.float64), dist.shape), 0.0)
+    n = len(p)
+    if mi.variant().startswith("scalar"):
+        seen = np.empty(n, dtype=bool)
+        for i, (di, t) in enumerate(zip(d, max_t, strict=True)):
+            ray = mi.Ray3f(mi.Point3f(*map(float, o)), mi.Vector3f(*map(float, di)))
+            ray.maxt = float(t)  # (Ray3f's third positional argument is the time, not maxt)
+            seen[i] = not scene.ray_test(ray)
+        return seen
+    ray = mi.Ray3f(jit_vectors(mi.Point3f, np.broadcast_to(o, (n, 3))), jit_vectors(mi.Vector3f, d))
+    ray.maxt = mi.Float(aligned_float32(max_t))
+    hit = np.asarray(scene.ray_test(ray), dtype=bool).reshape(n)
+    return ~hit

@@ -1,0 +1,173 @@
+"""PNG plots (matplotlib, Agg backend: no display needed)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+from datagen.scene.approach import trace_approach  # noqa: E402
+from datagen.config.schema import Config  # noqa: E402
+from datagen.dataset.files import atomic_path  # noqa: E402
+
+__all__ = ["plot_approaches", "plot_audit", "plot_evaluation"]
+
+
+def _save_png(fig, path: Path, dpi: int = 100) -> Path:
+    """Write a figure as PNG atomically and free it."""
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_approaches(config: Config, path: Path, approaches: int = 5, seed: int | None = None) -> None:
+    """Distance over time and trajectories in the drogue-centred frame for a few approaches."""
+    seed = config.dataset.seed if seed is None else seed
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8), constrained_layout=True)
+    for a in range(approaches):
+        tr = trace_approach(config, seed, a)
+        label = f"approach {a} ({tr['time_s'][-1]:.0f} s)"
+        axes[0].plot(tr["time_s"], tr["distance_m"], label=label)
+        pos = tr["probe_drogue_m"]
+        axes[1].plot(pos[:, 0], pos[:, 1])
+        axes[2].plot(pos[:, 0], pos[:, 2])
+        for ax, j in ((axes[1], 1), (axes[2], 2)):
+            ax.plot(pos[0, 0], pos[0, j], "o", color=ax.lines[-1].get_color(), ms=4)
+    axes[0].set(xlabel="time since start (s)", ylabel="probe-to-drogue distance (m)",
+                title="PtD distance (contact < 1 cm)", yscale="log")
+    axes[0].legend(fontsize=8)
+    axes[1].set(xlabel="x, tanker forward (m)", ylabel="y, left (m)", title="top view, drogue-centred frame")
+    axes[2].set(xlabel="x, tanker forward (m)", ylabel="z, up (m)", title="side view, drogue-centred frame")
+    for ax in axes[1:]:
+        ax.plot(0, 0, "k+", ms=12)
+        ax.grid(True, alpha=0.3)
+    axes[0].grid(True, alpha=0.3)
+    fig.suptitle(f"{config.name}: {approaches} Monte Carlo approaches (seed {seed}, start markers o, drogue +)")
+    _save_png(fig, path, dpi=110)
+
+
+def plot_audit(stats: dict, folder: Path) -> dict[str, Path]:
+    """The audit's figures as PNGs in ``folder``; returns {name: path}."""
+    import numpy as np
+
+    arrays = stats["_arrays"]
+    out: dict[str, Path] = {}
+
+    def save(fig, name: str) -> None:
+        out[name] = _save_png(fig, Path(folder) / f"{name}.png")
+
+    drift, distance = arrays["drift"], arrays["distance"]
+    floor = 1e-4  # a drift of exactly 0 (a symmetric view) still shows on the log axis
+    fig, ax = plt.subplots(figsize=(8, 4.5), constrained_layout=True)
+    if drift.size:
+        pick = np.random.default_rng(0).permutation(drift.size)[:20000]
+        ax.scatter(distance[pick], np.maximum(drift[pick], floor), s=3, alpha=0.25, label="a feature in a frame")
+        bins = [b for b in stats["tight_drift_px"]["by_distance_m"] if b["count"]]
+        mid = [(b["lo"] + b["hi"]) / 2 for b in bins]
+        ax.plot(mid, [max(b["median"], floor) for b in bins], "o-", color="C3", label="median per 10 m")
+        ax.plot(mid, [max(b["p95"], floor) for b in bins], "s--", color="C1", label="95th percentile")
+        ax.legend()
+    ax.set(yscale="log", xlabel="probe-to-drogue distance (m)", ylabel="tight-box centre drift (px)",
+           title="Tight-box (perceived) centre vs true centre projection")
+    ax.grid(True, alpha=0.3)
+    save(fig, "drift_vs_distance")
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+    sizes = sorted(set(arrays["size"].tolist()))
+    if drift.size:
+        axes[0].boxplot([np.maximum(drift[arrays["size"] == s], floor) for s in sizes], showfliers=False)
+        axes[0].set_xticks(range(1, len(sizes) + 1), [s or "untagged" for s in sizes])
+    axes[0].set(yscale="log", xlabel="feature size", ylabel="tight-box centre drift (px)", title="by feature size")
+    bins = [b for b in stats["tight_drift_px"]["by_obliqueness_deg"] if b["count"]]
+    mid = [(b["lo"] + b["hi"]) / 2 for b in bins]
+    axes[1].plot(mid, [max(b["median"], floor) for b in bins], "o-", label="median")
+    axes[1].plot(mid, [max(b["p95"], floor) for b in bins], "s--", label="95th percentile")
+    axes[1].set(yscale="log", xlabel="view obliqueness (deg; 0 = seen head-on)", ylabel="drift (px)",
+                title="by view obliqueness")
+    axes[1].legend()
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+    save(fig, "drift_by_size_and_obliqueness")
+
+    per_class = stats["labels_per_class"]
+    fig, ax = plt.subplots(figsize=(max(8, 0.12 * len(per_class)), 4), constrained_layout=True)
+    ax.bar(range(len(per_class)), list(per_class.values()))
+    ax.set(xlabel="class id", ylabel="labeled (frames)", title="Labels per class")
+    ax.grid(True, axis="y", alpha=0.3)
+    save(fig, "labels_per_class")
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
+    exclusions = stats["exclusions"]
+    axes[0].bar(list(exclusions), list(exclusions.values()), color=["C2"] + ["C7"] * (len(exclusions) - 1))
+    axes[0].set(ylabel="features x frames", title="Labeled and excluded, by reason")
+    axes[0].tick_params(axis="x", rotation=20)
+    hist = stats["visibility"]["visible_fraction_histogram"]
+    axes[1].bar(np.arange(10) / 10 + 0.05, hist, width=0.09)
+    axes[1].set(xlabel="visible fraction of a labeled feature's points", ylabel="count",
+                title="Visibility of labeled features (ray casts)")
+    for ax in axes:
+        ax.grid(True, axis="y", alpha=0.3)
+    save(fig, "exclusions_and_visibility")
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
+    cov = stats["distance_coverage"]
+    edges = np.asarray(cov["edges_m"])
+    axes[0].bar(edges[:-1] + 2.5, cov["frames"], width=4.5)
+    axes[0].set(xlabel="probe-to-drogue distance (m)", ylabel="frames", title="Distance coverage")
+    pnp = stats["pnp_below_3_features"]
+    axes[1].bar(list(pnp), [100 * v["share_below_3"] for v in pnp.values()], color="C3")
+    axes[1].set(ylabel="% of frames", title="Frames where an object has < 3 labeled features (no PnP)")
+    for ax in axes:
+        ax.grid(True, axis="y", alpha=0.3)
+    save(fig, "coverage_and_pnp")
+    return out
+
+
+def _label(source: dict) -> str:
+    return (f"truth + {source['noise_px']:g} px noise" if source["source"] == "truth"
+            else f"predictions ({source.get('predictions', '')})")
+
+
+def plot_evaluation(runs, summaries, folder: Path, *, name: str = "") -> dict[str, Path]:
+    """PtD error magnitude against distance, one panel per run with the mean and +-2 sigma
+    per distance bin (paper Figs 14-17), and reliability against distance."""
+    import numpy as np
+
+    out: dict[str, Path] = {}
+    n = len(runs)
+    cols = min(n, 2)
+    rows = (n + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(7 * cols, 4.2 * rows), squeeze=False, constrained_layout=True)
+    for ax, (source, result), summary in zip(axes.ravel(), runs, summaries):
+        ok = result["success"]
+        d, e = result["distance_m"], result["error_m"]
+        ax.scatter(d[ok], np.maximum(e[ok], 1e-6), s=2, alpha=0.3, color="C0", label="prediction error")
+        bins = [b for b in summary["by_distance"] if b["mean_m"] is not None]
+        mid = [(b["lo_m"] + b["hi_m"]) / 2 for b in bins]
+        ax.plot(mid, [b["mean_m"] for b in bins], "-", color="C3", label="mean")
+        ax.plot(mid, [b["plus_2sigma_m"] for b in bins], "--", color="C1", label="mean + 2 sigma")
+        ax.axhline(0.07, color="k", lw=0.8, ls=":", label="7 cm (acceptable at contact)")
+        ax.set(xscale="symlog", xlim=(0, 125), yscale="log", xlabel="probe-to-drogue distance (m)",
+               ylabel="PtD error magnitude (m)", title=f"{_label(source)}: target {summary['target']}")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7)
+    for ax in axes.ravel()[n:]:
+        ax.axis("off")
+    fig.suptitle(f"{name}: PtD vector error vs distance")
+    out["error_vs_distance"] = _save_png(fig, Path(folder) / "error_vs_distance.png")
+
+    fig, ax = plt.subplots(figsize=(8, 4), constrained_layout=True)
+    for (source, _), summary in zip(runs, summaries):
+        bins = [b for b in summary["by_distance"] if b["attempts"]]
+        ax.plot([(b["lo_m"] + b["hi_m"]) / 2 for b in bins], [100 * b["reliability"] for b in bins], "o-",
+                ms=3, label=_label(source))
+    ax.set(xlabel="probe-to-drogue distance (m)", ylabel="reliability (%)", ylim=(0, 102),
+           title=f"{name}: successful PtD predictions / attempts")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    out["reliability_vs_distance"] = _save_png(fig, Path(folder) / "reliability_vs_distance.png")
+    return out

@@ -1,0 +1,416 @@
+"""Monte Carlo refueling approaches (paper 3.1): pure numpy, no rendering.
+
+The local frame of the paper's Fig. 7 (centred on the *average* drogue
+position, axes along tanker forward, left, up) is exactly the tanker body frame
+of :mod:`datagen.core.conventions`, so the simulation runs in the tanker frame and
+places the tanker in the world afterwards.
+
+One approach:
+
+1. the receiver's probe tip starts at a random bearing behind (and mostly
+   below) the drogue, at the range's far end ('distance' sampling) or at a
+   uniform distance in range ('time' sampling); its attitude is the tanker's,
+   perturbed uniformly within +-yaw, +-pitch, +-roll;
+2. every step it follows the true probe-to-drogue (PtD) vector expressed in its
+   own frame: the PtD components shrink at ``forward_gain`` along receiver x
+   and ``lateral_gain_ratio`` times faster along y and z (speed-limited), on top
+   of the drogue's own motion, which the receiver matches (so that contact can
+   happen while the drogue moves); its attitude slerps back to the tanker's
+   with time constant ``attitude_time_constant_s``;
+3. contact is a PtD distance below ``contact_m`` (1 cm); 'time' sampling then
+   starts a new approach, as the paper's simulation did.
+
+The drogue moves about its average position under turbulence (see
+:class:`datagen.config.schema.DrogueConfig`); the hose runs from the tanker's port to
+the drogue as a cubic Hermite curve; the tanker flies straight and level or in
+a coordinated banking turn. The camera sits on its mount with a per-approach
+pose perturbation: extrinsics are unknown and change in flight.
+
+Frames are grouped ``frames_per_approach`` at a time: frames
+``[a*K, (a+1)*K)`` come from approach chain ``a``, whose every draw comes from
+:func:`datagen.core.conventions.approach_rng` ``(seed, a)``. A frame's state is thus
+a pure function of (config, seed, frame index), and any frame can be
+regenerated alone on any worker.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from datagen.config.schema import Config
+from datagen.core.conventions import approach_rng
+from datagen.scene.rig import HOSE_ATTACH_DROGUE_M, HOSE_PORT_TANKER_M, MOUNTS
+from datagen.core.transforms import (
+    invert_rigid,
+    make_transform,
+    rotation_from_rotvec,
+    rotation_from_ypr,
+    rotvec_from_rotation,
+)
+
+__all__ = [
+    "ApproachStart",
+    "FrameState",
+    "frame_state",
+    "frame_states",
+    "hose_curve",
+    "simulate_chain",
+    "trace_approach",
+]
+
+GRAVITY_MPS2 = 9.80665
+#: Turbulence runs this long before an approach starts, so the drogue starts in its stationary motion.
+TURBULENCE_WARMUP_S = 10.0
+#: Points along the hose polyline.
+HOSE_POINTS = 48
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ApproachStart:
+    """The random initial conditions of one approach (tanker frame)."""
+
+    distance_m: float
+    azimuth_rad: float
+    elevation_rad: float
+    yaw_rad: float
+    pitch_rad: float
+    roll_rad: float
+
+
+@dataclass(frozen=True, eq=False)
+class FrameState:
+    """Everything about one frame's geometry. All poses are 4x4 ``world_from_x``;
+    the camera frame is OpenCV's."""
+
+    frame_index: int
+    approach_index: int  # the approach chain (frames_per_approach frames)
+    approach_number: int  # 0 for the chain's first approach, +1 after each contact ('time' sampling)
+    time_s: float  # since the chain started
+    world_from_tanker: FloatArray
+    world_from_receiver: FloatArray
+    world_from_drogue: FloatArray
+    world_from_cam: FloatArray
+    hose_points_world: FloatArray  # (HOSE_POINTS, 3) from the port to the drogue coupling
+    ptd_receiver_m: FloatArray  # drogue centre in the receiver frame (probe tip -> drogue)
+    distance_m: float
+    mount: str
+    turbulence_intensity: float
+    bank_deg: float
+
+    @property
+    def cam_from_world(self) -> FloatArray:
+        return invert_rigid(self.world_from_cam)
+
+    def world_from(self, name: str) -> FloatArray:
+        return {"tanker": self.world_from_tanker, "receiver": self.world_from_receiver,
+                "drogue": self.world_from_drogue}[name]
+
+
+# --- pieces ----------------------------------------------------------------------
+def draw_start(config: Config, rng: np.random.Generator, distance_m: float) -> ApproachStart:
+    """Initial receiver placement and attitude perturbation (paper 3.1)."""
+    a = config.approach
+    el_lo, el_hi = a.start_elevation_deg
+    return ApproachStart(
+        distance_m=distance_m,
+        azimuth_rad=math.radians(rng.uniform(-a.start_azimuth_deg, a.start_azimuth_deg)),
+        elevation_rad=math.radians(rng.uniform(el_lo, el_hi)),
+        yaw_rad=math.radians(rng.uniform(-a.yaw_deg, a.yaw_deg)),
+        pitch_rad=math.radians(rng.uniform(-a.pitch_deg, a.pitch_deg)),
+        roll_rad=math.radians(rng.uniform(-a.roll_deg, a.roll_deg)),
+    )
+
+
+def start_offset(start: ApproachStart) -> FloatArray:
+    """Probe tip minus drogue centre at the start, tanker frame: behind, off to the side, below."""
+    ce = math.cos(start.elevation_rad)
+    direction = np.array([-ce * math.cos(start.azimuth_rad), ce * math.sin(start.azimuth_rad),
+                          math.sin(start.elevation_rad)])
+    return start.distance_m * direction
+
+
+class _Turbulence:
+    """Dryden-filtered gusts (first-order Gauss-Markov per axis) driving a damped
+    second-order drogue response; displacement in the tanker frame."""
+
+    def __init__(self, config: Config, rng: np.random.Generator, dt: float):
+        d = config.drogue
+        self.rng = rng
+        self.intensity = float(rng.uniform(*d.intensity))
+        self.sigma = np.asarray(d.rms_m) * self.intensity
+        self.decay = math.exp(-dt / d.gust_time_s)
+        self.kick = math.sqrt(1.0 - self.decay**2)
+        self.omega = 2.0 * math.pi * d.natural_hz
+        self.zeta = d.damping
+        self.dt = dt
+        self.gust = self.sigma * rng.standard_normal(3)
+        self.position = self.gust.copy()
+        self.velocity = np.zeros(3)
+        for _ in range(int(round(TURBULENCE_WARMUP_S / dt))):
+            self.step()
+
+    def step(self) -> None:
+        self.gust = self.gust * self.decay + self.sigma * self.kick * self.rng.standard_normal(3)
+        accel = self.omega**2 * (self.gust - self.position) - 2.0 * self.zeta * self.omega * self.velocity
+        self.velocity = self.velocity + self.dt * accel  # semi-implicit Euler: stable for omega*dt < 2
+        self.position = self.position + self.dt * self.velocity
+
+
+def tanker_drogue_rotation(drogue_offset: FloatArray) -> FloatArray:
+    """Attitude of the drogue in the tanker frame: the hose tension turns it toward its average
+    position, by the displacement's angle seen from the port."""
+    reach = float(np.hypot(HOSE_PORT_TANKER_M[0], HOSE_PORT_TANKER_M[1])) or 1.0
+    yaw = math.atan2(-drogue_offset[1], reach)
+    pitch = math.atan2(drogue_offset[2], reach)
+    return rotation_from_ypr(yaw, pitch, 0.0)
+
+
+def hose_curve(tanker_from_drogue: FloatArray, n: int = HOSE_POINTS) -> FloatArray:
+    """Hose centreline ``(n, 3)`` in the tanker frame, from the port to the drogue coupling.
+
+    A cubic Hermite curve: it leaves the port heading aft and 35 degrees down, and meets
+    the coupling along the drogue's axis (drag straightens the hose near the drogue).
+    """
+    p0 = HOSE_PORT_TANKER_M
+    p1 = tanker_from_drogue[:3, :3] @ HOSE_ATTACH_DROGUE_M + tanker_from_drogue[:3, 3]
+    chord = float(np.linalg.norm(p1 - p0))
+    t0 = chord * np.array([-math.cos(math.radians(35.0)), 0.0, -math.sin(math.radians(35.0))])
+    t1 = -chord * tanker_from_drogue[:3, 0]
+    s = np.linspace(0.0, 1.0, n)[:, None]
+    h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
+    h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
+    return h00 * p0 + h10 * t0 + h01 * p1 + h11 * t1
+
+
+class _Tanker:
+    """World pose of the tanker over time: straight and level, or a coordinated turn."""
+
+    def __init__(self, config: Config, rng: np.random.Generator):
+        t = config.tanker
+        self.speed = t.speed_mps
+        self.altitude = float(rng.uniform(*t.altitude_m))
+        self.heading0 = float(rng.uniform(0.0, 2.0 * math.pi))
+        turning = bool(rng.random() < t.turn_probability)
+        bank = math.radians(rng.uniform(*t.bank_deg)) * (1.0 if rng.random() < 0.5 else -1.0)
+        self.bank = bank if turning else 0.0
+        # Positive bank is right wing down: a right turn, heading (counter-clockwise) decreasing.
+        self.rate = -GRAVITY_MPS2 * math.tan(self.bank) / self.speed
+
+    def world_from_tanker(self, time_s: float) -> FloatArray:
+        heading = self.heading0 + self.rate * time_s
+        if abs(self.rate) < 1e-12:
+            pos = [self.speed * time_s * math.cos(heading), self.speed * time_s * math.sin(heading)]
+        else:
+            r = self.speed / self.rate
+            pos = [r * (math.sin(heading) - math.sin(self.heading0)),
+                   -r * (math.cos(heading) - math.cos(self.heading0))]
+        return make_transform(rotation_from_ypr(heading, 0.0, self.bank), [pos[0], pos[1], self.altitude])
+
+
+def _mount_jitter(config: Config, rng: np.random.Generator) -> tuple[FloatArray, FloatArray]:
+    """One approach's mount perturbation: a translation ``(3,)`` in the body frame and a
+    rotation ``(3, 3)`` about the camera's own axes, each within the configured bounds."""
+    j = config.camera.mount_jitter
+    shift = rng.uniform(-j.translation_m, j.translation_m, size=3)
+    ypr = np.radians(rng.uniform(-j.rotation_deg, j.rotation_deg, size=3))
+    return shift, rotation_from_ypr(*ypr)
+
+
+# --- the simulation ---------------------------------------------------------------
+@dataclass
+class _Snapshot:
+    approach_number: int
+    time_s: float
+    probe_tanker: FloatArray
+    attitude_rotvec: FloatArray
+    drogue_offset: FloatArray
+    body_from_cam: FloatArray
+    tanker: _Tanker
+    intensity: float
+
+
+class _Chain:
+    """One approach chain: the tanker, the turbulence, and a receiver that flies
+    approach after approach; every draw from one RNG, in a fixed order."""
+
+    def __init__(self, config: Config, rng: np.random.Generator):
+        a = config.approach
+        self.config = config
+        self.rng = rng
+        self.dt = a.dt_s
+        self.tanker = _Tanker(config, rng)
+        self.turbulence = _Turbulence(config, rng, self.dt)
+        self.gains = a.forward_gain * np.array([1.0, a.lateral_gain_ratio, a.lateral_gain_ratio])
+        self.limits = np.array([a.max_closure_mps, a.max_lateral_mps, a.max_lateral_mps])
+        self.attitude_decay = math.exp(-self.dt / a.attitude_time_constant_s)
+        self.time_s = 0.0
+        self.approach_number = -1
+        self.steps_this_approach = 0
+
+    def new_approach(self, distance_m: float) -> None:
+        self.approach_number += 1
+        self.steps_this_approach = 0
+        start = draw_start(self.config, self.rng, distance_m)
+        self.probe = self.turbulence.position + start_offset(start)
+        self.rotvec = rotvec_from_rotation(rotation_from_ypr(start.yaw_rad, start.pitch_rad, start.roll_rad))
+        shift, rot = _mount_jitter(self.config, self.rng)
+        nominal = MOUNTS[self.config.camera.mount].body_from_cam()
+        self.body_from_cam = make_transform(np.eye(3), shift) @ nominal @ make_transform(rot, np.zeros(3))
+
+    @property
+    def ptd_tanker(self) -> FloatArray:
+        return self.turbulence.position - self.probe
+
+    @property
+    def distance(self) -> float:
+        return float(np.linalg.norm(self.ptd_tanker))
+
+    def step(self) -> None:
+        if self.steps_this_approach >= self.config.approach.max_steps:
+            raise RuntimeError(
+                f"an approach did not reach contact in {self.config.approach.max_steps} steps "
+                f"(distance {self.distance:.3f} m): check the approach gains and speed limits"
+            )
+        drogue_before = self.turbulence.position
+        self.turbulence.step()
+        rotation = rotation_from_rotvec(self.rotvec)
+        ptd_receiver = rotation.T @ (drogue_before - self.probe)
+        velocity_receiver = np.clip(self.gains * ptd_receiver, -self.limits, self.limits)
+        # Match the drogue's own motion, then close on it along the receiver's axes.
+        self.probe = self.probe + (self.turbulence.position - drogue_before) + self.dt * (
+            rotation @ velocity_receiver)
+        self.rotvec = self.rotvec * self.attitude_decay  # slerp toward the tanker's attitude
+        self.time_s += self.dt
+        self.steps_this_approach += 1
+
+    def snap(self) -> _Snapshot:
+        return _Snapshot(self.approach_number, self.time_s, self.probe.copy(), self.rotvec.copy(),
+                         self.turbulence.position.copy(), self.body_from_cam, self.tanker,
+                         self.turbulence.intensity)
+
+
+def _start_chain(config: Config, seed: int, approach_index: int) -> tuple[_Chain, FloatArray | None]:
+    """Chain ``approach_index`` with its first approach begun, and for 'distance' sampling
+    its distance targets (far to near). The one place that fixes the order of the chain's
+    first draws, so that a traced approach is the one its frames come from."""
+    a = config.approach
+    k = a.frames_per_approach
+    lo, hi = a.range_m
+    chain = _Chain(config, approach_rng(seed, approach_index))
+    if a.sampling == "distance":
+        # One frame per distance stratum, visited from far to near, on one approach.
+        targets = np.sort(lo + (np.arange(k) + chain.rng.random(k)) * (hi - lo) / k)[::-1]
+        chain.new_approach(hi)
+        return chain, targets
+    chain.new_approach(float(chain.rng.uniform(lo, hi)))
+    return chain, None
+
+
+def simulate_chain(config: Config, seed: int, approach_index: int) -> list[_Snapshot]:
+    """Simulate approach chain ``approach_index``; return its ``frames_per_approach`` snapshots."""
+    a = config.approach
+    k = a.frames_per_approach
+    chain, targets = _start_chain(config, seed, approach_index)
+    snapshots: list[_Snapshot] = []
+    if targets is not None:
+        while True:
+            distance = chain.distance
+            contact = distance < a.contact_m
+            while len(snapshots) < k and (contact or targets[len(snapshots)] >= distance):
+                snapshots.append(chain.snap())
+            if len(snapshots) == k:
+                return snapshots
+            chain.step()
+    # 'time': a frame every stride_steps steps, through contact and the next approaches.
+    step = 0
+    while True:
+        if step % a.stride_steps == 0:
+            snapshots.append(chain.snap())
+            if len(snapshots) == k:
+                return snapshots
+        if chain.distance < a.contact_m:
+            chain.new_approach(float(chain.rng.uniform(*a.range_m)))
+        chain.step()
+        step += 1
+
+
+def trace_approach(config: Config, seed: int, approach_index: int, every: int = 3) -> dict[str, FloatArray]:
+    """The first approach of chain ``approach_index`` from start to contact, every ``every``
+    steps: ``time_s``, ``distance_m``, ``ptd_receiver_m`` (T, 3) and ``probe_drogue_m``
+    (T, 3), the probe tip in the drogue-centred local frame (paper Fig. 7)."""
+    a = config.approach
+    chain, _ = _start_chain(config, seed, approach_index)
+    rows: list[tuple] = []
+    step = 0
+    while True:
+        if step % every == 0 or chain.distance < a.contact_m:
+            rotation = rotation_from_rotvec(chain.rotvec)
+            rows.append((chain.time_s, chain.distance, rotation.T @ chain.ptd_tanker, -chain.ptd_tanker))
+        if chain.distance < a.contact_m:
+            break
+        chain.step()
+        step += 1
+    return {
+        "time_s": np.array([r[0] for r in rows]),
+        "distance_m": np.array([r[1] for r in rows]),
+        "ptd_receiver_m": np.array([r[2] for r in rows]),
+        "probe_drogue_m": np.array([r[3] for r in rows]),
+    }
+
+
+def _state(config: Config, frame_index: int, approach_index: int, snap: _Snapshot) -> FrameState:
+    world_from_tanker = snap.tanker.world_from_tanker(snap.time_s)
+    tanker_from_receiver = make_transform(rotation_from_rotvec(snap.attitude_rotvec), snap.probe_tanker)
+    tanker_from_drogue = make_transform(tanker_drogue_rotation(snap.drogue_offset), snap.drogue_offset)
+    world_from_receiver = world_from_tanker @ tanker_from_receiver
+    world_from_drogue = world_from_tanker @ tanker_from_drogue
+    body = MOUNTS[config.camera.mount].body
+    world_from_body = world_from_receiver if body == "receiver" else world_from_tanker
+    hose_tanker = hose_curve(tanker_from_drogue)
+    hose_world = hose_tanker @ world_from_tanker[:3, :3].T + world_from_tanker[:3, 3]
+    ptd = invert_rigid(world_from_receiver) @ world_from_drogue[:, 3]
+    return FrameState(
+        frame_index=frame_index,
+        approach_index=approach_index,
+        approach_number=snap.approach_number,
+        time_s=snap.time_s,
+        world_from_tanker=world_from_tanker,
+        world_from_receiver=world_from_receiver,
+        world_from_drogue=world_from_drogue,
+        world_from_cam=world_from_body @ snap.body_from_cam,
+        hose_points_world=hose_world,
+        ptd_receiver_m=ptd[:3],
+        distance_m=float(np.linalg.norm(ptd[:3])),
+        mount=config.camera.mount,
+        turbulence_intensity=snap.intensity,
+        bank_deg=math.degrees(snap.tanker.bank),
+    )
+
+
+@functools.lru_cache(maxsize=4)
+def _chain_states(config: Config, seed: int, approach_index: int) -> tuple[FrameState, ...]:
+    k = config.approach.frames_per_approach
+    snaps = simulate_chain(config, seed, approach_index)
+    return tuple(_state(config, approach_index * k + j, approach_index, s) for j, s in enumerate(snaps))
+
+
+def frame_state(config: Config, frame_index: int, seed: int | None = None) -> FrameState:
+    """The state of frame ``frame_index``: a pure function of (config, seed, frame index).
+
+    ``seed`` defaults to the config's dataset seed.
+    """
+    seed = config.dataset.seed if seed is None else seed
+    k = config.approach.frames_per_approach
+    return _chain_states(config, seed, frame_index // k)[frame_index % k]
+
+
+def frame_states(config: Config, frame_indices, seed: int | None = None) -> list[FrameState]:
+    """:func:`frame_state` for many frames (each chain is simulated once)."""
+    return [frame_state(config, i, seed) for i in frame_indices]
