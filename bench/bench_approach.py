@@ -14,8 +14,8 @@ import os
 import platform
 import time
 
-from datagen.scene.approach import _chain_states, frame_states
-from datagen.config.schema import load_config
+from datagen.config import load_config
+from datagen.scene.approach import frame_states
 
 
 def main() -> None:
@@ -27,7 +27,6 @@ def main() -> None:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     config = load_config(args.config)
     k = config.approach.frames_per_approach
-    _chain_states.cache_clear()
     start = time.perf_counter()
     frame_states(config, range(args.chains * k))
     elapsed = time.perf_counter() - start

@@ -35,22 +35,24 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 
-from datagen.scene.approach import frame_state
-from datagen.config.schema import load_config, override_config
-from datagen.core.conventions import frame_rng
-from datagen.render.renderer import Renderer, draw_look, render_seed
+from datagen.config import load_config, override_config
+from datagen.pipeline.frame import draw_frame
+from datagen.render.renderer import Renderer
+from datagen.scene.approach import FrameStates
+from datagen.scene.resolved import Scene
 
 
 def pure_render_s(config, frames: int) -> float:
     import mitsuba as mi
 
-    renderer = Renderer(config)
-    seed = config.dataset.seed
+    scene = Scene.resolve(config)
+    renderer, states = Renderer(scene), FrameStates(config)
     total = 0.0
     for i in range(frames):
-        renderer.pose(frame_state(config, i), draw_look(config, frame_rng(seed, i)))
+        draws = draw_frame(scene, states, i)
+        renderer.pose(draws.state, draws.look)
         start = time.perf_counter()
-        image = mi.render(renderer.scene, seed=render_seed(seed, i), spp=renderer.spp)
+        image = mi.render(renderer.scene, seed=draws.render_seed, spp=renderer.spp)
         np.array(image)  # make sure the kernel ran
         total += time.perf_counter() - start
     return total

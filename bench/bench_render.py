@@ -20,11 +20,13 @@ import tempfile
 import time
 from pathlib import Path
 
-from datagen.scene.approach import frame_state
-from datagen.assets.files import feature_table
-from datagen.config.schema import load_config
-from datagen.core.conventions import frame_rng
-from datagen.render.renderer import Renderer, draw_look, render_seed, write_png
+from datagen.config import load_config
+from datagen.files import write_image
+from datagen.pipeline.frame import draw_frame, frame_labels
+from datagen.render.renderer import Renderer
+from datagen.render.tonemap import to_srgb8
+from datagen.scene.approach import FrameStates
+from datagen.scene.resolved import Scene
 
 
 def main() -> None:
@@ -35,20 +37,21 @@ def main() -> None:
     parser.add_argument("--variant", default=None)
     args = parser.parse_args()
     config = load_config(args.config)
-    features = feature_table(config)
-    seed = config.dataset.seed
+    scene = Scene.resolve(config)
     print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs; config {args.config}, "
           f"{config.camera.width}x{config.camera.height}")
     with tempfile.TemporaryDirectory() as tmp:
         for spp in args.spp:
-            renderer = Renderer(config, spp=spp, variant=args.variant)
+            renderer = Renderer(scene, spp=spp, variant=args.variant)
+            states = FrameStates(config)
             render_s = total_s = 0.0
             for n, i in enumerate(range(args.frames + 1)):
-                start = time.perf_counter()
-                state = frame_state(config, i)
-                result = renderer.render(state, draw_look(config, frame_rng(seed, i)), render_seed(seed, i))
-                renderer.feature_visibility(state, features)
-                write_png(Path(tmp) / f"{i}.png", result.rgb)
+                start = time.perf_counter()  # the build's frame pipeline (datagen.pipeline.frame), timed whole
+                draws = draw_frame(scene, states, i)
+                frame_labels(scene, draws.state)
+                result = renderer.render(draws.state, draws.look, draws.render_seed)
+                renderer.feature_visibility(draws.state, scene.features)
+                write_image(Path(tmp) / f"{i}.png", to_srgb8(result.rgb)[..., ::-1])
                 elapsed = time.perf_counter() - start
                 if n > 0:
                     render_s += result.render_s

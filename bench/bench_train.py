@@ -39,10 +39,10 @@ from pathlib import Path
 
 import numpy as np
 
-from datagen.build.run import build_dataset
-from datagen.config.schema import load_config, override_config
-from datagen.dataset.reader import load_dataset
+from datagen.config import load_config, override_config
 from datagen.core.training import ANCHOR_STRIDES
+from datagen.dataset.reader import load_dataset
+from datagen.pipeline.run import build_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -92,7 +92,8 @@ def blank_images(root: Path, config) -> None:
 
     import cv2
 
-    from datagen.dataset.layout import Layout, plan_shards, write_image_lists
+    from datagen.dataset.layout import Layout, plan_shards
+    from datagen.dataset.metadata import write_image_lists
 
     layout, jobs = Layout(root), plan_shards(config)
     grey = root / ".grey.png"

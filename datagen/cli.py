@@ -20,9 +20,10 @@ from typing import Annotated, TypeVar
 import typer
 
 from datagen import __version__
-from datagen.core.camera import Intrinsics
-from datagen.config.schema import load_config
+from datagen.config import load_config
+from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import ConfigError, DatagenError
+from datagen.core.features import FEATURE_VARIANTS
 
 app = typer.Typer(
     name="datagen",
@@ -109,18 +110,17 @@ def validate(
 ) -> None:
     """Check configs against the schema, and their meshes and feature files;
     print every problem, one line each."""
-    from datagen.assets.files import check_assets
+    from datagen.scene.resolved import Scene
 
     failed = []
     for path in configs:
         try:
             config = load_config(path)
-            table = check_assets(config)
+            scene = Scene.resolve(config)
         except ConfigError as exc:
             failed.append(exc)
             continue
-        cam = config.camera
-        k = Intrinsics.from_hfov(cam.width, cam.height, math.radians(cam.hfov_deg))
+        cam, k, table = config.camera, scene.intrinsics, scene.features
         typer.echo(
             f"{path}: ok ({config.name}: {cam.mount}, {cam.hfov_deg:g} deg hFOV, "
             f"{cam.width}x{cam.height}, fx=fy={k.fx:.3f} px, {config.dataset.frames} frames, "
@@ -142,7 +142,7 @@ def approach(
     seed: Annotated[int | None, typer.Option("--seed", min=0, help="Override the config's seed.")] = None,
 ) -> None:
     """Simulate Monte Carlo refueling approaches; plot a few, print frame states."""
-    from datagen.scene.approach import frame_state, trace_approach
+    from datagen.scene.approach import frame_states, trace_approach
 
     if plot is not None:
         output_path(plot, "--plot")
@@ -151,8 +151,7 @@ def approach(
     for a in range(approaches):
         tr = trace_approach(cfg, seed, a)
         typer.echo(f"approach {a}: start {tr['distance_m'][0]:7.2f} m, contact after {tr['time_s'][-1]:6.1f} s")
-    for i in range(frames):
-        st = frame_state(cfg, i, seed)
+    for i, st in enumerate(frame_states(cfg, range(frames), seed)):
         x, y, z = st.ptd_receiver_m
         typer.echo(f"frame {i:5d}: approach {st.approach_index}.{st.approach_number} t={st.time_s:7.2f} s "
                    f"distance {st.distance_m:8.3f} m  PtD_receiver [{x:8.3f} {y:7.3f} {z:7.3f}] m")
@@ -189,8 +188,9 @@ def build(
     """Render a sharded, resumable dataset with YOLO labels and parquet manifests.
 
     Rerunning the same command after an interruption finishes the missing shards."""
-    from datagen.build.run import BuildProgress, build_dataset
-    from datagen.config.schema import override_config
+    from datagen.config import override_config
+    from datagen.pipeline.progress import BuildProgress
+    from datagen.pipeline.run import build_dataset
 
     if executor not in ("local", "ray"):
         raise DatagenError(f"--executor: unknown executor {executor!r} (choose local or ray)")
@@ -222,8 +222,8 @@ def audit(
     """Check a dataset's labels against the true centre projections; write
     report.json, plots and report.html. Exit 1 when a check fails."""
     from datagen.analysis.audit import audit as run_audit
-    from datagen.analysis.audit import write_report
     from datagen.dataset.reader import load_dataset
+    from datagen.report.audit_report import write_report
 
     folder = output_path(out if out is not None else Path(dataset) / "audit", "--out")
     view = load_dataset(dataset, allow_duplicates=True)
@@ -259,8 +259,8 @@ def preview(
     = None,
 ) -> None:
     """Draw overlays of true centres, tight and corrected boxes (paper Fig. 11)."""
-    from datagen.report.overlays import write_previews
     from datagen.dataset.reader import load_dataset
+    from datagen.report.overlays import write_previews
 
     folder = output_path(out if out is not None else Path(dataset) / "preview", "--out")
     wanted = _frame_list(frames) if frames else None
@@ -288,9 +288,10 @@ def evaluate(
 ) -> None:
     """PtD vectors by dual-object PnP from true centres (with noise) or detections;
     accuracy and reliability against distance (paper 3.3-3.6)."""
-    from datagen.analysis.evaluate import covered_splits, parse_predictions, summarize, write_evaluation
+    from datagen.analysis.evaluate import covered_splits, parse_predictions, summarize
     from datagen.analysis.evaluate import evaluate as run_evaluate
     from datagen.dataset.reader import load_dataset
+    from datagen.report.evaluation_report import write_evaluation
 
     if split not in (None, "all", "train", "val"):
         raise DatagenError(f"--split: {split!r}: choose all, train or val")
@@ -376,7 +377,7 @@ def render(
     seed: Annotated[int | None, typer.Option("--seed", min=0, help="Override the config's seed.")] = None,
 ) -> None:
     """Render single frames of a config (no labels): for looking, not for datasets."""
-    from datagen.render.renderer import render_frames
+    from datagen.report.gallery import render_frames
 
     output_path(out, "--out")
     cfg = load_config(config)
@@ -391,7 +392,7 @@ def gallery(
     spp: Annotated[int, typer.Option("--spp", min=1, max=MAX_SPP, help="Samples per pixel.")] = 16,
 ) -> None:
     """Render four frames each of wingcam55, podcam15 and dashcam75 into one sheet."""
-    from datagen.render.renderer import write_gallery
+    from datagen.report.gallery import write_gallery
 
     output_path(out, "--out")
     root = Path(__file__).resolve().parent.parent / "scenes"
@@ -425,28 +426,27 @@ def assets_build(
     out: Annotated[Path | None, typer.Option("--out", help="Assets folder (default: the built-in one).")] = None,
 ) -> None:
     """Regenerate every built-in mesh and feature file, byte for byte."""
-    from datagen.assets.files import BUILTIN_DIR, build_assets
+    from datagen.assets.files import BUILTIN_DIR
+    from datagen.assets.generate import write_assets
 
-    for path in build_assets(output_path(out, "--out") if out else BUILTIN_DIR):
-        typer.echo(f"wrote {path} ({path.stat().st_size:,} bytes)")
+    for path, size in write_assets(output_path(out, "--out") if out else BUILTIN_DIR).items():
+        typer.echo(f"wrote {path} ({size:,} bytes)")
 
 
 def _object_name(name: str) -> str:
-    from datagen.assets.files import RIGID_OBJECTS
-
     if name not in RIGID_OBJECTS:
         raise DatagenError(f"unknown object {name!r} (choose from {', '.join(RIGID_OBJECTS)})")
     return name
 
 
-_VARIANTS = ("baseline", "small", "medium", "large", "random")
 
 
 @assets_app.command("show")
 @user_errors
 def assets_show(
-    name: Annotated[str, typer.Argument(help="Object: tanker, receiver or drogue.", show_default=False)],
-    variant: Annotated[str, typer.Option("--variant", help="baseline, small, medium, large or random.")] = "baseline",
+    name: Annotated[str, typer.Argument(help=f"Object: {', '.join(RIGID_OBJECTS)}.", show_default=False)],
+    variant: Annotated[str, typer.Option("--variant", help=f"{', '.join(FEATURE_VARIANTS[:-1])} or "
+                                         f"{FEATURE_VARIANTS[-1]}.")] = "baseline",
     config: Annotated[Path | None, typer.Option("--config", help="Use this config's mesh and feature files "
                                                 "and its seed (default: the built-in assets).")] = None,
     seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of random features without --config.")] = 0,
@@ -454,11 +454,12 @@ def assets_show(
                                        "(as features.random_per_object).")] = 40,
 ) -> None:
     """Print the feature table of an object."""
-    from datagen.assets.files import builtin_paths, describe_features, load_object_features, object_paths
+    from datagen.assets.files import builtin_paths
+    from datagen.assets.table import describe_features, load_object_features, object_paths
 
     name = _object_name(name)
-    if variant not in _VARIANTS:
-        raise DatagenError(f"--variant: unknown variant {variant!r} (choose from {', '.join(_VARIANTS)})")
+    if variant not in FEATURE_VARIANTS:
+        raise DatagenError(f"--variant: unknown variant {variant!r} (choose from {', '.join(FEATURE_VARIANTS)})")
     mesh_path, features_path = builtin_paths(name)
     if config is not None:
         cfg = load_config(config)
@@ -480,7 +481,8 @@ def assets_preview(
     config: Annotated[Path | None, typer.Option("--config", help="Use this config's mesh and feature files.")] = None,
 ) -> None:
     """Render a contact sheet of each object from six views, feature centres marked."""
-    from datagen.assets.files import BUILTIN_DIR, RIGID_OBJECTS, builtin_paths, load_features, load_mesh, object_paths
+    from datagen.assets.files import BUILTIN_DIR, builtin_paths, load_features, load_mesh
+    from datagen.assets.table import object_paths
     from datagen.report.contact_sheets import write_contact_sheet
 
     cfg = load_config(config) if config is not None else None

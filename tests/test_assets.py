@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -12,23 +14,16 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from datagen.assets.files import (
-    BUILTIN_DIR,
-    RIGID_OBJECTS,
-    STORED_VARIANTS,
-    build_assets,
-    builtin_paths,
-    feature_table,
-    hull_distance,
-    load_features,
-    load_mesh,
-    load_object_features,
-)
-from datagen.config.schema import load_config
-from datagen.core.errors import ConfigError
+from datagen.assets.files import BUILTIN_DIR, builtin_paths, hull_distance, load_features, load_mesh
+from datagen.assets.generate import asset_documents
 from datagen.assets.models import material_class
 from datagen.assets.models.drogue import HOSE_RADIUS_M, hose_faces, hose_mesh, hose_vertices
-from datagen.scene.rig import HOSE_PORT_TANKER_M, MOUNTS
+from datagen.assets.rig import HOSE_PORT_TANKER_M, MOUNTS
+from datagen.assets.table import feature_table, load_object_features
+from datagen.config import load_config
+from datagen.core.conventions import RIGID_OBJECTS
+from datagen.core.errors import ConfigError
+from datagen.core.features import STORED_VARIANTS
 
 from .strategies import finite
 
@@ -48,11 +43,15 @@ def surface_distance(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
 
 # --- the built-in assets ------------------------------------------------------------
 def test_committed_assets_are_exactly_what_assets_build_writes(tmp_path: Path) -> None:
-    written = build_assets(tmp_path)
-    assert len(written) == 2 * len(RIGID_OBJECTS)
-    for path in written:
+    documents = asset_documents(tmp_path)
+    assert len(documents) == 2 * len(RIGID_OBJECTS)
+    for path, data in documents.items():
         committed = BUILTIN_DIR / path.relative_to(tmp_path)
-        assert committed.read_bytes() == path.read_bytes(), f"{committed} differs from a fresh build"
+        assert committed.read_bytes() == data, f"{committed} differs from a fresh build"
+    out = subprocess.run([sys.executable, "-m", "datagen", "assets", "build", "--out", str(tmp_path)],
+                         capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == documents
     assert not [p for p in tmp_path.rglob(".*")], "temporary files left behind"
 
 
@@ -140,9 +139,10 @@ def test_parts_are_named_for_materials(meshes) -> None:
 def test_meshes_load_in_mitsuba(meshes) -> None:
     import mitsuba as mi
 
-    from datagen.render.mitsuba import mitsuba_mesh, select_variant
+    from datagen.render.mitsuba import mitsuba_mesh
+    from datagen.render.runtime import use_variant
 
-    select_variant("auto")
+    use_variant("auto")
     for name, mesh in meshes.items():
         shapes = {p: mitsuba_mesh(p, m.vertices, m.faces) for p, m in mesh.parts.items()}
         scene = mi.load_dict({"type": "scene", **shapes}, optimize=False)

@@ -17,16 +17,18 @@ import yaml
 from hypothesis import given
 from hypothesis import strategies as st
 
-from datagen.analysis.audit import audit, feature_normals, obliqueness_deg, tight_centre_drift_px, write_report
-from datagen.build.run import build_dataset
+from datagen.analysis.audit import audit, feature_normals, obliqueness_deg, tight_centre_drift_px
 from datagen.core.camera import Intrinsics
 from datagen.core.errors import DatagenError
 from datagen.core.features import FeatureTable
 from datagen.core.labels import compute_labels
-from datagen.report.overlays import write_previews
-from datagen.dataset.reader import load_dataset
 from datagen.core.transforms import make_transform
-from tests.test_build import tiny_config
+from datagen.dataset.reader import load_dataset
+from datagen.pipeline.run import build_dataset
+from datagen.report.audit_report import write_report
+from datagen.report.overlays import write_previews
+
+from .support import tiny_config
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -239,7 +241,7 @@ def test_duplicate_coarse_and_non_finite_lines_fail_without_a_traceback(copy, tm
 # --- learnability (labels.min_box_px) ---------------------------------------------------------
 def wingcam_labels(tmp: Path, **overrides) -> Path:
     """A labels-only wingcam55 build of 40 frames (seed 123, not the config's)."""
-    from datagen.config.schema import load_config, override_config
+    from datagen.config import load_config, override_config
 
     config = override_config(load_config(ROOT / "scenes" / "wingcam55.yaml"),
                              {"dataset.frames": 40, "dataset.seed": 123, **overrides})

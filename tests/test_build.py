@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import platform
 import re
 import signal
 import subprocess
@@ -21,66 +22,27 @@ import yaml
 from hypothesis import given
 from hypothesis import strategies as st
 
-from datagen.assets.files import feature_table
-from datagen.build.run import build_dataset
+from datagen.assets.table import feature_table
+from datagen.config import LabelsConfig, load_config, override_config
 from datagen.core.camera import Intrinsics
-from datagen.config.schema import LabelsConfig, load_config, override_config
-from datagen.dataset.layout import SPLITS, DatasetLock, frame_split, plan_shards
 from datagen.core.errors import ConfigError, DatagenError
-from datagen.dataset.files import is_temporary
 from datagen.core.labels import compute_labels
-from datagen.dataset.schema import RUN_COLUMNS, features_schema, manifest_schema, read_features
 from datagen.core.training import label_options
+from datagen.dataset.folder import DatasetLock
+from datagen.dataset.layout import SPLITS, frame_split, plan_shards
+from datagen.dataset.schema import features_schema, manifest_schema, read_features
+from datagen.pipeline.run import build_dataset
 
-ROOT = Path(__file__).resolve().parents[1]
-
-TINY = """\
-name: tiny
-camera: {mount: wingcam, hfov_deg: 55.0, width: 128, height: 68}
-render: {spp: 1, max_depth: 3, exr: %(exr)s}
-labels: {edge_margin_px: 2.0}
-approach: {frames_per_approach: 4}
-dataset: {frames: 8, shard_size: 3, seed: 7}
-"""
-
-
-def tiny_config(tmp: Path, *, exr: bool = False, **overrides):
-    path = tmp / "tiny.yaml"
-    path.write_text(TINY % {"exr": str(exr).lower()})
-    config = load_config(path)
-    return override_config(config, overrides) if overrides else config
-
-
-def run_cli(*args: str, cwd: Path = ROOT, timeout: float = 300) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "datagen", *args], cwd=cwd, capture_output=True, text=True,
-                          timeout=timeout)
-
-
-def manifest_rows(root: Path) -> dict[int, dict]:
-    rows = {}
-    for path in sorted((root / "manifests").glob("*.parquet")):
-        for row in pq.read_table(path).to_pylist():
-            rows[row["frame_id"]] = row
-    return rows
-
-
-def comparable(root: Path) -> dict[int, str]:
-    """Manifest rows without the timing columns, as canonical JSON (NaN-safe equality)."""
-    return {i: json.dumps({k: v for k, v in row.items() if k not in RUN_COLUMNS}, sort_keys=True)
-            for i, row in manifest_rows(root).items()}
-
-
-def label_files(root: Path) -> dict[str, bytes]:
-    return {str(p.relative_to(root)): p.read_bytes() for p in sorted((root / "labels").rglob("*.txt"))}
-
-
-def image_files(root: Path) -> dict[str, bytes]:
-    return {str(p.relative_to(root)): p.read_bytes() for tree in ("images", "exr") for p in sorted((root / tree).rglob("*"))
-            if p.is_file()}
-
-
-def temporaries(root: Path) -> list[Path]:
-    return [p for p in root.rglob(".*") if is_temporary(p.name)]
+from .support import (
+    ROOT,
+    comparable,
+    image_files,
+    label_files,
+    manifest_rows,
+    run_cli,
+    temporaries,
+    tiny_config,
+)
 
 
 # --- the plan --------------------------------------------------------------------------
@@ -232,7 +194,7 @@ def test_a_running_build_locks_the_folder(tmp_path: Path) -> None:
     tiny_config(tmp_path)
     root = tmp_path / "ds"
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time; from pathlib import Path; from datagen.dataset.layout import "
+        [sys.executable, "-c", "import sys, time; from pathlib import Path; from datagen.dataset.folder import "
          "DatasetLock; DatasetLock(Path(sys.argv[1])).acquire(); print('locked', flush=True); time.sleep(120)",
          str(root)], stdout=subprocess.PIPE, text=True)
     try:
@@ -366,12 +328,15 @@ def test_rendered_and_labels_only_builds_label_alike(reference, tmp_path: Path) 
 @pytest.mark.render
 def test_two_workers_give_the_same_dataset(reference, tmp_path: Path) -> None:
     root, config = reference
-    report = build_dataset(config, tmp_path / "ds", workers=2)
+    report = build_dataset(config, tmp_path / "ds", workers=2, threads=1)
     assert report.rendered == 8
     assert label_files(tmp_path / "ds") == label_files(root)
     assert comparable(tmp_path / "ds") == comparable(root)
-    pids = {row["worker_rss_mib"] > 0 for row in manifest_rows(tmp_path / "ds").values()}
-    assert pids == {True}
+    assert image_files(tmp_path / "ds") == image_files(root)  # one Mitsuba thread each: the same bytes
+    rows = manifest_rows(tmp_path / "ds").values()
+    workers = {row["worker"] for row in rows}
+    assert len(workers) == 2 and f"{platform.node()}:{os.getpid()}" not in workers  # two processes did it
+    assert all(row["worker_rss_mib"] > 0 for row in rows)
 
 
 @pytest.mark.render
@@ -458,3 +423,22 @@ def test_exclude_mode_drops_boxes_under_the_minimum_as_too_small(tmp_path: Path)
         if f["labeled"]:  # a written box is the corrected one, never grown, at least the minimum
             assert f["label_xyxy"] == f["corrected_xyxy"]
             assert np.all(np.diff(np.reshape(f["label_xyxy"], (2, 2)), axis=0) >= need)
+
+
+def test_the_manifest_readme_recompute_example_runs_and_matches(tmp_path: Path) -> None:
+    """manifests/README.md's 'Recomputing a label' snippet, run as written on a built dataset."""
+    build_dataset(tiny_config(tmp_path), tmp_path / "ds", render=False)
+    text = (ROOT / "manifests" / "README.md").read_text()
+    section = text[text.index("## Recomputing a label"):]
+    code = section[section.index("```python") + len("```python"):]
+    code = code[:code.index("```")].replace("DATASET", str(tmp_path / "ds"))
+    scope: dict = {}
+    exec(compile(code, "manifests/README.md", "exec"), scope)  # noqa: S102 (the project's own documentation)
+    labels, row = scope["labels"], scope["row"]
+    stored = row["features"]
+    np.testing.assert_allclose(labels.center_px, np.array([f["center_px"] for f in stored], dtype=float),
+                               atol=1e-6)
+    labeled = np.array([f["labeled"] for f in stored])
+    np.testing.assert_array_equal(labels.labeled, labeled)
+    np.testing.assert_allclose(labels.label_xyxy[labeled], np.array([f["label_xyxy"] for f in stored if f["labeled"]]),
+                               atol=1e-6)

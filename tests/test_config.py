@@ -8,7 +8,7 @@ import pytest
 import yaml
 from pydantic import BaseModel, ValidationError
 
-from datagen.config.schema import Config, load_config
+from datagen.config import Config, load_config
 from datagen.core.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -12,7 +12,13 @@ from hypothesis.extra.numpy import arrays
 
 from datagen.core.camera import Intrinsics, project_points
 from datagen.core.conventions import CVCAM_FROM_MICAM, MICAM_FROM_CVCAM, frame_rng
-from datagen.core.transforms import Transform, apply_transform, invert_rigid, make_transform, rotation_from_ypr
+from datagen.core.transforms import (
+    Transform,
+    apply_transform,
+    invert_rigid,
+    make_transform,
+    rotation_from_ypr,
+)
 
 from .strategies import finite, rotations
 

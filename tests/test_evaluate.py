@@ -14,15 +14,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from datagen.scene.approach import frame_state
-from datagen.assets.files import feature_table
-from datagen.build.run import build_dataset
-from datagen.core.camera import Intrinsics, project_points
-from datagen.config.schema import load_config, override_config
-from datagen.core.errors import DatagenError
 from datagen.analysis.evaluate import evaluate, parse_predictions, ptd_from_points, summarize
-from datagen.dataset.reader import load_dataset
+from datagen.assets.table import feature_table
+from datagen.config import load_config, override_config
+from datagen.core.camera import Intrinsics, project_points
+from datagen.core.errors import DatagenError
 from datagen.core.transforms import apply_transform, invert_rigid, make_transform, rotation_from_ypr
+from datagen.dataset.reader import load_dataset
+from datagen.pipeline.run import build_dataset
+from datagen.scene.approach import frame_state
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -108,7 +108,8 @@ def test_predictions_are_parsed_and_matched_by_stem(wingcam, tmp_path: Path) -> 
 
 def test_a_bad_prediction_line_names_its_file(tmp_path: Path) -> None:
     (tmp_path / "00000001.txt").write_text("3 0.5 0.5 0.1 0.1 0.9\n81 0.5 0.5 0.1 0.1 0.9\n")
-    with pytest.raises(DatagenError, match=r"00000001\.txt:2: expected 'class cx cy w h \[conf\]' with class < 80"):
+    with pytest.raises(DatagenError, match=r"00000001\.txt:2: not a detection line 'class cx cy w h \[conf\]': "
+                       r"class 81 is not an integer in \[0, 80\)"):
         parse_predictions(tmp_path, 2048, 1080, 80)
 
 

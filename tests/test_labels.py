@@ -11,8 +11,9 @@ from hypothesis.extra.numpy import arrays
 
 from datagen.core.camera import Intrinsics
 from datagen.core.features import FeatureTable
-from datagen.core.labels import YOLO_DECIMALS, Exclusion, boxes_from_uv, compute_labels, yolo_lines
+from datagen.core.labels import Exclusion, boxes_from_uv, compute_labels
 from datagen.core.transforms import make_transform, rotation_from_ypr
+from datagen.dataset.yolo import YOLO_DECIMALS, yolo_lines
 
 from .strategies import cam_from_model_in_front, finite, intrinsics, point_sets, rotations
 

@@ -11,27 +11,42 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from datagen.scene.approach import frame_state
-from datagen.assets.files import feature_table, load_mesh, object_paths
+from datagen.assets.files import load_mesh
+from datagen.assets.rig import body_from_cam_looking
+from datagen.assets.table import feature_table, object_paths
+from datagen.config import load_config, override_config
 from datagen.core.camera import Intrinsics, project_points
-from datagen.config.schema import load_config, override_config
-from datagen.core.conventions import frame_rng
+from datagen.core.conventions import frame_rng, object_id, render_seed
 from datagen.core.errors import DatagenError
-from datagen.render.renderer import Renderer, draw_look, object_ids, render_seed, to_srgb8, write_exr
-from datagen.scene.rig import body_from_cam_looking
 from datagen.core.transforms import apply_transform, invert_rigid, make_transform, rotation_from_ypr
+from datagen.files import write_exr
+from datagen.render.renderer import Renderer, visibility_tolerance_m
+from datagen.render.tonemap import haze, to_srgb8
+from datagen.scene.approach import frame_state
+from datagen.scene.look import draw_look
+from datagen.scene.resolved import Scene
 
 pytestmark = pytest.mark.render
 ROOT = Path(__file__).resolve().parents[1]
 
 import mitsuba as mi  # noqa: E402  (after the marker: every test here needs Mitsuba)
 
-from datagen.render.mitsuba import select_variant, sensor_dict  # noqa: E402
+from datagen.render.mitsuba import sensor_dict, visible  # noqa: E402
+from datagen.render.runtime import set_threads, thread_count, use_variant  # noqa: E402
 
 
 @pytest.fixture(scope="module", autouse=True)
 def variant() -> str:
-    return select_variant("auto")
+    return use_variant("auto")
+
+
+@pytest.fixture
+def one_thread():
+    """One Dr.Jit thread for the test (byte-identical renders), the pool restored after."""
+    before = thread_count()
+    set_threads(1)
+    yield
+    set_threads(before)
 
 
 @pytest.mark.parametrize("hfov_deg", [15.0, 25.0, 55.0, 75.0])
@@ -65,10 +80,10 @@ def test_emissive_spheres_land_on_their_label_projection(hfov_deg: float) -> Non
         assert np.linalg.norm(centroid - [u, v]) < 0.1, (hfov_deg, centroid, (u, v))
 
 
-def _renderer(config_name: str, **kwargs) -> tuple[Renderer, object]:
+def renderer_for(config_name: str, **kwargs) -> tuple[Renderer, object]:
     config = load_config(ROOT / "scenes" / config_name)
     size = {"width": 320, "height": 169} if not kwargs.pop("full_size", False) else {}
-    return Renderer(config, spp=kwargs.pop("spp", 4), **size, **kwargs), config
+    return Renderer(Scene.resolve(config), spp=kwargs.pop("spp", 4), **size, **kwargs), config
 
 
 @pytest.mark.parametrize(("config_name", "frame", "obj"), [("podcam15.yaml", 0, "drogue"),
@@ -76,14 +91,14 @@ def _renderer(config_name: str, **kwargs) -> tuple[Renderer, object]:
 def test_object_id_silhouette_matches_projected_mesh(config_name: str, frame: int, obj: str) -> None:
     # Full 2048 x 1080: the geometry pass alone (no path tracing) is quick, and thin
     # parts such as wing tips then span pixels instead of slipping between centres.
-    renderer, config = _renderer(config_name, full_size=True)
+    renderer, config = renderer_for(config_name, full_size=True)
     state = frame_state(config, frame)
     # Unoccluded: move the hose (which hangs in front of the drogue seen from the pod) away.
     state = dataclasses.replace(state, hose_points_world=state.hose_points_world + [0.0, 0.0, 5000.0])
     look = draw_look(config, frame_rng(config.dataset.seed, frame))
     renderer.pose(state, look)
     _, ids = renderer.geometry_pass()
-    mask = ids == object_ids()[obj]
+    mask = ids == object_id(obj)
     assert mask.sum() > 50, "the object should be in view"
     rows, cols = np.nonzero(mask)
     silhouette = np.array([cols.min(), rows.min(), cols.max() + 1, rows.max() + 1], dtype=float)
@@ -97,69 +112,68 @@ def test_object_id_silhouette_matches_projected_mesh(config_name: str, frame: in
     np.testing.assert_array_less(np.abs(silhouette - projected), 1.0)
 
 
-def test_per_frame_parameters_reproduce_a_fresh_scene_load() -> None:
-    import drjit as dr
-
-    before = dr.thread_count()
-    try:
-        a, config = _renderer("dashcam75.yaml", threads=1)
-        b, _ = _renderer("dashcam75.yaml", threads=1)
-        seed = config.dataset.seed
-        first, second = frame_state(config, 0), frame_state(config, 7)
-        look0, look7 = (draw_look(config, frame_rng(seed, i)) for i in (0, 7))
-        a.render(first, look0, render_seed(seed, 0))  # a: posed and dressed twice
-        again = a.render(second, look7, render_seed(seed, 7), geometry=True)
-        fresh = b.render(second, look7, render_seed(seed, 7), geometry=True)  # b: from a fresh load
-        np.testing.assert_array_equal(again.rgb, fresh.rgb)
-        np.testing.assert_array_equal(again.object_id, fresh.object_id)
-        np.testing.assert_array_equal(again.depth, fresh.depth)
-        other = a.render(first, look0, render_seed(seed, 0))
-        assert np.abs(other.rgb - fresh.rgb).mean() > 1e-3  # and the frames do differ
-    finally:
-        dr.set_thread_count(before)
+def test_per_frame_parameters_reproduce_a_fresh_scene_load(one_thread) -> None:
+    a, config = renderer_for("dashcam75.yaml")
+    b, _ = renderer_for("dashcam75.yaml")
+    seed = config.dataset.seed
+    first, second = frame_state(config, 0), frame_state(config, 7)
+    look0, look7 = (draw_look(config, frame_rng(seed, i)) for i in (0, 7))
+    a.render(first, look0, render_seed(seed, 0))  # a: posed and dressed twice
+    again = a.render(second, look7, render_seed(seed, 7), geometry=True)
+    fresh = b.render(second, look7, render_seed(seed, 7), geometry=True)  # b: from a fresh load
+    np.testing.assert_array_equal(again.rgb, fresh.rgb)
+    np.testing.assert_array_equal(again.object_id, fresh.object_id)
+    np.testing.assert_array_equal(again.depth, fresh.depth)
+    other = a.render(first, look0, render_seed(seed, 0))
+    assert np.abs(other.rgb - fresh.rgb).mean() > 1e-3  # and the frames do differ
 
 
-def test_a_frame_renders_the_same_first_in_its_process_or_after_another() -> None:
+def test_a_frame_renders_the_same_first_in_its_process_or_after_another(one_thread) -> None:
     """A resumed build renders its frames after other frames, or first: the image must not
     change (it did in 33 of 138,240 pixels of this frame before a fresh scene was posed twice)."""
-    import drjit as dr
-
-    before = dr.thread_count()
     config = override_config(load_config(ROOT / "scenes" / "wingcam55.yaml"),
                              {"camera.width": 512, "camera.height": 270, "render.spp": 4})
     seed = config.dataset.seed
+    scene = Scene.resolve(config)
 
     def render(renderer, i):
         return renderer.render(frame_state(config, i), draw_look(config, frame_rng(seed, i)), render_seed(seed, i)).rgb
 
-    try:
-        first = render(Renderer(config, threads=1), 5)
-        later = Renderer(config, threads=1)
-        render(later, 4)
-        np.testing.assert_array_equal(render(later, 5), first)
-    finally:
-        dr.set_thread_count(before)
+    first = render(Renderer(scene), 5)
+    later = Renderer(scene)
+    render(later, 4)
+    np.testing.assert_array_equal(render(later, 5), first)
 
 
-def test_depth_is_camera_z_and_infinite_on_the_sky() -> None:
-    renderer, config = _renderer("wingcam55.yaml")
+def test_depth_is_camera_z_on_the_tanker_and_the_sea_and_infinite_on_the_sky() -> None:
+    renderer, config = renderer_for("wingcam55.yaml")
     state = frame_state(config, 2)
     renderer.pose(state, draw_look(config, frame_rng(config.dataset.seed, 2)))
     depth, ids = renderer.geometry_pass()
-    tanker = ids == object_ids()["tanker"]
+    tanker = ids == object_id("tanker")
     cam_from_tanker = invert_rigid(state.world_from_cam) @ state.world_from_tanker
     mesh = load_mesh(object_paths(config, "tanker")[0], "tanker").combined
     z = apply_transform(cam_from_tanker, mesh.vertices)[:, 2]
-    assert z.min() - 0.5 <= depth[tanker].min() and depth[tanker].max() <= z.max() + 0.5
-    # Looking down at the sea from altitude, the sea's depth is the camera height / cos.
-    assert np.isfinite(depth).any()
-    camera_up = state.world_from_cam[:3, 1] @ np.array([0.0, 0.0, -1.0])  # image up (-y) vs world up
-    if camera_up > 0.3:  # horizon in view: the sky above it is infinite
-        assert np.isinf(depth[0]).any()
+    assert tanker.sum() > 100 and z.min() - 0.5 <= depth[tanker].min() and depth[tanker].max() <= z.max() + 0.5
+    # The sea (world z = 0): a pixel centre's ray from the camera at height h meets it at
+    # distance h / (-d_z), whose camera z-depth is that distance times the ray's own z.
+    k = renderer.intrinsics
+    uu, vv = np.meshgrid(np.arange(k.width) + 0.5, np.arange(k.height) + 0.5)
+    d_cam = np.stack([(uu - k.cx) / k.fx, (vv - k.cy) / k.fy, np.ones_like(uu)], axis=-1)
+    d_cam /= np.linalg.norm(d_cam, axis=-1, keepdims=True)
+    d_world = d_cam @ state.world_from_cam[:3, :3].T
+    height = state.world_from_cam[2, 3]
+    sea = (ids == 0) & np.isfinite(depth)
+    assert sea.sum() > 1000, "this frame looks down on the sea"
+    expected = height / -d_world[..., 2] * d_cam[..., 2]
+    np.testing.assert_allclose(depth[sea], expected[sea], rtol=1e-3)
+    # Rays that rise above the horizon and miss the aircraft hit nothing: infinite depth.
+    sky = (d_world[..., 2] > 1e-3) & (ids == 0)
+    assert sky.sum() > 1000 and np.isinf(depth[sky]).all()
 
 
 def test_feature_visibility_sees_into_the_basket_only_from_behind() -> None:
-    renderer, config = _renderer("podcam15.yaml")
+    renderer, config = renderer_for("podcam15.yaml")
     state = frame_state(config, 0)
     state = dataclasses.replace(state, hose_points_world=state.hose_points_world + [0.0, 0.0, 5000.0])
     features = feature_table(config)
@@ -173,7 +187,12 @@ def test_feature_visibility_sees_into_the_basket_only_from_behind() -> None:
         moved = dataclasses.replace(state, world_from_cam=body_from_cam_looking(eye, target - eye))
         renderer.pose(moved, draw_look(config, frame_rng(0, 0)))
         fraction, centre_seen = renderer.feature_visibility(moved, features)
-        assert ((0 <= fraction) & (fraction <= 1)).all()
+        # Each fraction is the share of that feature's own points a ray reaches (padding aside).
+        for f in (centre, coupling):
+            points = apply_transform(world_from_drogue, features.point_set(f)) - eye
+            seen = visible(renderer.scene, np.zeros(3), points,
+                           visibility_tolerance_m(np.linalg.norm(points, axis=1)))
+            assert fraction[f] == seen.mean() and fraction[f] * features.n_points[f] % 1 == 0
         results[side] = (centre_seen[centre], fraction[coupling], centre_seen[coupling])
     # The basket centre is seen through the opening from behind, hidden by the
     # canopy from ahead; the coupling's outside is hidden behind the reception ring
@@ -187,7 +206,7 @@ def test_looks_are_drawn_from_the_frame_rng_within_the_config() -> None:
     config = load_config(ROOT / "scenes" / "wingcam55.yaml")
     a, b = (draw_look(config, frame_rng(55, 3)) for _ in range(2))
     c = draw_look(config, frame_rng(55, 4))
-    assert a.flat() == b.flat() and a.flat() != c.flat()
+    assert a == b and a != c
     sky = config.randomization.sky
     assert sky.sun_elevation_deg[0] <= a.sun_elevation_deg <= sky.sun_elevation_deg[1]
     assert sky.turbidity[0] <= a.turbidity <= sky.turbidity[1]
@@ -195,7 +214,7 @@ def test_looks_are_drawn_from_the_frame_rng_within_the_config() -> None:
     assert all(lo <= m["paint"].roughness <= hi for m in a.materials.values())
 
 
-def test_frames_reuse_compiled_kernels() -> None:
+def test_frames_reuse_compiled_kernels(one_thread) -> None:
     """Every per-frame parameter reaches Mitsuba without being baked into a kernel, except
     the sunsky scales, which take only a few levels: memory and compile time per frame stay
     flat over long builds (a continuous sun_scale draw compiled a new kernel every frame)."""
@@ -206,7 +225,7 @@ def test_frames_reuse_compiled_kernels() -> None:
     scales = {(draw_look(config, frame_rng(55, i)).sun_scale, draw_look(config, frame_rng(55, i)).sky_scale)
               for i in range(300)}
     assert len(scales) == 25  # 5 levels each, all used
-    renderer = Renderer(config, threads=1)
+    renderer = Renderer(Scene.resolve(config))
     features = feature_table(config)
     sun, sky = next(iter(scales))
     dr.set_flag(dr.JitFlag.KernelHistory, True)
@@ -227,11 +246,11 @@ def test_frames_reuse_compiled_kernels() -> None:
 def test_exr_has_linear_rgb_depth_and_object_ids(tmp_path: Path) -> None:
     import OpenEXR
 
-    renderer, config = _renderer("podcam15.yaml", spp=1)
+    renderer, config = renderer_for("podcam15.yaml", spp=1)
     state = frame_state(config, 0)
     result = renderer.render(state, draw_look(config, frame_rng(15, 0)), render_seed(15, 0), geometry=True)
     path = tmp_path / "f.exr"
-    write_exr(path, result)
+    write_exr(path, result.rgb, result.depth, result.object_id)
     with OpenEXR.File(str(path), separate_channels=True) as exr:
         channels = exr.channels()
         assert sorted(channels) == ["B", "G", "R", "Z", "object_id"]
@@ -248,11 +267,11 @@ def test_srgb_transfer() -> None:
 
 
 def test_missing_llvm_gets_an_install_hint(monkeypatch) -> None:
-    from datagen.render import mitsuba as mitsuba_util
+    from datagen.render import runtime
 
-    monkeypatch.setattr(mitsuba_util, "_has_backend", lambda name: False)
+    monkeypatch.setattr(runtime, "has_backend", lambda name: False)
     with pytest.raises(DatagenError, match=r"apt-get install -y libllvm19"):
-        mitsuba_util.select_variant("llvm_ad_rgb")
+        runtime.use_variant("llvm_ad_rgb")
 
 
 def test_render_command_writes_png_and_exr(tmp_path: Path) -> None:
@@ -277,7 +296,7 @@ def test_render_command_writes_png_and_exr(tmp_path: Path) -> None:
 def test_a_visibility_threshold_excludes_occluded_features() -> None:
     from datagen.core.labels import Exclusion, compute_labels
 
-    renderer, config = _renderer("podcam15.yaml")
+    renderer, config = renderer_for("podcam15.yaml")
     state = frame_state(config, 0)
     features = feature_table(config)
     renderer.pose(state, draw_look(config, frame_rng(15, 0)))
@@ -299,10 +318,10 @@ def test_scalar_fallback_agrees_with_the_vectorized_variant() -> None:
     features = feature_table(config)
     out = {}
     for name in ("scalar_rgb", "auto"):
-        renderer = Renderer(config, variant=name, width=96, height=51, spp=1)
+        renderer = Renderer(Scene.resolve(config), variant=name, width=96, height=51, spp=1)
         renderer.pose(state, look)
         out[name] = (*renderer.geometry_pass(), *renderer.feature_visibility(state, features))
-    select_variant("auto")
+    use_variant("auto")
     (d_s, id_s, f_s, c_s), (d_v, id_v, f_v, c_v) = out["scalar_rgb"], out["auto"]
     assert len(set(id_v.ravel().tolist())) >= 3  # sea, drogue, hose and receiver in view
     assert (id_s == id_v).mean() > 0.998
@@ -313,13 +332,11 @@ def test_scalar_fallback_agrees_with_the_vectorized_variant() -> None:
 
 
 def test_haze_fades_distance_towards_the_sky() -> None:
-    from datagen.render.renderer import _haze
-
     rgb = np.zeros((2, 3, 3), dtype=np.float32)
     rgb[0, :] = [1.0, 0.5, 0.25]  # sky row (nothing hit)
     rgb[1, :] = [0.1, 0.1, 0.1]
     depth = np.array([[np.inf] * 3, [0.0, 20_000.0, 1e9]], dtype=np.float32)
-    out = _haze(rgb, depth, np.zeros((2, 3), np.uint32), 20_000.0)
+    out = haze(rgb, depth, np.zeros((2, 3), np.uint32), 20_000.0)
     np.testing.assert_allclose(out[0], rgb[0])  # the sky itself is the airlight
     np.testing.assert_allclose(out[1, 0], rgb[1, 0])  # nothing in between at zero depth
     np.testing.assert_allclose(out[1, 1], rgb[1, 1] * np.exp(-1) + rgb[0, 0] * (1 - np.exp(-1)), rtol=1e-6)

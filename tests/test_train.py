@@ -20,10 +20,11 @@ import pytest
 import yaml
 
 from datagen.analysis.audit import audit
-from datagen.build.run import build_dataset
-from datagen.config.schema import load_config, override_config
-from datagen.dataset.layout import Layout, plan_shards, write_image_lists
+from datagen.config import load_config, override_config
+from datagen.dataset.layout import Layout, plan_shards
+from datagen.dataset.metadata import write_image_lists
 from datagen.dataset.reader import load_dataset
+from datagen.pipeline.run import build_dataset
 
 pytestmark = pytest.mark.train
 pytest.importorskip("ultralytics", reason="needs the train extra: pip install -e '.[train]'")

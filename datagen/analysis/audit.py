@@ -22,10 +22,11 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from datagen.core.labels import Exclusion, FrameLabels
 from datagen.dataset.layout import MANIFEST_NAME
-from datagen.dataset.files import is_temporary
-from datagen.core.labels import YOLO_DECIMALS, Exclusion, FrameLabels
 from datagen.dataset.reader import DatasetView, image_size
+from datagen.dataset.yolo import YOLO_DECIMALS, parse_line
+from datagen.files import is_temporary
 
 __all__ = [
     "DRIFT_LIMIT_PX",
@@ -158,7 +159,8 @@ def _binned(values: NDArray, keys: NDArray, edges: NDArray) -> list[dict]:
 
 
 # --- label files --------------------------------------------------------------------------
-def _parse_label_file(path: Path) -> tuple[list[list[str]], str | None]:
+def _read_label_file(path: Path) -> tuple[list[str], str | None]:
+    """The non-blank lines of a label file, or why there are none."""
     if path.exists() and not path.is_file():
         return [], "not a regular file"
     try:
@@ -167,7 +169,7 @@ def _parse_label_file(path: Path) -> tuple[list[list[str]], str | None]:
         return [], "missing"
     except (OSError, UnicodeDecodeError) as exc:
         return [], f"unreadable ({exc})"
-    return [line.split() for line in text.splitlines() if line.strip()], None
+    return [line for line in text.splitlines() if line.strip()], None
 
 
 
@@ -253,31 +255,21 @@ def _check_label_files(view: DatasetView, labels) -> tuple[list[Check], NDArray[
     parsed: list[tuple[float, ...]] = []
     for b in range(len(view)):
         rel = view.label_path[b]
-        rows, problem = _parse_label_file(view.root / rel)
+        rows, problem = _read_label_file(view.root / rel)
         if problem:
             lines.fail(rel, problem)
             continue
         seen: Counter = Counter()
         per_class: Counter = Counter()
-        for n, tokens in enumerate(rows, start=1):
+        for n, line in enumerate(rows, start=1):
             where = f"{rel}:{n}"
             rules.checked += 1
             lines.checked += 1
-            try:
-                values = [float(t) for t in tokens]
-            except ValueError:
-                rules.fail(where, f"not numbers: {' '.join(tokens)!r}")
+            values, problem = parse_line(line, nc)
+            if problem:
+                rules.fail(where, problem)
                 continue
-            if not all(math.isfinite(v) for v in values):
-                rules.fail(where, f"not finite: {' '.join(tokens)!r}")
-                continue
-            if len(values) != 5:
-                rules.fail(where, f"{len(values)} columns, Ultralytics needs 5")
-                continue
-            cls = values[0]
-            if cls != int(cls) or not 0 <= cls < nc:
-                rules.fail(where, f"class {tokens[0]} is not an integer in [0, {nc})")
-                continue
+            tokens = line.split()
             if min(values[1:]) < 0 or max(values[1:]) > 1 or values[3] <= 0 or values[4] <= 0:
                 rules.fail(where, f"values {tokens[1:]} outside [0, 1] or a size not positive")
             parsed.append((b, *values))
@@ -285,7 +277,7 @@ def _check_label_files(view: DatasetView, labels) -> tuple[list[Check], NDArray[
             seen[key] += 1
             if seen[key] == 2:
                 rules.fail(where, "duplicate row")
-            f = int(cls)
+            f = int(values[0])
             per_class[f] += 1
             if per_class[f] == 2:
                 lines.fail(where, f"class {f} has more than one line")
@@ -592,150 +584,11 @@ def _statistics(view: DatasetView, labels) -> dict:
     }
 
 
-# --- the report --------------------------------------------------------------------------------
-def report_document(result: AuditResult) -> dict:
-    """report.json: machine-readable, for gating in CI (``passed`` and each check's)."""
-    stats = {k: v for k, v in result.stats.items() if not k.startswith("_")}
-    return {
-        "dataset": str(result.root),
-        "name": result.name,
-        "frames": result.frames,
-        "passed": result.passed,
-        "checks": [c.as_dict() for c in result.checks],
-        "stats": stats,
-    }
 
 
-def write_report(result: AuditResult, view: DatasetView, out: Path, *, overlays: int = 3) -> dict[str, Path]:
-    """Write report.json, plots/*.png and a self-contained report.html into ``out``."""
-    import base64
-    import html
-    import json
-
-    import cv2
-
-    from datagen.dataset.files import atomic_path
-    from datagen.report.plots import plot_audit
-    from datagen.report.overlays import draw_overlay
-
-    out = Path(out)
-    plots = plot_audit(result.stats, out / "plots")
-
-    def data_uri(data: bytes, kind: str) -> str:
-        return f"data:image/{kind};base64,{base64.b64encode(data).decode()}"
-
-    esc = html.escape
-    rows = []
-    for c in result.checks:
-        status = "n/a" if not c.applicable else ("pass" if c.passed else "FAIL")
-        offenders = "".join(f"<li><code>{esc(o)}</code></li>" for o in c.offenders)
-        worst = "" if c.worst is None else f"{c.worst:.3g}"
-        rows.append(f"<tr class='{status.lower().replace('/', '')}'><td>{esc(c.name)}</td><td>{status}</td>"
-                    f"<td>{c.checked}</td><td>{c.failures}</td><td>{worst}</td><td>{esc(c.description)}"
-                    f"{'<ul>' + offenders + '</ul>' if offenders else ''}</td></tr>")
-    drift = result.stats["tight_drift_px"]
-
-    def cells(stat: dict) -> str:
-        """Count, mean, median, p95 and max cells of one drift bin (empty where no feature)."""
-        return f"<td>{stat['count']}</td>" + "".join(
-            f"<td>{stat[k]:.3f}</td>" if k in stat else "<td></td>" for k in ("mean", "median", "p95", "max"))
-
-    def table(bins: list[dict], label: str) -> str:
-        body = "".join(f"<tr><td>{b['lo']:g}-{b['hi']:g}</td>{cells(b)}</tr>" for b in bins)
-        return (f"<table><tr><th>{label}</th><th>features</th><th>mean</th><th>median</th><th>p95</th>"
-                f"<th>max</th></tr>{body}</table>")
-
-    sizes = "".join(f"<tr><td>{esc(s)}</td>{cells(v)}</tr>" for s, v in drift["by_size"].items())
-    figures = "".join(f"<figure><img alt='{esc(name)}' src='{data_uri(path.read_bytes(), 'png')}'>"
-                      f"<figcaption>{esc(name)}</figcaption></figure>" for name, path in plots.items())
-    overlay_html = []
-    for b in np.linspace(0, len(view) - 1, min(overlays, len(view))).round().astype(int) if len(view) else []:
-        image = draw_overlay(view, int(b), result.labels)
-        scale = min(1.0, 1200 / image.shape[1])
-        image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
-        ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 85])
-        overlay_html.append(f"<figure><img alt='overlay frame {view.frame_id[b]}' "
-                            f"src='{data_uri(data.tobytes(), 'jpeg')}'><figcaption>frame {view.frame_id[b]} "
-                            f"({esc(view.split[b])})</figcaption></figure>")
-    verdict = "PASSED" if result.passed else "FAILED"
-    page = f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>datagen audit: {esc(result.name)}</title>
-<style>
-body {{ font: 14px/1.4 system-ui, sans-serif; margin: 2em; max-width: 1300px; }}
-table {{ border-collapse: collapse; margin: 1em 0; }} td, th {{ border: 1px solid #ccc; padding: 3px 8px; }}
-tr.fail td {{ background: #fdd; }} tr.pass td:nth-child(2) {{ color: #080; }} code {{ font-size: 12px; }}
-figure {{ display: inline-block; margin: 0.5em; }} img {{ max-width: 100%; border: 1px solid #ddd; }}
-.verdict {{ font-weight: bold; color: {'#080' if result.passed else '#c00'}; }}
-</style></head>
-<body>
-<h1>datagen audit: {esc(result.name)}</h1>
-<p><code>{esc(str(result.root))}</code>: {result.frames} frames, {len(view.features)} classes,
-{'corrected' if view.corrected else 'tight (uncorrected)'} boxes, edge margin {view.edge_margin_px:g} px.
-Verdict: <span class="verdict">{verdict}</span></p>
-<h2>Checks</h2>
-<table><tr><th>check</th><th>result</th><th>checked</th><th>failures</th><th>worst</th><th>what (worst offenders)</th></tr>
-{''.join(rows)}</table>
-{_learnable_html(result.stats["learnable"], esc)}
-<h2>Parallax: tight-box centre drift from the true centre projection</h2>
-<p>{drift['features']} features in view; median {_fmt(drift['median'])} px, 95th percentile {_fmt(drift['p95'])} px,
-max {_fmt(drift['max'])} px. Corrected boxes are centred on the true centre; a detector trained on tight
-boxes learns this drift.</p>
-{table(drift['by_distance_m'], 'distance (m)')}
-<table><tr><th>size</th><th>features</th><th>mean</th><th>median</th><th>p95</th><th>max</th></tr>{sizes}</table>
-{table(drift['by_obliqueness_deg'], 'obliqueness (deg)')}
-<h2>Plots</h2>
-{figures}
-<h2>Overlays</h2>
-<p>Magenta crosshair: true centre projection; amber: tight box; green: corrected box (the paper's label); cyan: the label box where it was grown to the minimum training size; grey: excluded.</p>
-{''.join(overlay_html)}
-<script>
-window.addEventListener("load", () => {{
-  const images = Array.from(document.images);
-  const shown = images.filter(i => i.complete && i.naturalWidth > 0).length;
-  document.body.dataset.images = shown + "/" + images.length;
-}});
-</script>
-</body></html>
-"""
-    with atomic_path(out / "report.html") as tmp:
-        tmp.write_text(page)
-    # report.json last: it is the record of every file the report wrote (``files``, relative to
-    # the report folder), which --overwrite removes and nothing else.
-    doc = report_document(result)
-    doc["files"] = ["report.html", *(str(p.relative_to(out)) for p in plots.values())]
-    with atomic_path(out / "report.json") as tmp:
-        tmp.write_text(json.dumps(doc, indent=2, allow_nan=False, default=_json_default) + "\n")
-    return {"json": out / "report.json", "html": out / "report.html", **plots}
 
 
-def _learnable_html(stats: dict, esc) -> str:
-    """The report's section on what Ultralytics' trainer can learn of the label lines."""
-    def pct(v: float | None) -> str:
-        return "-" if v is None else f"{100 * v:.1f}%"
-
-    def rows(items) -> str:
-        return "".join(f"<tr><td>{esc(str(k))}</td><td>{v['lines']}</td><td>{pct(v['share'])}</td></tr>"
-                       for k, v in items)
-
-    head = "<tr><th>{}</th><th>lines</th><th>learnable</th></tr>"
-    distance = [(f"{b['lo']:g}-{b['hi']:g}", b) for b in stats["by_distance_m"] if b["lines"]]
-    worst = [(w["class"], w) for w in stats["worst_classes"]]
-    return f"""<h2>Learnable by the detector</h2>
-<p>{stats['lines']} label lines; {pct(stats['share'])} survive Ultralytics' training transforms at imgsz
-{stats['train_imgsz']} ({pct(stats['share_survive_2px'])} have both sides above 2 px) and hold an anchor centre
-({pct(stats['share_with_anchor'])}); the check asks for {pct(stats['threshold'])}. Label boxes are at least
-{stats['min_box_px']:g} px there ({esc(stats['small_boxes'])} smaller ones).</p>
-<table>{head.format('distance (m)')}{rows(distance)}</table>
-<table>{head.format('size')}{rows(stats['by_size'].items())}</table>
-<table>{head.format('worst classes')}{rows(worst) or '<tr><td colspan=3>every class fully learnable</td></tr>'}</table>
-"""
 
 
-def _fmt(value: float | None) -> str:
-    return "-" if value is None else f"{value:.3f}"
 
 
-def _json_default(value):
-    if isinstance(value, np.generic):
-        return value.item()
-    raise TypeError(f"not JSON: {type(value).__name__}")

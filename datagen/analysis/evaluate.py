@@ -33,8 +33,9 @@ from numpy.typing import NDArray
 from datagen.core.camera import Intrinsics
 from datagen.core.conventions import evaluation_rng
 from datagen.core.errors import DatagenError
-from datagen.dataset.reader import DatasetView
 from datagen.core.transforms import invert_rigid
+from datagen.dataset.reader import DatasetView
+from datagen.dataset.yolo import parse_line
 
 __all__ = [
     "PnPSettings",
@@ -192,16 +193,11 @@ def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_con
             raise DatagenError(f"{path}: unreadable prediction file ({exc})") from None
         n_detections = n_below = 0
         for n, line in enumerate(text.splitlines(), start=1):
-            tokens = line.split()
-            if not tokens:
+            if not line.split():
                 continue
-            try:
-                values = [float(t) for t in tokens]
-            except ValueError:
-                raise DatagenError(f"{path}:{n}: not a YOLO detection line: {line!r}") from None
-            if (len(values) not in (5, 6) or not all(math.isfinite(v) for v in values)
-                    or values[0] != int(values[0]) or not 0 <= values[0] < nc):
-                raise DatagenError(f"{path}:{n}: expected 'class cx cy w h [conf]' with class < {nc}: {line!r}")
+            values, problem = parse_line(line, nc, columns=(5, 6))
+            if problem:
+                raise DatagenError(f"{path}:{n}: not a detection line 'class cx cy w h [conf]': {problem}")
             cls, cx, cy = int(values[0]), values[1], values[2]
             conf = values[5] if len(values) == 6 else 1.0
             n_detections += 1
@@ -373,52 +369,3 @@ def summarize(result: dict, settings: PnPSettings = PnPSettings()) -> dict:
             "reasons": reasons, "solve_ms_mean": float(solve.mean() * 1e3) if solve.size else None}
 
 
-def write_evaluation(view: DatasetView, runs: list[tuple[dict, dict]], out: Path,
-                     settings: PnPSettings = PnPSettings()) -> dict[str, Path]:
-    """``evaluation.json`` (settings and each run's metrics), ``results.parquet`` (one row
-    per frame and run) and PNG plots in the style of the paper's Figs 14-17.
-
-    Args:
-        runs: ``(source, result)`` pairs; ``source`` describes the 2D points, e.g.
-            ``{"source": "truth", "noise_px": 0.5}``.
-    """
-    import dataclasses
-    import json
-
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    from datagen.dataset.files import atomic_path
-    from datagen.report.plots import plot_evaluation
-
-    out = Path(out)
-    summaries = [{**source, **summarize(result, settings)} for source, result in runs]
-    doc = {"dataset": str(view.root), "name": view.doc.get("name"), "frames": len(view),
-           "settings": dataclasses.asdict(settings), "reasons": list(REASONS), "runs": summaries}
-    tables = []
-    for source, r in runs:
-        n = len(r["frame_id"])
-        tables.append(pa.table({
-            "source": pa.array([source["source"]] * n),
-            "noise_px": pa.array([float(source.get("noise_px", math.nan))] * n),
-            "frame_id": pa.array(r["frame_id"]),
-            "distance_m": pa.array(r["distance_m"]),
-            "matches_receiver": pa.array(r["matches_receiver"]),
-            "matches_target": pa.array(r["matches_target"]),
-            "success": pa.array(r["success"]),
-            "reason": pa.array([REASONS[i] for i in r["reason"]]),
-            "ptd_m": pa.FixedSizeListArray.from_arrays(pa.array(r["ptd_m"].ravel()), 3),
-            "truth_m": pa.FixedSizeListArray.from_arrays(pa.array(r["truth_m"].ravel()), 3),
-            "error_m": pa.array(r["error_m"]),
-            "error_to_drogue_m": pa.array(r["error_to_drogue_m"]),
-            "solve_s": pa.array(r["solve_s"]),
-        }))
-    with atomic_path(out / "results.parquet") as tmp:
-        pq.write_table(pa.concat_tables(tables), tmp, compression="zstd")
-    plots = plot_evaluation(runs, summaries, out / "plots", name=str(view.doc.get("name", "")))
-    # evaluation.json last: the record of every file the evaluation wrote (``files``, relative to
-    # its folder), which --overwrite removes and nothing else.
-    doc["files"] = ["results.parquet", *(str(p.relative_to(out)) for p in plots.values())]
-    with atomic_path(out / "evaluation.json") as tmp:
-        tmp.write_text(json.dumps(doc, indent=2) + "\n")
-    return {"json": out / "evaluation.json", "parquet": out / "results.parquet", **plots}

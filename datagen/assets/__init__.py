@@ -1,1 +1,1 @@
-"""."""
+"""The objects: the rig, procedural models, mesh and feature files (read and validated), generated features."""

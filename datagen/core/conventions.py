@@ -34,7 +34,17 @@ Pixels (continuous)
     ``K`` has ``cx = W / 2`` and ``cy = H / 2`` exactly (Table 1: 1024.0, 540.0
     for 2048x1080). YOLO values are these coordinates divided by W and H.
     Mitsuba's film uses the same continuous convention: a film position sample
-    ``s`` in ``[0, 1]^2`` lands at ``uv_px = s * (W, H)``.
+    ``s`` in ``[0, 1]^2`` lands at ``uv_px = s * (W, H)``. OpenCV's drawing
+    functions put integer coordinates at pixel *centres*: a mark at continuous
+    ``(u, v)`` is drawn at :func:`drawing_px` ``(u, v) = (u - 0.5, v - 0.5)``.
+
+Objects and mounts
+    :data:`OBJECT_NAMES` are the rigid bodies of a refueling scene, in the order
+    their object ids are assigned (:func:`object_id`: 1-based; 0 is background);
+    :data:`RIGID_OBJECTS` are those with a mesh and a feature file (the hose is
+    made per frame), which are the objects whose features can be labeled.
+    :data:`CAMERA_MOUNTS` are the paper's camera positions (their geometry is
+    :data:`datagen.assets.rig.MOUNTS`).
 
 Transforms
     A 4x4 homogeneous matrix that maps coordinates in frame ``a`` to frame ``b``
@@ -56,7 +66,10 @@ Randomness
     unit)``, spawn key ``(unit, SPLIT_STREAM)``, where the unit is the frame
     index (or the approach chain index with ``dataset.split_by: approach``): a
     stream of its own, so that changing ``val_fraction`` moves frames between
-    splits without changing any frame's sky, materials or pose.
+    splits without changing any frame's sky, materials or pose. Mitsuba's
+    sampler seed of frame ``i`` is :func:`render_seed` ``(seed, i)``, the first
+    word of the frame's own seed sequence; ``datagen evaluate``'s pixel noise
+    comes from :func:`evaluation_rng` ``(seed, i, run)``.
     No module uses a global RNG.
 """
 
@@ -70,6 +83,7 @@ __all__ = [
     "BODY_FORWARD",
     "BODY_LEFT",
     "BODY_UP",
+    "CAMERA_MOUNTS",
     "CVCAM_FROM_MICAM",
     "CV_DOWN",
     "CV_FORWARD",
@@ -78,11 +92,15 @@ __all__ = [
     "NEAR_PLANE_M",
     "OBJECT_NAMES",
     "PIXEL_CONVENTION",
+    "RIGID_OBJECTS",
     "approach_rng",
+    "drawing_px",
     "evaluation_rng",
     "frame_rng",
     "frame_seed_sequence",
+    "object_id",
     "random_features_rng",
+    "render_seed",
     "split_uniform",
 ]
 
@@ -94,6 +112,17 @@ BODY_UP: Final = np.array([0.0, 0.0, 1.0])
 #: The rigid bodies of a refueling scene, in the order their object ids are
 #: assigned (id = index + 1; id 0 is background).
 OBJECT_NAMES: Final[tuple[str, ...]] = ("tanker", "receiver", "drogue", "hose")
+#: The objects with a mesh and a feature file (the hose is made per frame): the ones
+#: whose features can be labeled.
+RIGID_OBJECTS: Final[tuple[str, ...]] = OBJECT_NAMES[:3]
+#: The paper's camera mounts (3.1): receiver right wing pod, receiver cockpit, tanker hose pod.
+CAMERA_MOUNTS: Final[tuple[str, ...]] = ("wingcam", "dashcam", "podcam")
+
+
+def object_id(name: str) -> int:
+    """The ``object_id`` of an object in the EXR and the geometry pass: 1-based position in
+    :data:`OBJECT_NAMES` (0 is the background: the sea or nothing)."""
+    return OBJECT_NAMES.index(name) + 1
 
 # --- camera frames -----------------------------------------------------------
 CV_RIGHT: Final = np.array([1.0, 0.0, 0.0])
@@ -117,6 +146,13 @@ for _a in (BODY_FORWARD, BODY_LEFT, BODY_UP, CV_RIGHT, CV_DOWN, CV_FORWARD, CVCA
 PIXEL_CONVENTION: Final[str] = "continuous"
 
 
+def drawing_px(uv_px):
+    """Where OpenCV draws a mark at continuous pixel coordinates ``uv_px`` (``(..., 2)``):
+    half a pixel up and left, because its drawing grid has integer coordinates at
+    pixel centres."""
+    return np.asarray(uv_px, dtype=np.float64) - 0.5
+
+
 # --- randomness --------------------------------------------------------------
 def frame_seed_sequence(seed: int, frame_index: int) -> np.random.SeedSequence:
     """The seed sequence of frame ``frame_index`` under root seed ``seed``."""
@@ -130,6 +166,11 @@ def frame_rng(seed: int, frame_index: int) -> np.random.Generator:
     alone, on any worker, in any order.
     """
     return np.random.default_rng(frame_seed_sequence(seed, frame_index))
+
+
+def render_seed(seed: int, frame_index: int) -> int:
+    """Mitsuba's sampler seed for frame ``frame_index``: the first word of its seed sequence."""
+    return int(frame_seed_sequence(seed, frame_index).generate_state(1, dtype=np.uint32)[0])
 
 
 #: Second spawn-key element of the approach streams (frame streams have one-element keys).

@@ -16,11 +16,21 @@ from __future__ import annotations
 import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["FeatureTable"]
+__all__ = ["FEATURE_VARIANTS", "SIZE_SCALE", "STORED_VARIANTS", "FeatureTable"]
+
+#: Feature sizes: the ring radius of a feature relative to its object's small radius,
+#: so that each size has four times the area of the one before (paper models J, K, L).
+SIZE_SCALE: Final[dict[str, float]] = {"small": 1.0, "medium": 2.0, "large": 4.0}
+#: Variants a feature file stores: the paper's baseline and the co-located size variants.
+STORED_VARIANTS: Final[tuple[str, ...]] = ("baseline", *SIZE_SCALE)
+#: Every feature variant a config may ask for: the stored ones and seeded random surface
+#: features generated from the mesh (paper model I).
+FEATURE_VARIANTS: Final[tuple[str, ...]] = (*STORED_VARIANTS, "random")
 
 
 @dataclass(frozen=True, eq=False)

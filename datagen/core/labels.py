@@ -32,7 +32,6 @@ apply to the label box. Only features with no exclusion become YOLO lines.
 from __future__ import annotations
 
 import dataclasses
-
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Literal
@@ -44,13 +43,11 @@ from datagen.core.camera import Intrinsics, depth_in_front, project_xyz
 from datagen.core.features import FeatureTable
 
 __all__ = [
-    "YOLO_DECIMALS",
     "Exclusion",
     "FrameLabels",
     "SmallBoxes",
     "boxes_from_uv",
     "compute_labels",
-    "yolo_lines",
 ]
 
 
@@ -288,32 +285,3 @@ def compute_labels(
         min_size_px=min_size_px,
         small_boxes=small_boxes,
     )
-
-
-def yolo_lines(labels: FrameLabels, class_ids: ArrayLike, width: int, height: int) -> list[str]:
-    """YOLO lines ``class cx cy w h`` (:data:`YOLO_DECIMALS` decimals, normalized by W and H) of one frame.
-
-    Only labeled features appear, in class-id order of ``class_ids``.
-    """
-    if labels.exclusion.ndim != 1:
-        raise ValueError(f"yolo_lines takes one frame, got batch shape {labels.exclusion.shape[:-1]}")
-    keep = labels.labeled
-    ids = np.asarray(class_ids)[keep]
-    order = np.argsort(ids, kind="stable")
-    centre = labels.label_center_px[keep][order]
-    box = labels.label_xyxy[keep][order]
-    rows = np.column_stack([
-        ids[order],
-        centre[:, 0] / width,
-        centre[:, 1] / height,
-        (box[:, 2] - box[:, 0]) / width,
-        (box[:, 3] - box[:, 1]) / height,
-    ])
-    # One %-format over the whole frame: several times faster than per-line f-strings.
-    return (_YOLO_LINE * len(rows) % tuple(rows.ravel().tolist())).splitlines()
-
-
-#: Decimals of the normalized values in a label line. Seven keep the rounding under
-#: 1.2e-4 px at 2048x1080 (six would allow 1.02e-3 px, above the audit's drift bound).
-YOLO_DECIMALS = 7
-_YOLO_LINE = "%d" + f" %.{YOLO_DECIMALS}f" * 4 + "\n"

@@ -20,15 +20,16 @@ import pyarrow.parquet as pq
 from numpy.typing import NDArray
 from pydantic import ValidationError
 
-from datagen.core.camera import Intrinsics
+from datagen.config.inputs import parse_json, parse_yaml, read_text
 from datagen.config.schema import LabelsConfig
-from datagen.dataset.layout import MANIFEST_NAME
+from datagen.core.camera import Intrinsics
+from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import DatagenError
 from datagen.core.features import FeatureTable
-from datagen.config.inputs import parse_json, parse_yaml, read_text
 from datagen.core.labels import FrameLabels, compute_labels
-from datagen.dataset.schema import MANIFEST_VERSION, manifest_schema, read_features
 from datagen.core.training import TrainView, label_options
+from datagen.dataset.layout import MANIFEST_NAME
+from datagen.dataset.schema import MANIFEST_VERSION, manifest_schema, read_features
 
 __all__ = ["DatasetView", "image_size", "load_dataset"]
 
@@ -261,7 +262,7 @@ def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> Dataset
         row_intrinsics=np.stack([np.asarray(table.column(c), dtype=np.float64)
                                  for c in ("width", "height", "fx", "fy", "cx", "cy")], axis=1),
         cam_from_world=matrices("cam_from_world"),
-        world_from={o: matrices(f"world_from_{o}") for o in ("tanker", "receiver", "drogue")},
+        world_from={o: matrices(f"world_from_{o}") for o in RIGID_OBJECTS},
         distance_m=np.asarray(table.column("distance_m"), dtype=np.float64),
         ptd_receiver_m=_floats(table.column("ptd_receiver_m").combine_chunks(), (b, 3)),
         approach_index=np.asarray(table.column("approach_index"), dtype=np.int64),

@@ -13,19 +13,26 @@ documents every column; a test checks that the two agree.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
+from datagen.core.camera import Intrinsics
 from datagen.core.features import FeatureTable
-from datagen.dataset.files import atomic_path
+from datagen.core.labels import Exclusion
+from datagen.files import write_parquet
+from datagen.scene.look import FrameLook, sun_direction_world
+
+if TYPE_CHECKING:
+    from datagen.scene.approach import FrameState
 
 __all__ = [
     "MANIFEST_VERSION",
@@ -33,6 +40,7 @@ __all__ = [
     "RUN_COLUMNS",
     "feature_records",
     "features_schema",
+    "manifest_row",
     "manifest_schema",
     "matrix_field",
     "read_features",
@@ -139,10 +147,7 @@ def write_manifest(path: Path, rows: Sequence[dict], summary: dict) -> Path:
     scalars = pa.Table.from_pylist([{k: v for k, v in row.items() if k != "features"} for row in rows],
                                    schema=schema.remove(index))
     table = scalars.add_column(index, schema.field("features"), _features_column([r["features"] for r in rows]))
-    table = table.replace_schema_metadata(meta)
-    with atomic_path(path) as tmp:
-        pq.write_table(table, tmp, compression="zstd")
-    return Path(path)
+    return write_parquet(path, table.replace_schema_metadata(meta), compression="zstd")
 
 
 def read_manifest_summary(path: Path) -> dict:
@@ -176,10 +181,7 @@ def write_features(path: Path, features: FeatureTable) -> Path:
         }
         for i in range(len(features))
     ]
-    table = pa.Table.from_pylist(rows, schema=features_schema())
-    with atomic_path(path) as tmp:
-        pq.write_table(table, tmp)
-    return Path(path)
+    return write_parquet(path, pa.Table.from_pylist(rows, schema=features_schema()))
 
 
 def read_features(path: Path) -> FeatureTable:
@@ -201,6 +203,58 @@ def matrix_field(m: np.ndarray) -> list[float]:
     return np.asarray(m, dtype=np.float64).reshape(16).tolist()
 
 
+def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, label_path: str,
+                 exr_path: str | None, intrinsics: Intrinsics, state: FrameState, look: FrameLook, seed: int,
+                 render_seed: int, spp: int | None, features: FeatureColumns, n_labeled: int,
+                 render_s: float | None, frame_s: float, worker: str, worker_rss_mib: float) -> dict:
+    """One frame's manifest row, column by column (:func:`manifest_schema`): the frame,
+    its files, the camera, the poses, the approach, every appearance draw, the features
+    and the run columns (:data:`RUN_COLUMNS`)."""
+    k = intrinsics
+    return {
+        "frame_id": frame,
+        "split": split,
+        "shard": shard,
+        "image_path": image_path,
+        "label_path": label_path,
+        "exr_path": exr_path,
+        "width": k.width,
+        "height": k.height,
+        "fx": k.fx,
+        "fy": k.fy,
+        "cx": k.cx,
+        "cy": k.cy,
+        "cam_from_world": matrix_field(state.cam_from_world),
+        "world_from_tanker": matrix_field(state.world_from_tanker),
+        "world_from_receiver": matrix_field(state.world_from_receiver),
+        "world_from_drogue": matrix_field(state.world_from_drogue),
+        "ptd_receiver_m": state.ptd_receiver_m.tolist(),
+        "distance_m": state.distance_m,
+        "seed": seed,
+        "render_seed": render_seed,
+        "spp": spp,
+        "mount": state.mount,
+        "approach_index": state.approach_index,
+        "approach_number": state.approach_number,
+        "time_s": state.time_s,
+        "turbulence_intensity": state.turbulence_intensity,
+        "bank_deg": state.bank_deg,
+        "sun_direction_world": np.asarray(sun_direction_world(state, look), dtype=np.float64).tolist(),
+        **{f.name: getattr(look, f.name) for f in dataclasses.fields(look) if f.name != "materials"},
+        "materials": [
+            {"object": obj, "part_class": cls, "base_color": list(m.base_color), "roughness": m.roughness,
+             "metallic": m.metallic, "specular": m.specular}
+            for obj, classes in look.materials.items() for cls, m in classes.items()
+        ],
+        "n_labeled": n_labeled,
+        "features": features,
+        "render_s": render_s,
+        "frame_s": frame_s,
+        "worker": worker,
+        "worker_rss_mib": worker_rss_mib,
+    }
+
+
 @dataclass(frozen=True)
 class FeatureColumns:
     """The ``features`` column of one frame as arrays (``F`` records, class-id order):
@@ -220,8 +274,6 @@ class FeatureColumns:
         return self.exclusion == 0
 
     def exclusion_counts(self) -> dict[str, int]:
-        from datagen.core.labels import Exclusion
-
         codes, counts = np.unique(self.exclusion[self.exclusion != 0], return_counts=True)
         return {Exclusion(int(c)).reason: int(n) for c, n in zip(codes, counts, strict=True)}
 
@@ -242,8 +294,6 @@ def feature_records(labels, class_ids, visible_fraction=None, center_visible=Non
 
 def _features_column(frames: Sequence[FeatureColumns]) -> pa.Array:
     """One ``list<struct>`` column from per-frame arrays, without a Python object per record."""
-    from datagen.core.labels import Exclusion
-
     counts = np.array([len(f.class_id) for f in frames], dtype=np.int32)
     offsets = pa.array(np.concatenate([[0], np.cumsum(counts)]).astype(np.int32))
     n = int(counts.sum())

@@ -1,7 +1,5 @@
-"""Mitsuba 3 plumbing shared by the renderer and the asset previews.
+"""Mitsuba 3 plumbing shared by the renderer and the asset contact sheets.
 
-- :func:`select_variant` picks ``cuda_ad_rgb``, ``llvm_ad_rgb`` or ``scalar_rgb``
-  and explains how to install LLVM 19 instead of crashing when it is missing.
 - :func:`mitsuba_mesh` turns triangle arrays into a ``mi.Mesh`` (any file format
   trimesh reads can thus be rendered, parts kept apart).
 - :func:`sensor_dict` places a perspective sensor whose intrinsics are exactly
@@ -12,62 +10,25 @@
 
 from __future__ import annotations
 
-import functools
-from typing import Final
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from datagen.core.camera import Intrinsics
 from datagen.core.conventions import CVCAM_FROM_MICAM
-from datagen.core.errors import DatagenError
 
 __all__ = [
-    "LLVM_HINT",
     "aligned_float32",
     "jit_vectors",
     "mitsuba_mesh",
-    "select_variant",
     "sensor_dict",
     "visible",
     "world_from_micam",
 ]
 
-VARIANTS: Final = ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
-LLVM_HINT: Final = (
-    "Mitsuba's llvm_ad_rgb variant needs LLVM 19: install it with `apt-get install -y libllvm19` "
-    "(LLVM 15/16 crash and 14 is too old), or set render.variant: scalar_rgb"
-)
 
 
-@functools.cache
-def _has_backend(name: str) -> bool:
-    import drjit as dr
-
-    backend = {"cuda": dr.JitBackend.CUDA, "llvm": dr.JitBackend.LLVM}[name]
-    try:
-        return bool(dr.has_backend(backend))
-    except Exception:  # an unusable driver or library reads as absent
-        return False
 
 
-def select_variant(requested: str = "auto") -> str:
-    """Set and return the Mitsuba variant: ``auto`` prefers CUDA, then LLVM, then scalar."""
-    import mitsuba as mi
-
-    if requested == "auto":
-        chosen = "cuda_ad_rgb" if _has_backend("cuda") else "llvm_ad_rgb" if _has_backend("llvm") else "scalar_rgb"
-    elif requested in VARIANTS:
-        chosen = requested
-        if requested == "llvm_ad_rgb" and not _has_backend("llvm"):
-            raise DatagenError(f"render.variant: llvm_ad_rgb is unavailable: {LLVM_HINT}")
-        if requested == "cuda_ad_rgb" and not _has_backend("cuda"):
-            raise DatagenError("render.variant: cuda_ad_rgb is unavailable: no CUDA GPU or driver found")
-    else:
-        raise DatagenError(f"render.variant: unknown Mitsuba variant {requested!r} (use auto or {', '.join(VARIANTS)})")
-    if mi.variant() != chosen:
-        mi.set_variant(chosen)
-    return chosen
 
 
 def mitsuba_mesh(name: str, vertices: ArrayLike, faces: ArrayLike, bsdf=None):

@@ -5,160 +5,63 @@ is a ``shapegroup`` of its parts (one principled BSDF per part) placed by an
 ``instance``; the hose is a mesh of fixed topology; a ``sunsky`` emitter lights
 a sea plane far below. Per frame only parameters change through
 ``mi.traverse``: instance transforms, hose vertices, sensor pose, sun and sky,
-sea height and the materials. The scene is rendered in a camera-centred frame
-(world translated so the camera is at the origin), because world coordinates
-reach kilometres and Mitsuba computes in float32.
+sea height and the materials of the frame's :class:`~datagen.scene.look.FrameLook`.
+The scene is rendered in a camera-centred frame (world translated so the camera
+is at the origin), because world coordinates reach kilometres and Mitsuba
+computes in float32.
 
 Besides the image, a geometry pass casts one ray through each pixel centre
 (continuous convention: pixel (i, j) has its centre at (i + 0.5, j + 0.5)) for
-the camera z-depth ``Z`` and the ``object_id`` of :data:`datagen.core.conventions.OBJECT_NAMES`
-(0 where the ray hits the sea or nothing). Feature visibility is a ray cast from
-the camera to each feature point: a point is visible when it is in front of the
-camera and nothing is hit before it, up to :func:`visibility_tolerance_m`.
+the camera z-depth ``Z`` and the :func:`~datagen.core.conventions.object_id` of
+each object (0 where the ray hits the sea or nothing). Feature visibility is a
+ray cast from the camera to each feature point: a point is visible when it is in
+front of the camera and nothing is hit before it, up to
+:func:`visibility_tolerance_m`.
 """
 
 from __future__ import annotations
 
-import colorsys
 import functools
-import math
-from dataclasses import asdict, dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.assets.files import RIGID_OBJECTS, load_mesh, object_paths
-from datagen.core.camera import Intrinsics
-from datagen.core.conventions import OBJECT_NAMES, frame_seed_sequence
+from datagen.assets.files import load_mesh
 from datagen.assets.models import material_class
-from datagen.render.mitsuba import jit_vectors, set_buffer, visible, world_from_micam
-from datagen.assets.models.drogue import hose_faces, hose_vertices
+from datagen.assets.models.drogue import hose_faces, hose_placeholder, hose_vertices
+from datagen.core.camera import Intrinsics
+from datagen.core.conventions import OBJECT_NAMES, RIGID_OBJECTS, object_id
 from datagen.core.transforms import make_transform
+from datagen.render.mitsuba import (
+    jit_vectors,
+    mitsuba_mesh,
+    sensor_dict,
+    set_buffer,
+    visible,
+    world_from_micam,
+)
+from datagen.render.runtime import use_variant
+from datagen.render.tonemap import exposure_scale, haze
+from datagen.scene.look import FrameLook, Material, neutral_look, sun_direction_world
 
 if TYPE_CHECKING:
-    from datagen.scene.approach import FrameState
-    from datagen.config.schema import Config
     from datagen.core.features import FeatureTable
+    from datagen.scene.approach import FrameState
+    from datagen.scene.resolved import Scene
 
-__all__ = [
-    "FrameLook",
-    "RenderResult",
-    "Renderer",
-    "draw_look",
-    "object_ids",
-    "render_seed",
-    "to_srgb8",
-    "visibility_tolerance_m",
-]
+__all__ = ["RenderResult", "Renderer", "visibility_tolerance_m"]
 
 #: Sea level is world z = 0; the sea plane is a square this many metres across (its edge
 #: then lies under 0.04 degrees below the horizon, where sunsky is black, seen from 8 km).
 SEA_SIZE_M: Final = 2.0e7
-#: Linear radiance that maps to sRGB white at 0 EV (sunsky radiance is in W/(m^2 sr nm)-like units).
-WHITE_RADIANCE: Final = 0.7
-#: Number of distinct values sun_scale and sky_scale take (see :func:`_levels`).
-SKY_SCALE_LEVELS: Final = 5
-#: Haze visibility (distance at which contrast falls to 1/e), metres, when haze is on.
-HAZE_VISIBILITY_M: Final = (15_000.0, 60_000.0)
-
-
-def object_ids() -> dict[str, int]:
-    """The ``object_id`` of every object: 1-based position in ``OBJECT_NAMES``; 0 is background."""
-    return {name: i + 1 for i, name in enumerate(OBJECT_NAMES)}
 
 
 def visibility_tolerance_m(distance_m: NDArray[np.float64]) -> NDArray[np.float64]:
     """How far before a feature point a hit still counts as the point itself: 1 cm
     plus 1e-4 of the distance (float32 intersection error and mesh rounding)."""
     return 0.01 + 1e-4 * np.asarray(distance_m)
-
-
-def render_seed(seed: int, frame_index: int) -> int:
-    """Mitsuba's sampler seed for a frame: derived from the frame's seed sequence."""
-    return int(frame_seed_sequence(seed, frame_index).generate_state(1, dtype=np.uint32)[0])
-
-
-@dataclass(frozen=True)
-class Material:
-    base_color: tuple[float, float, float]
-    roughness: float
-    metallic: float = 0.0
-    specular: float = 0.5
-
-
-@dataclass(frozen=True)
-class FrameLook:
-    """Every appearance draw of one frame (recorded in the manifests)."""
-
-    sun_elevation_deg: float
-    sun_azimuth_deg: float
-    turbidity: float
-    sun_scale: float
-    sky_scale: float
-    exposure_ev: float
-    sea_roughness: float
-    haze_visibility_m: float | None
-    materials: dict[str, dict[str, Material]] = field(default_factory=dict)  # object -> class -> material
-
-    def flat(self) -> dict[str, object]:
-        """A flat record of the draws, for a manifest row."""
-        out = {k: v for k, v in asdict(self).items() if k != "materials"}
-        for obj, classes in self.materials.items():
-            for cls, m in classes.items():
-                out[f"{obj}_{cls}_rgb"] = list(m.base_color)
-                out[f"{obj}_{cls}_roughness"] = m.roughness
-        return out
-
-
-def _uniform(rng: np.random.Generator, bounds) -> float:
-    lo, hi = bounds
-    return float(rng.uniform(lo, hi))
-
-
-def _levels(rng: np.random.Generator, bounds) -> float:
-    """One of :data:`SKY_SCALE_LEVELS` evenly spaced values across ``bounds``, each
-    equally likely. Mitsuba's ``sunsky`` keeps its sun and sky scales as scalars that
-    are baked into the compiled kernel: a continuous draw would compile (and keep in
-    memory) a new kernel for every frame; a few levels bound the kernels at
-    ``SKY_SCALE_LEVELS**2`` for the whole dataset."""
-    lo, hi = bounds
-    step = int(rng.integers(SKY_SCALE_LEVELS))  # every level equally likely
-    return lo + (hi - lo) * step / (SKY_SCALE_LEVELS - 1)
-
-
-def _hsv(rng: np.random.Generator, saturation, value) -> tuple[float, float, float]:
-    h = float(rng.uniform(0.0, 1.0))
-    return tuple(float(c) for c in colorsys.hsv_to_rgb(h, _uniform(rng, saturation), _uniform(rng, value)))
-
-
-def draw_look(config: Config, rng: np.random.Generator) -> FrameLook:
-    """Draw a frame's sky, sun, exposure, haze and per-part materials, in a fixed order."""
-    r = config.randomization
-    sky, mat = r.sky, r.materials
-    look = dict(
-        sun_elevation_deg=_uniform(rng, sky.sun_elevation_deg),
-        sun_azimuth_deg=_uniform(rng, sky.sun_azimuth_deg),
-        turbidity=_uniform(rng, sky.turbidity),
-        sun_scale=_levels(rng, sky.sun_scale),
-        sky_scale=_levels(rng, sky.sky_scale),
-        exposure_ev=_uniform(rng, r.exposure_ev),
-        sea_roughness=_uniform(rng, (0.05, 0.25)),
-    )
-    haze = _uniform(rng, HAZE_VISIBILITY_M) if r.haze else None
-    materials: dict[str, dict[str, Material]] = {}
-    for obj in (*RIGID_OBJECTS, "hose"):
-        materials[obj] = {
-            "paint": Material(_hsv(rng, mat.paint_saturation, mat.paint_value), _uniform(rng, mat.paint_roughness)),
-            "metal": Material(_hsv(rng, (0.0, 0.05), (0.6, 0.9)), _uniform(rng, mat.metal_roughness), 1.0),
-            "glass": Material(_hsv(rng, (0.0, 0.3), (0.01, 0.06)), _uniform(rng, (0.02, 0.08)), 0.0, 1.0),
-            "markings": Material(_hsv(rng, (0.0, 0.8), (0.05, 0.6)), _uniform(rng, mat.paint_roughness)),
-            "dark": Material(_hsv(rng, (0.0, 0.1), (0.005, 0.03)), _uniform(rng, (0.4, 0.8))),
-            "fabric": Material(_hsv(rng, (0.0, 0.2), (0.55, 0.9)), _uniform(rng, (0.6, 0.9))),
-            "rubber": Material(_hsv(rng, (0.0, 0.1), (0.02, 0.06)), _uniform(rng, (0.5, 0.8))),
-        }
-    return FrameLook(**look, haze_visibility_m=haze, materials=materials)
 
 
 @dataclass(frozen=True)
@@ -169,24 +72,6 @@ class RenderResult:
     depth: NDArray[np.float32] | None  # (H, W) camera z-depth, metres, +inf where nothing is hit
     object_id: NDArray[np.uint32] | None  # (H, W); both None unless the geometry pass ran
     render_s: float  # seconds inside mi.render
-
-
-#: Linear values are quantized to 16 bits before the sRGB table: finer than one 8-bit
-#: step everywhere (the steepest part, near black, moves by 0.05 of a step).
-_SRGB_LEVELS: Final = 65536
-
-
-@functools.cache
-def _srgb_table() -> NDArray[np.uint8]:
-    x = np.linspace(0.0, 1.0, _SRGB_LEVELS)
-    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    return np.round(srgb * 255.0).astype(np.uint8)
-
-
-def to_srgb8(linear: NDArray[np.floating]) -> NDArray[np.uint8]:
-    """8-bit sRGB from linear RGB in [0, 1] (clipped), the IEC 61966-2-1 transfer."""
-    x = np.clip(np.asarray(linear, dtype=np.float32), 0.0, 1.0)
-    return _srgb_table()[np.rint(x * np.float32(_SRGB_LEVELS - 1)).astype(np.int32)]
 
 
 def _principled(m: Material) -> dict:
@@ -202,23 +87,20 @@ def _principled(m: Material) -> dict:
 class Renderer:
     """A scene loaded once; :meth:`render` poses and re-dresses it per frame."""
 
-    def __init__(self, config: Config, *, spp: int | None = None, variant: str | None = None,
-                 threads: int | None = None, width: int | None = None, height: int | None = None) -> None:
+    def __init__(self, scene: Scene, *, spp: int | None = None, variant: str | None = None,
+                 width: int | None = None, height: int | None = None) -> None:
         import drjit as dr
         import mitsuba as mi
 
-        from datagen.render.mitsuba import mitsuba_mesh, select_variant, sensor_dict
-
-        self.variant = select_variant(variant or config.render.variant)
-        if threads is not None:
-            dr.set_thread_count(threads)
+        config = scene.config
+        self.variant = use_variant(variant or config.render.variant)
         self.config = config
         cam = config.camera
-        self.intrinsics = Intrinsics.from_hfov_deg(width or cam.width, height or cam.height, cam.hfov_deg)
+        self.intrinsics = scene.intrinsics if width is None and height is None else \
+            Intrinsics.from_hfov_deg(width or cam.width, height or cam.height, cam.hfov_deg)
         self.spp = spp or config.render.spp
-        self._ids = object_ids()
-        first = draw_look(config, np.random.default_rng(0))
-        scene: dict = {
+        first = neutral_look(config)
+        description: dict = {
             "type": "scene",
             "integrator": {"type": "path", "max_depth": config.render.max_depth},
             "sensor": sensor_dict(self.intrinsics, np.eye(4), self.spp),
@@ -229,7 +111,7 @@ class Renderer:
         self._parts: dict[str, list[tuple[str, str]]] = {}  # object -> [(param key prefix, material class)]
         meshes = {}
         for obj in RIGID_OBJECTS:
-            mesh = load_mesh(object_paths(config, obj)[0], obj)
+            mesh = load_mesh(scene.mesh_path(obj), obj)
             group = {"type": "shapegroup"}
             self._parts[obj] = []
             for i, (part, tm) in enumerate(mesh.parts.items()):
@@ -240,24 +122,20 @@ class Renderer:
                 group[key] = shape
                 meshes[(obj, key)] = shape
                 self._parts[obj].append((f"{obj}_group.{key}", cls))
-            scene[f"{obj}_group"] = group
-            scene[obj] = {"type": "instance", "shapegroup": {"type": "ref", "id": f"{obj}_group"}}
+            description[f"{obj}_group"] = group
+            description[obj] = {"type": "instance", "shapegroup": {"type": "ref", "id": f"{obj}_group"}}
         self._hose_points = None
         self.scene = None
-        self._scene_dict = scene
+        self._scene_dict = description
         self._meshes = meshes
         self._mi, self._dr = mi, dr
-        self._mitsuba_mesh = mitsuba_mesh
         self._first = first
 
     # -- scene construction (deferred until the hose's point count is known) --------------
     def _build(self, hose_points: int) -> None:
         mi, dr = self._mi, self._dr
-        faces = hose_faces(hose_points)
-        placeholder = np.zeros((hose_points * 12 + 2, 3))
-        placeholder[:, 0] = np.arange(len(placeholder)) * 1e-3  # non-degenerate until posed
-        hose = self._mitsuba_mesh("hose", placeholder, faces,
-                                  mi.load_dict(_principled(self._first.materials["hose"]["rubber"])))
+        hose = mitsuba_mesh("hose", hose_placeholder(hose_points), hose_faces(hose_points),
+                            mi.load_dict(_principled(self._first.materials["hose"]["rubber"])))
         scene = dict(self._scene_dict, hose=hose)
         self.scene = mi.load_dict(scene, optimize=False)
         self.params = mi.traverse(self.scene)
@@ -268,8 +146,8 @@ class Renderer:
             return
         lookup = {}
         for (obj, _), shape in self._meshes.items():
-            lookup[int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0])] = self._ids[obj]
-        lookup[int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(hose))[0])] = self._ids["hose"]
+            lookup[int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0])] = object_id(obj)
+        lookup[int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(hose))[0])] = object_id("hose")
         self._id_table = np.zeros(max(lookup) + 1, dtype=np.uint32)
         for k, v in lookup.items():
             self._id_table[k] = v
@@ -308,7 +186,7 @@ class Renderer:
         sea = make_transform(np.eye(3), [0.0, 0.0, -cam_pos[2]]) @ np.diag([SEA_SIZE_M / 2, SEA_SIZE_M / 2, 1.0, 1.0])
         p["sea.to_world"] = mi.Transform4f(sea.tolist())
         p["sea.bsdf.roughness.value"] = look.sea_roughness
-        p["sky.sun_direction"] = mi.Vector3f(*(float(v) for v in self.sun_direction_world(state, look)))
+        p["sky.sun_direction"] = mi.Vector3f(*(float(v) for v in sun_direction_world(state, look)))
         p["sky.turbidity"] = look.turbidity
         p["sky.sun_scale"] = look.sun_scale
         p["sky.sky_scale"] = look.sky_scale
@@ -320,16 +198,6 @@ class Renderer:
         p[f"{prefix}.roughness.value"] = m.roughness
         p[f"{prefix}.metallic.value"] = m.metallic
         p[f"{prefix}.specular"] = m.specular
-
-    @staticmethod
-    def sun_direction_world(state: FrameState, look: FrameLook) -> NDArray[np.float64]:
-        """Unit vector towards the sun, world frame: elevation above the horizon,
-        azimuth counter-clockwise from the tanker's heading at this frame."""
-        x_axis = state.world_from_tanker[:3, 0]
-        heading = math.atan2(x_axis[1], x_axis[0])
-        az = heading + math.radians(look.sun_azimuth_deg)
-        el = math.radians(look.sun_elevation_deg)
-        return np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
 
     def render(self, state: FrameState, look: FrameLook, seed: int, *, geometry: bool = False) -> RenderResult:
         """Pose the scene and render it: exposure-scaled linear RGB, plus the geometry
@@ -345,9 +213,9 @@ class Renderer:
         depth = ids = None
         if geometry or look.haze_visibility_m is not None:
             depth, ids = self.geometry_pass()
-        rgb *= np.float32(2.0 ** look.exposure_ev / WHITE_RADIANCE)
+        rgb *= exposure_scale(look.exposure_ev)
         if look.haze_visibility_m is not None:
-            rgb = _haze(rgb, depth, ids, look.haze_visibility_m)
+            rgb = haze(rgb, depth, ids, look.haze_visibility_m)
         return RenderResult(rgb, depth, ids, render_s)
 
     @functools.cached_property
@@ -388,7 +256,8 @@ class Renderer:
             si = self.scene.ray_intersect(ray)
             if si.is_valid():
                 t[i] = si.t
-                ids[i] = self._ids.get(str(si.shape.id()).split("_")[0], 0)  # ids are object_pN or hose
+                name = str(si.shape.id()).split("_")[0]  # shape ids are object_pN or hose
+                ids[i] = object_id(name) if name in OBJECT_NAMES else 0
         return t, ids
 
     def geometry_pass(self) -> tuple[NDArray[np.float32], NDArray[np.uint32]]:
@@ -416,93 +285,3 @@ class Renderer:
         mask = np.arange(p)[None, :] < features.n_points[:, None]
         fraction = (seen[:, :p] & mask).sum(axis=1) / features.n_points
         return fraction, seen[:, p]
-
-
-def _haze(rgb: NDArray[np.float32], depth: NDArray[np.float32], ids: NDArray[np.uint32],
-          visibility_m: float) -> NDArray[np.float32]:
-    """Atmospheric perspective: blend towards the sky's own colour with distance."""
-    sky = ~np.isfinite(depth)
-    airlight = rgb[sky].mean(axis=0) if sky.any() else rgb.reshape(-1, 3).mean(axis=0)
-    transmittance = np.exp(-np.where(np.isfinite(depth), depth, np.inf) / visibility_m)[..., None]
-    return (rgb * transmittance + airlight * (1 - transmittance)).astype(np.float32)
-
-
-def write_png(path: Path, rgb_linear: NDArray[np.float32], *, quality: int | None = None) -> None:
-    """Write 8-bit sRGB (PNG, or JPEG when the suffix says so) atomically."""
-    from datagen.dataset.files import write_image
-
-    write_image(path, to_srgb8(rgb_linear)[..., ::-1], jpeg_quality=quality or 95)
-
-
-def write_exr(path: Path, result: RenderResult) -> None:
-    """Linear EXR with channels R, G, B (float32), Z (float32, +inf on no hit) and
-    object_id (uint32), written atomically with the OpenEXR package."""
-    import OpenEXR
-
-    from datagen.dataset.files import atomic_path
-
-    channels = {
-        "R": np.ascontiguousarray(result.rgb[..., 0]),
-        "G": np.ascontiguousarray(result.rgb[..., 1]),
-        "B": np.ascontiguousarray(result.rgb[..., 2]),
-        "Z": np.ascontiguousarray(result.depth, dtype=np.float32),
-        "object_id": np.ascontiguousarray(result.object_id, dtype=np.uint32),
-    }
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    with atomic_path(path) as tmp:
-        with OpenEXR.File(header, channels) as exr:
-            exr.write(str(tmp))
-
-
-def render_frames(config: Config, frames, out: Path, *, spp: int | None = None, scale: float = 1.0,
-                  exr: bool = False, seed: int | None = None) -> list[Path]:
-    """Render frames of a config into ``out`` as ``{name}-{frame:06d}.png`` (and ``.exr``)."""
-    from datagen.scene.approach import frame_state
-    from datagen.core.conventions import frame_rng
-
-    seed = config.dataset.seed if seed is None else seed
-    cam = config.camera
-    renderer = Renderer(config, spp=spp, width=max(1, round(cam.width * scale)),
-                        height=max(1, round(cam.height * scale)))
-    written = []
-    for i in frames:
-        state = frame_state(config, i, seed)
-        result = renderer.render(state, draw_look(config, frame_rng(seed, i)), render_seed(seed, i),
-                                 geometry=exr or config.render.exr)
-        stem = Path(out) / f"{config.name}-{i:06d}"
-        ext = ".jpg" if config.render.image_format == "jpg" else ".png"
-        write_png(stem.with_suffix(ext), result.rgb, quality=config.render.jpeg_quality)
-        written.append(stem.with_suffix(ext))
-        if exr or config.render.exr:
-            write_exr(stem.with_suffix(".exr"), result)
-            written.append(stem.with_suffix(".exr"))
-    return written
-
-
-#: Frames of the gallery: spread over each config's approach chains and distances.
-GALLERY_FRAMES: Final = (0, 7, 21, 45)
-
-
-def write_gallery(configs, out: Path, *, spp: int = 16, tile=(512, 270)) -> Path:
-    """Render :data:`GALLERY_FRAMES` of each config at twice the tile size, scale
-    them down and write one sheet (a row per config) with captions."""
-    import cv2
-
-    from datagen.scene.approach import frame_state
-    from datagen.core.conventions import frame_rng
-    from datagen.dataset.files import write_image
-
-    rows = []
-    for config in configs:
-        seed = config.dataset.seed
-        renderer = Renderer(config, spp=spp, width=2 * tile[0], height=2 * tile[1])
-        tiles = []
-        for i in GALLERY_FRAMES:
-            state = frame_state(config, i, seed)
-            result = renderer.render(state, draw_look(config, frame_rng(seed, i)), render_seed(seed, i))
-            image = cv2.resize(to_srgb8(result.rgb)[..., ::-1], tile, interpolation=cv2.INTER_AREA)
-            caption = f"{config.name} #{i}  PtD {state.distance_m:.1f} m"
-            cv2.putText(image, caption, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
-            tiles.append(image)
-        rows.append(np.concatenate(tiles, axis=1))
-    return write_image(out, np.concatenate(rows, axis=0), jpeg_quality=90)

@@ -1,7 +1,7 @@
 """Contact sheets of the assets: each object from six views, feature centres marked.
 
-Rendered with Mitsuba through the same camera model as the labels
-(:mod:`datagen.render.mitsuba`), so a marker sits where a label's centre would.
+Rendered with Mitsuba (:mod:`datagen.render.views`) through the same camera model
+as the labels, so a marker sits where a label's centre would.
 Filled markers are centres the camera sees; hollow ones are hidden behind the
 object (ray cast, 1 cm tolerance).
 """
@@ -18,11 +18,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.assets.files import Feature, ObjectMesh
+from datagen.assets.rig import body_from_cam_looking
 from datagen.core.camera import Intrinsics, project_points
-from datagen.dataset.files import write_image
-from datagen.assets.models import material_class
-from datagen.scene.rig import body_from_cam_looking
+from datagen.core.conventions import drawing_px
 from datagen.core.transforms import apply_transform, invert_rigid
+from datagen.files import write_image
+from datagen.render.views import render_views
 
 __all__ = ["VIEWS", "contact_sheet", "write_contact_sheet"]
 
@@ -38,43 +39,10 @@ VIEWS: Final = (
 _TILE: Final = (480, 360)
 _HFOV_DEG: Final = 40.0
 
-_COLORS: Final = {
-    "paint": (0.58, 0.60, 0.63),
-    "glass": (0.02, 0.03, 0.05),
-    "metal": (0.80, 0.80, 0.82),
-    "markings": (0.55, 0.12, 0.08),
-    "dark": (0.015, 0.015, 0.015),
-    "fabric": (0.85, 0.84, 0.78),
-    "rubber": (0.03, 0.03, 0.03),
-}
 
 
-def _bsdf(part: str) -> dict:
-    cls = material_class(part)
-    color = (0.40, 0.41, 0.43) if part == "radome" else _COLORS[cls]
-    return {
-        "type": "principled",
-        "base_color": {"type": "rgb", "value": color},
-        "metallic": 1.0 if cls == "metal" else 0.0,
-        "roughness": 0.05 if cls == "glass" else 0.3 if cls == "metal" else 0.55,
-    }
 
 
-def _scene(mesh: ObjectMesh, world_from_cam: NDArray, intrinsics: Intrinsics, spp: int):
-    import mitsuba as mi
-
-    from datagen.render.mitsuba import mitsuba_mesh, sensor_dict
-
-    scene: dict = {
-        "type": "scene",
-        "integrator": {"type": "path", "max_depth": 4},
-        "sensor": sensor_dict(intrinsics, world_from_cam, spp),
-        "sky": {"type": "constant", "radiance": {"type": "rgb", "value": (0.45, 0.5, 0.6)}},
-        "sun": {"type": "directional", "direction": [-0.4, -0.3, -1.0], "irradiance": {"type": "rgb", "value": 2.5}},
-    }
-    for name, part in mesh.parts.items():
-        scene[f"part_{name}"] = mitsuba_mesh(name, part.vertices, part.faces, mi.load_dict(_bsdf(name)))
-    return mi.load_dict(scene, optimize=False)
 
 
 def _view_pose(center: NDArray, distance: float, azimuth_deg: float, elevation_deg: float) -> NDArray:
@@ -87,11 +55,6 @@ def contact_sheet(mesh: ObjectMesh, features: Sequence[Feature], *, spp: int = 6
                   variant: str = "auto") -> NDArray[np.uint8]:
     """The object from each of :data:`VIEWS` with its feature centres marked, as one
     8-bit BGR image (3 x 2 tiles)."""
-    import mitsuba as mi
-
-    from datagen.render.mitsuba import select_variant, visible, world_from_micam
-
-    select_variant(variant)
     bounds = mesh.combined.bounds
     center = bounds.mean(axis=0)
     intrinsics = Intrinsics.from_hfov_deg(*_TILE, _HFOV_DEG)
@@ -99,14 +62,9 @@ def contact_sheet(mesh: ObjectMesh, features: Sequence[Feature], *, spp: int = 6
     distance = 0.5 * float(np.linalg.norm(bounds[1] - bounds[0])) / math.tan(intrinsics.vfov_rad / 2)
     centers = np.array([f.center_m for f in features])
     poses = [_view_pose(center, distance, az, el) for _, az, el in VIEWS]
-    scene = _scene(mesh, poses[0], intrinsics, spp)  # loaded once; each view only moves the sensor
-    params = mi.traverse(scene)
     tiles = []
-    for (title, _, _), world_from_cam in zip(VIEWS, poses, strict=True):
-        params["sensor.to_world"] = mi.Transform4f(world_from_micam(world_from_cam).tolist())
-        params.update()
-        image = np.asarray(mi.util.convert_to_bitmap(mi.render(scene, seed=0)))[..., ::-1].copy()
-        seen = visible(scene, world_from_cam[:3, 3], centers, tolerance_m=0.01)
+    rendered = render_views(mesh, poses, intrinsics, centers, spp=spp, variant=variant)
+    for (title, _, _), world_from_cam, (image, seen) in zip(VIEWS, poses, rendered, strict=True):
         uv = project_points(apply_transform(invert_rigid(world_from_cam), centers), intrinsics)
         _mark(image, uv, seen, [f.class_id for f in features])
         cv2.putText(image, title, (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 1, cv2.LINE_AA)
@@ -124,7 +82,8 @@ def _mark(image: NDArray[np.uint8], uv: NDArray, seen: NDArray[np.bool_], ids: S
         if not (np.isfinite(u) and np.isfinite(v)):
             continue
         # Continuous pixel coordinates to OpenCV's integer drawing grid (shift 4: 1/16 px).
-        point = (round((u - 0.5) * 16), round((v - 0.5) * 16))
+        x, y = drawing_px((u, v))
+        point = (round(x * 16), round(y * 16))
         color = (40, 220, 40) if ok else (60, 60, 255)
         cv2.circle(image, point, 4 * 16, color, -1 if ok else 1, cv2.LINE_AA, shift=4)
         if ok:

@@ -14,10 +14,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from datagen.core.conventions import drawing_px
 from datagen.core.labels import Exclusion, FrameLabels
 from datagen.dataset.reader import DatasetView
 
-__all__ = ["draw_overlay", "write_previews"]
+__all__ = ["draw_crosshair", "draw_overlay", "write_previews"]
 
 # BGR colours.
 TIGHT = (0, 200, 255)  # amber: the tight box
@@ -25,6 +26,25 @@ CORRECTED = (80, 220, 60)  # green: the corrected box (the paper's label)
 WRITTEN = (255, 200, 0)  # cyan: the label box when grown to labels.min_box_px
 CENTRE = (255, 80, 255)  # magenta: true centre crosshair
 EXCLUDED = (160, 160, 160)  # grey: excluded features still in view
+
+
+#: OpenCV's sub-pixel drawing: coordinates in 1/16 px.
+_SHIFT = 4
+
+
+def _fixed(x: float, y: float) -> tuple[int, int]:
+    """OpenCV's fixed-point drawing coordinates of continuous pixel ``(x, y)``."""
+    u, v = drawing_px((x, y))
+    return round(u * (1 << _SHIFT)), round(v * (1 << _SHIFT))
+
+
+def draw_crosshair(image: NDArray[np.uint8], uv_px, colour, *, arm: float, thickness: int = 1) -> None:
+    """A crosshair centred on continuous pixel coordinates ``uv_px`` (anti-aliased, sub-pixel)."""
+    import cv2
+
+    u, v = (float(c) for c in uv_px)
+    cv2.line(image, _fixed(u - arm, v), _fixed(u + arm, v), colour, thickness, cv2.LINE_AA, _SHIFT)
+    cv2.line(image, _fixed(u, v - arm), _fixed(u, v + arm), colour, thickness, cv2.LINE_AA, _SHIFT)
 
 
 def draw_overlay(view: DatasetView, b: int, labels: FrameLabels, *, names: bool = True) -> NDArray[np.uint8]:
@@ -42,11 +62,7 @@ def draw_overlay(view: DatasetView, b: int, labels: FrameLabels, *, names: bool 
     scale = max(1.0, k.width / 1024)
     thick = max(1, round(scale))
     font = 0.35 * scale
-    shift = 4  # sub-pixel drawing: coordinates in 1/16 px
-    one = 1 << shift
-
-    def pt(x: float, y: float) -> tuple[int, int]:
-        return round(x * one), round(y * one)
+    pt, shift = _fixed, _SHIFT
 
     frame = labels.frame(b)
     for f in range(len(view.features)):
@@ -62,10 +78,8 @@ def draw_overlay(view: DatasetView, b: int, labels: FrameLabels, *, names: bool 
             lx0, ly0, lx1, ly1 = frame.label_xyxy[f]
             cv2.rectangle(image, pt(lx0, ly0), pt(lx1, ly1), WRITTEN, thick, cv2.LINE_AA, shift)
         u, v = frame.center_px[f]
-        arm = 6 * scale
         colour = EXCLUDED if excluded else CENTRE
-        cv2.line(image, pt(u - arm, v), pt(u + arm, v), colour, thick, cv2.LINE_AA, shift)
-        cv2.line(image, pt(u, v - arm), pt(u, v + arm), colour, thick, cv2.LINE_AA, shift)
+        draw_crosshair(image, (u, v), colour, arm=6 * scale, thickness=thick)
         if names:
             text = view.features.name[f].split(".", 1)[-1] + (f" ({reason.reason})" if excluded else "")
             cv2.putText(image, text, (int(x1) + 2, int(y0) + int(8 * scale)), cv2.FONT_HERSHEY_SIMPLEX, font,
@@ -84,7 +98,7 @@ def write_previews(view: DatasetView, frames: list[int] | None, out: Path, label
     import json
 
     from datagen.core.errors import DatagenError
-    from datagen.dataset.files import atomic_path, write_image
+    from datagen.files import write_image, write_text
 
     labels = labels if labels is not None else view.recompute()
     index = {int(fid): b for b, fid in enumerate(view.frame_id)}
@@ -104,6 +118,5 @@ def write_previews(view: DatasetView, frames: list[int] | None, out: Path, label
     except (OSError, ValueError, AttributeError):
         earlier = []
     files = sorted({*(f for f in earlier if isinstance(f, str)), *(p.name for p in written)})
-    with atomic_path(record) as tmp:
-        tmp.write_text(json.dumps({"dataset": str(view.root), "files": files}, indent=2) + "\n")
+    write_text(record, json.dumps({"dataset": str(view.root), "files": files}, indent=2) + "\n")
     return written

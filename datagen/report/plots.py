@@ -1,33 +1,39 @@
-"""PNG plots (matplotlib, Agg backend: no display needed)."""
+"""PNG plots of the approaches, the audit and the evaluation.
+
+Figures are made with ``matplotlib.figure.Figure`` directly, never through
+pyplot: no backend is selected and no figure is kept in a global registry (no
+process-wide state), and a figure is rendered to PNG bytes that
+:mod:`datagen.files` writes.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-
-from datagen.scene.approach import trace_approach  # noqa: E402
-from datagen.config.schema import Config  # noqa: E402
-from datagen.dataset.files import atomic_path  # noqa: E402
+from datagen.config.schema import Config
+from datagen.files import write_figure
+from datagen.scene.approach import trace_approach
 
 __all__ = ["plot_approaches", "plot_audit", "plot_evaluation"]
 
 
-def _save_png(fig, path: Path, dpi: int = 100) -> Path:
-    """Write a figure as PNG atomically and free it."""
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=dpi, format="png")
-    plt.close(fig)
-    return Path(path)
+def _figure(*shape: int, **options):
+    """A figure and its axes (``Figure.subplots``), laid out with constrained layout."""
+    fig = Figure(figsize=options.pop("figsize"), constrained_layout=True)
+    return fig, fig.subplots(*shape, **options)
+
+
+def _save_png(fig: Figure, path: Path, dpi: int = 100) -> Path:
+    """Render a figure to PNG and write it atomically."""
+    return write_figure(path, fig, dpi=dpi)
 
 
 def plot_approaches(config: Config, path: Path, approaches: int = 5, seed: int | None = None) -> None:
     """Distance over time and trajectories in the drogue-centred frame for a few approaches."""
     seed = config.dataset.seed if seed is None else seed
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8), constrained_layout=True)
+    fig, axes = _figure(1, 3, figsize=(16, 4.8))
     for a in range(approaches):
         tr = trace_approach(config, seed, a)
         label = f"approach {a} ({tr['time_s'][-1]:.0f} s)"
@@ -62,9 +68,9 @@ def plot_audit(stats: dict, folder: Path) -> dict[str, Path]:
 
     drift, distance = arrays["drift"], arrays["distance"]
     floor = 1e-4  # a drift of exactly 0 (a symmetric view) still shows on the log axis
-    fig, ax = plt.subplots(figsize=(8, 4.5), constrained_layout=True)
+    fig, ax = _figure(figsize=(8, 4.5))
     if drift.size:
-        pick = np.random.default_rng(0).permutation(drift.size)[:20000]
+        pick = np.linspace(0, drift.size - 1, min(drift.size, 20000)).astype(int)  # every k-th: no RNG
         ax.scatter(distance[pick], np.maximum(drift[pick], floor), s=3, alpha=0.25, label="a feature in a frame")
         bins = [b for b in stats["tight_drift_px"]["by_distance_m"] if b["count"]]
         mid = [(b["lo"] + b["hi"]) / 2 for b in bins]
@@ -76,7 +82,7 @@ def plot_audit(stats: dict, folder: Path) -> dict[str, Path]:
     ax.grid(True, alpha=0.3)
     save(fig, "drift_vs_distance")
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+    fig, axes = _figure(1, 2, figsize=(11, 4.2))
     sizes = sorted(set(arrays["size"].tolist()))
     if drift.size:
         axes[0].boxplot([np.maximum(drift[arrays["size"] == s], floor) for s in sizes], showfliers=False)
@@ -94,13 +100,13 @@ def plot_audit(stats: dict, folder: Path) -> dict[str, Path]:
     save(fig, "drift_by_size_and_obliqueness")
 
     per_class = stats["labels_per_class"]
-    fig, ax = plt.subplots(figsize=(max(8, 0.12 * len(per_class)), 4), constrained_layout=True)
+    fig, ax = _figure(figsize=(max(8, 0.12 * len(per_class)), 4))
     ax.bar(range(len(per_class)), list(per_class.values()))
     ax.set(xlabel="class id", ylabel="labeled (frames)", title="Labels per class")
     ax.grid(True, axis="y", alpha=0.3)
     save(fig, "labels_per_class")
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
+    fig, axes = _figure(1, 2, figsize=(11, 4))
     exclusions = stats["exclusions"]
     axes[0].bar(list(exclusions), list(exclusions.values()), color=["C2"] + ["C7"] * (len(exclusions) - 1))
     axes[0].set(ylabel="features x frames", title="Labeled and excluded, by reason")
@@ -113,7 +119,7 @@ def plot_audit(stats: dict, folder: Path) -> dict[str, Path]:
         ax.grid(True, axis="y", alpha=0.3)
     save(fig, "exclusions_and_visibility")
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
+    fig, axes = _figure(1, 2, figsize=(11, 4))
     cov = stats["distance_coverage"]
     edges = np.asarray(cov["edges_m"])
     axes[0].bar(edges[:-1] + 2.5, cov["frames"], width=4.5)
@@ -141,7 +147,7 @@ def plot_evaluation(runs, summaries, folder: Path, *, name: str = "") -> dict[st
     n = len(runs)
     cols = min(n, 2)
     rows = (n + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(7 * cols, 4.2 * rows), squeeze=False, constrained_layout=True)
+    fig, axes = _figure(rows, cols, figsize=(7 * cols, 4.2 * rows), squeeze=False)
     for ax, (source, result), summary in zip(axes.ravel(), runs, summaries):
         ok = result["success"]
         d, e = result["distance_m"], result["error_m"]
@@ -160,7 +166,7 @@ def plot_evaluation(runs, summaries, folder: Path, *, name: str = "") -> dict[st
     fig.suptitle(f"{name}: PtD vector error vs distance")
     out["error_vs_distance"] = _save_png(fig, Path(folder) / "error_vs_distance.png")
 
-    fig, ax = plt.subplots(figsize=(8, 4), constrained_layout=True)
+    fig, ax = _figure(figsize=(8, 4))
     for (source, _), summary in zip(runs, summaries):
         bins = [b for b in summary["by_distance"] if b["attempts"]]
         ax.plot([(b["lo_m"] + b["hi_m"]) / 2 for b in bins], [100 * b["reliability"] for b in bins], "o-",

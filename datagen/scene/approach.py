@@ -35,16 +35,15 @@ regenerated alone on any worker.
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
+from datagen.assets.rig import HOSE_ATTACH_DROGUE_M, HOSE_PORT_TANKER_M, MOUNTS
 from datagen.config.schema import Config
 from datagen.core.conventions import approach_rng
-from datagen.scene.rig import HOSE_ATTACH_DROGUE_M, HOSE_PORT_TANKER_M, MOUNTS
 from datagen.core.transforms import (
     invert_rigid,
     make_transform,
@@ -55,7 +54,10 @@ from datagen.core.transforms import (
 
 __all__ = [
     "ApproachStart",
+    "DrogueTurbulence",
     "FrameState",
+    "FrameStates",
+    "TankerFlight",
     "frame_state",
     "frame_states",
     "hose_curve",
@@ -136,7 +138,7 @@ def start_offset(start: ApproachStart) -> FloatArray:
     return start.distance_m * direction
 
 
-class _Turbulence:
+class DrogueTurbulence:
     """Dryden-filtered gusts (first-order Gauss-Markov per axis) driving a damped
     second-order drogue response; displacement in the tanker frame."""
 
@@ -189,7 +191,7 @@ def hose_curve(tanker_from_drogue: FloatArray, n: int = HOSE_POINTS) -> FloatArr
     return h00 * p0 + h10 * t0 + h01 * p1 + h11 * t1
 
 
-class _Tanker:
+class TankerFlight:
     """World pose of the tanker over time: straight and level, or a coordinated turn."""
 
     def __init__(self, config: Config, rng: np.random.Generator):
@@ -232,7 +234,7 @@ class _Snapshot:
     attitude_rotvec: FloatArray
     drogue_offset: FloatArray
     body_from_cam: FloatArray
-    tanker: _Tanker
+    tanker: TankerFlight
     intensity: float
 
 
@@ -245,8 +247,8 @@ class _Chain:
         self.config = config
         self.rng = rng
         self.dt = a.dt_s
-        self.tanker = _Tanker(config, rng)
-        self.turbulence = _Turbulence(config, rng, self.dt)
+        self.tanker = TankerFlight(config, rng)
+        self.turbulence = DrogueTurbulence(config, rng, self.dt)
         self.gains = a.forward_gain * np.array([1.0, a.lateral_gain_ratio, a.lateral_gain_ratio])
         self.limits = np.array([a.max_closure_mps, a.max_lateral_mps, a.max_lateral_mps])
         self.attitude_decay = math.exp(-self.dt / a.attitude_time_constant_s)
@@ -365,6 +367,11 @@ def trace_approach(config: Config, seed: int, approach_index: int, every: int = 
     }
 
 
+def _read_only(array: FloatArray) -> FloatArray:
+    array.setflags(write=False)
+    return array
+
+
 def _state(config: Config, frame_index: int, approach_index: int, snap: _Snapshot) -> FrameState:
     world_from_tanker = snap.tanker.world_from_tanker(snap.time_s)
     tanker_from_receiver = make_transform(rotation_from_rotvec(snap.attitude_rotvec), snap.probe_tanker)
@@ -376,6 +383,8 @@ def _state(config: Config, frame_index: int, approach_index: int, snap: _Snapsho
     hose_tanker = hose_curve(tanker_from_drogue)
     hose_world = hose_tanker @ world_from_tanker[:3, :3].T + world_from_tanker[:3, 3]
     ptd = invert_rigid(world_from_receiver) @ world_from_drogue[:, 3]
+    for array in (world_from_tanker, world_from_receiver, world_from_drogue, hose_world, ptd):
+        array.setflags(write=False)
     return FrameState(
         frame_index=frame_index,
         approach_index=approach_index,
@@ -384,9 +393,9 @@ def _state(config: Config, frame_index: int, approach_index: int, snap: _Snapsho
         world_from_tanker=world_from_tanker,
         world_from_receiver=world_from_receiver,
         world_from_drogue=world_from_drogue,
-        world_from_cam=world_from_body @ snap.body_from_cam,
+        world_from_cam=_read_only(world_from_body @ snap.body_from_cam),
         hose_points_world=hose_world,
-        ptd_receiver_m=ptd[:3],
+        ptd_receiver_m=ptd[:3],  # a view of the read-only ptd
         distance_m=float(np.linalg.norm(ptd[:3])),
         mount=config.camera.mount,
         turbulence_intensity=snap.intensity,
@@ -394,23 +403,47 @@ def _state(config: Config, frame_index: int, approach_index: int, snap: _Snapsho
     )
 
 
-@functools.lru_cache(maxsize=4)
-def _chain_states(config: Config, seed: int, approach_index: int) -> tuple[FrameState, ...]:
-    k = config.approach.frames_per_approach
-    snaps = simulate_chain(config, seed, approach_index)
-    return tuple(_state(config, approach_index * k + j, approach_index, s) for j, s in enumerate(snaps))
+class FrameStates:
+    """The frame states of one config and root seed, each approach chain simulated once.
+
+    Holds the last ``chains`` chains it simulated (frames of one chain are
+    consecutive, so a shard rarely needs more); whoever creates it owns the memory.
+    The states' arrays are read-only. ``FrameStates(config)(i)`` is
+    :func:`frame_state` ``(config, i)``.
+    """
+
+    def __init__(self, config: Config, seed: int | None = None, *, chains: int = 4) -> None:
+        self.config = config
+        self.seed = config.dataset.seed if seed is None else seed
+        self._chains: dict[int, tuple[FrameState, ...]] = {}
+        self._keep = max(1, chains)
+
+    def chain(self, approach_index: int) -> tuple[FrameState, ...]:
+        """The states of every frame of approach chain ``approach_index``."""
+        if approach_index not in self._chains:
+            if len(self._chains) >= self._keep:
+                self._chains.pop(next(iter(self._chains)))
+            k = self.config.approach.frames_per_approach
+            snaps = simulate_chain(self.config, self.seed, approach_index)
+            self._chains[approach_index] = tuple(_state(self.config, approach_index * k + j, approach_index, s)
+                                                 for j, s in enumerate(snaps))
+        return self._chains[approach_index]
+
+    def __call__(self, frame_index: int) -> FrameState:
+        k = self.config.approach.frames_per_approach
+        return self.chain(frame_index // k)[frame_index % k]
 
 
 def frame_state(config: Config, frame_index: int, seed: int | None = None) -> FrameState:
     """The state of frame ``frame_index``: a pure function of (config, seed, frame index).
 
-    ``seed`` defaults to the config's dataset seed.
+    ``seed`` defaults to the config's dataset seed. It simulates the frame's whole
+    approach chain; for many frames use :func:`frame_states` or :class:`FrameStates`.
     """
-    seed = config.dataset.seed if seed is None else seed
-    k = config.approach.frames_per_approach
-    return _chain_states(config, seed, frame_index // k)[frame_index % k]
+    return FrameStates(config, seed, chains=1)(frame_index)
 
 
 def frame_states(config: Config, frame_indices, seed: int | None = None) -> list[FrameState]:
     """:func:`frame_state` for many frames (each chain is simulated once)."""
-    return [frame_state(config, i, seed) for i in frame_indices]
+    states = FrameStates(config, seed)
+    return [states(i) for i in frame_indices]

@@ -3,7 +3,7 @@
 Each builder returns a :class:`Model`: meshes by part name in the object's body
 frame (:mod:`datagen.core.conventions`), and the feature anchors from which
 :mod:`datagen.assets.files` derives the feature point sets. The models are built
-around the mounts and hose port of :mod:`datagen.scene.rig`.
+around the mounts and hose port of :mod:`datagen.assets.rig`.
 """
 
 from __future__ import annotations
@@ -16,7 +16,6 @@ import trimesh
 
 __all__ = [
     "MATERIAL_CLASSES",
-    "SIZE_SCALE",
     "FeatureAnchor",
     "InternalFeature",
     "Model",
@@ -24,10 +23,6 @@ __all__ = [
 ]
 
 Size = Literal["small", "medium", "large"]
-
-#: Ring radius of a feature relative to its model's small radius: each size has
-#: four times the area of the one before (paper models J, K, L).
-SIZE_SCALE: Final[dict[str, float]] = {"small": 1.0, "medium": 2.0, "large": 4.0}
 
 #: Material class of each built-in part name; the renderer randomizes a material
 #: per class. Unknown part names (a user's mesh) fall back on keywords, then paint.
@@ -65,7 +60,7 @@ class FeatureAnchor:
     """A feature defined by a point on (or near) the surface.
 
     Its point set is the anchor snapped to the surface plus a ring of surface
-    points around it, of radius ``model.small_radius_m * SIZE_SCALE[size]``;
+    points around it, of radius ``model.small_radius_m * SIZE_SCALE[size]`` (:data:`datagen.core.features.SIZE_SCALE`);
     its true centre is the snapped anchor.
     """
 

@@ -3,7 +3,7 @@
 The drogue frame: x forward (towards the tanker, along the hose), y left, z up,
 origin at the drogue centre on the basket axis, where the probe tip is at
 contact. The coupling (where the hose attaches, at
-:data:`datagen.scene.rig.HOSE_ATTACH_DROGUE_M`) is ahead of the centre and the
+:data:`datagen.assets.rig.HOSE_ATTACH_DROGUE_M`) is ahead of the centre and the
 canopy opens aft towards the receiver: 16 ribs carry a fabric canopy about
 0.7 m across at the rim.
 
@@ -22,9 +22,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from datagen.assets.models import FeatureAnchor, InternalFeature, Model
 from datagen.assets.models.geometry import Parts, box, loft, tube, tube_rings
-from datagen.scene.rig import HOSE_ATTACH_DROGUE_M
+from datagen.assets.rig import HOSE_ATTACH_DROGUE_M
 
-__all__ = ["HOSE_RADIUS_M", "HOSE_SIDES", "build_drogue", "hose_faces", "hose_mesh", "hose_vertices"]
+__all__ = ["HOSE_RADIUS_M", "HOSE_SIDES", "build_drogue", "hose_faces", "hose_mesh", "hose_placeholder", "hose_vertices"]
 
 N_RIBS: Final = 16
 RIM_X: Final = -0.35  # canopy rim plane, aft of the centre
@@ -127,6 +127,14 @@ def hose_vertices(points: ArrayLike, sides: int = HOSE_SIDES) -> NDArray[np.floa
     rings = tube_rings(points, HOSE_RADIUS_M, sides)
     flat = rings.reshape(-1, 3)
     return np.concatenate([flat, rings[0].mean(axis=0)[None], rings[-1].mean(axis=0)[None]])
+
+
+def hose_placeholder(n_points: int, sides: int = HOSE_SIDES) -> NDArray[np.float64]:
+    """Vertices for a hose mesh before it is posed: as many as :func:`hose_vertices` gives
+    (the rings, then the two cap centres), spread along x so that no triangle is degenerate."""
+    placeholder = np.zeros((n_points * sides + 2, 3))
+    placeholder[:, 0] = np.arange(len(placeholder)) * 1e-3
+    return placeholder
 
 
 def _hose_loft(rings: NDArray[np.float64]) -> trimesh.Trimesh:

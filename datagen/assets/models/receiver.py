@@ -2,9 +2,9 @@
 
 About 17 m long and 12 m across the wingtip missiles. Receiver body frame: x
 forward, y left, z up, origin at the probe tip; the centreline lies
-:data:`datagen.scene.rig.RECEIVER_CENTRELINE_Y_M` to the left of the tip. The right
+:data:`datagen.assets.rig.RECEIVER_CENTRELINE_Y_M` to the left of the tip. The right
 wing carries the wingcam pod whose nose sits just behind the wingcam mount of
-:data:`datagen.scene.rig.MOUNTS`.
+:data:`datagen.assets.rig.MOUNTS`.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from datagen.assets.models.geometry import (
     tube,
     wing,
 )
-from datagen.scene.rig import MOUNTS, RECEIVER_CENTRELINE_Y_M
+from datagen.assets.rig import MOUNTS, RECEIVER_CENTRELINE_Y_M
 
 __all__ = ["build_receiver"]
 

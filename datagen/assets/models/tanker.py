@@ -3,7 +3,7 @@
 About 50 m long and 48 m in span. Tanker body frame: x forward, y left, z up,
 origin at the *average* drogue centre, so the aircraft sits ahead of and above
 the origin. The centreline drogue unit's fairing hangs under the aft fuselage
-with its hose exit port at :data:`datagen.scene.rig.HOSE_PORT_TANKER_M`.
+with its hose exit port at :data:`datagen.assets.rig.HOSE_PORT_TANKER_M`.
 """
 
 from __future__ import annotations
@@ -11,8 +11,17 @@ from __future__ import annotations
 import numpy as np
 
 from datagen.assets.models import FeatureAnchor, Model
-from datagen.assets.models.geometry import Panel, Parts, decal, ellipsoid, loft, on_side, superellipse_ring, tube
-from datagen.scene.rig import HOSE_PORT_TANKER_M
+from datagen.assets.models.geometry import (
+    Panel,
+    Parts,
+    decal,
+    ellipsoid,
+    loft,
+    on_side,
+    superellipse_ring,
+    tube,
+)
+from datagen.assets.rig import HOSE_PORT_TANKER_M
 
 __all__ = ["build_tanker"]
 

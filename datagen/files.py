@@ -3,6 +3,12 @@
 A reader (or a crash) never sees a half-written file. A temporary is named
 ``.NAME.PID.datagen-tmp``: a name only datagen uses, so that sweeping the
 temporaries an interrupted writer left can never touch a user's own files.
+The dataset writer and the report writers call these functions; no other
+module opens a file for writing (a test checks).
+
+Image formats live here too: 8-bit PNG (zlib level 1, no row filter) or JPEG
+for training images, overlays and sheets, and the linear EXR of a frame
+(channels R, G, B and Z in float32, ``object_id`` in uint32).
 """
 
 from __future__ import annotations
@@ -14,7 +20,17 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Final
 
-__all__ = ["TEMPORARY_SUFFIX", "atomic_path", "is_temporary", "write_image"]
+__all__ = [
+    "TEMPORARY_SUFFIX",
+    "atomic_path",
+    "is_temporary",
+    "write_bytes",
+    "write_exr",
+    "write_figure",
+    "write_image",
+    "write_parquet",
+    "write_text",
+]
 
 #: The suffix of datagen's temporaries (``.NAME.PID.datagen-tmp``).
 TEMPORARY_SUFFIX: Final = ".datagen-tmp"
@@ -63,6 +79,56 @@ def write_image(path: str | Path, bgr8, *, jpeg_quality: int = 95) -> Path:
     ok, data = cv2.imencode(ext, bgr8, params)
     if not ok:
         raise RuntimeError(f"image encoding failed for {path}")
+    return write_bytes(path, data.tobytes())
+
+
+def write_figure(path: str | Path, figure, *, dpi: int = 100) -> Path:
+    """A matplotlib figure as PNG, atomically."""
+    import io
+
+    buffer = io.BytesIO()
+    figure.savefig(buffer, dpi=dpi, format="png")
+    return write_bytes(path, buffer.getvalue())
+
+
+def write_bytes(path: str | Path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically."""
+    path = Path(path)
     with atomic_path(path) as tmp:
-        tmp.write_bytes(data.tobytes())
+        tmp.write_bytes(data)
+    return path
+
+
+def write_text(path: str | Path, text: str) -> Path:
+    """Write UTF-8 ``text`` to ``path`` atomically."""
+    return write_bytes(path, text.encode("utf-8"))
+
+
+def write_parquet(path: str | Path, table, **options) -> Path:
+    """Write a pyarrow table as parquet atomically (``options``: ``pq.write_table``'s)."""
+    import pyarrow.parquet as pq
+
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp, **options)
+    return path
+
+
+def write_exr(path: str | Path, rgb, depth, object_id) -> Path:
+    """A frame's linear EXR, atomically: R, G, B (float32 radiance), Z (float32 camera
+    z-depth in metres, +inf where nothing is hit) and object_id (uint32), ZIP-compressed."""
+    import numpy as np
+    import OpenEXR
+
+    channels = {
+        "R": np.ascontiguousarray(rgb[..., 0], dtype=np.float32),
+        "G": np.ascontiguousarray(rgb[..., 1], dtype=np.float32),
+        "B": np.ascontiguousarray(rgb[..., 2], dtype=np.float32),
+        "Z": np.ascontiguousarray(depth, dtype=np.float32),
+        "object_id": np.ascontiguousarray(object_id, dtype=np.uint32),
+    }
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    path = Path(path)
+    with atomic_path(path) as tmp, OpenEXR.File(header, channels) as exr:
+        exr.write(str(tmp))
     return path

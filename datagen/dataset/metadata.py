@@ -1,0 +1,194 @@
+"""The metadata files of a dataset: ``dataset.json``, ``data.yaml``, ``hyp.yaml``,
+``features.parquet`` and the image lists ``train.txt`` / ``val.txt``.
+
+``dataset.json`` says what the dataset is (written once, when a dataset is new);
+the others are pure functions of the resolved scene and are rewritten by every
+run. The fingerprint decides whether a rerun resumes the same dataset.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import platform
+from importlib import metadata
+from pathlib import Path
+from typing import Final
+
+import yaml
+
+from datagen.core.conventions import OBJECT_NAMES, PIXEL_CONVENTION
+from datagen.dataset.layout import SPLITS, Layout, ShardJob
+from datagen.dataset.schema import MANIFEST_VERSION, write_features
+from datagen.files import write_text
+from datagen.scene.resolved import Scene
+
+__all__ = [
+    "DATASET_SCHEMA",
+    "DATASET_SCHEMA_VERSION",
+    "config_fingerprint",
+    "data_yaml",
+    "dataset_document",
+    "hyp_yaml",
+    "write_dataset_files",
+    "write_image_lists",
+]
+
+DATASET_SCHEMA: Final = "datagen.dataset"
+
+
+#: Version of dataset.json's layout (bumped on any incompatible change).
+DATASET_SCHEMA_VERSION: Final = 1
+
+
+def config_fingerprint(scene: Scene, *, render: bool = True) -> str:
+    """SHA-256 of everything that decides a dataset's content: the resolved config,
+    the bytes of every asset file and whether images are rendered."""
+    doc = {
+        "config": scene.config.model_dump(mode="json"),
+        "render": render,
+        "assets": {name: [a["mesh_sha256"], a["features_sha256"]] for name, a in scene.assets.items()},
+    }
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
+
+
+def _versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for dist in ("datagen", "mitsuba", "drjit", "numpy", "pyarrow", "trimesh", "opencv-python-headless"):
+        with contextlib.suppress(metadata.PackageNotFoundError):
+            out[dist] = metadata.version(dist)
+    return out
+
+
+# --- metadata files ---------------------------------------------------------------------------
+def dataset_document(scene: Scene, jobs: list[ShardJob], fingerprint: str, *, render: bool = True) -> dict:
+    """The content of ``dataset.json``."""
+    config, assets, k = scene.config, scene.assets, scene.intrinsics
+    cam = config.camera
+    class_names = list(scene.features.name)
+    splits = {s: {"frames": sum(len(j.frames) for j in jobs if j.split == s),
+                  "shards": sum(1 for j in jobs if j.split == s)} for s in SPLITS}
+    objects = [{"id": i + 1, "name": name, "mesh": assets[name]["mesh"] if name in assets else None,
+                "mesh_sha256": assets[name]["mesh_sha256"] if name in assets else None}
+               for i, name in enumerate(OBJECT_NAMES)]
+    return {
+        "schema": DATASET_SCHEMA,
+        "schema_version": DATASET_SCHEMA_VERSION,
+        "manifest_version": MANIFEST_VERSION,
+        "name": config.name,
+        "fingerprint": fingerprint,
+        "render": render,
+        "versions": _versions(),
+        "image_width": cam.width,
+        "image_height": cam.height,
+        "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy},
+        "edge_margin_px": config.labels.edge_margin_px,
+        "corrected": config.labels.corrected,
+        "label_size": {"train_imgsz": config.labels.train_imgsz, "min_box_px": config.labels.min_box_px,
+                       "small_boxes": config.labels.small_boxes,
+                       "min_label_size_px": list(scene.label_options["min_size_px"])},
+        "pixel_convention": PIXEL_CONVENTION,
+        "camera_frame": "opencv: x right, y down, z forward",
+        "body_frame": "x forward, y left, z up",
+        "objects": objects,
+        "features": {"file": "features.parquet", "classes": len(class_names),
+                     "variant": config.features.variant, "objects": list(config.features.objects)},
+        "seed": config.dataset.seed,
+        "shard_size": config.dataset.shard_size,
+        "splits": splits,
+        "assets": assets,
+        "config": config.model_dump(mode="json"),
+    }
+
+
+def _commands(root: Path, imgsz: int) -> str:
+    """Train, predict and evaluate commands that work offline from any folder."""
+    return f"""\
+# Train (offline, from any folder; yolo11s.yaml builds the network from scratch, a local .pt file works too):
+#   yolo detect train data={root / 'data.yaml'} cfg={root / 'hyp.yaml'} model=yolo11s.yaml project={root.parent / 'runs'} name={root.name}
+# Predict the validation frames (keeping low-confidence detections) and score the PtD vectors
+# that PnP makes of the detections at or above --conf:
+#   yolo detect predict model={root.parent / 'runs' / root.name / 'weights' / 'best.pt'} source={root / 'val.txt'} imgsz={imgsz} conf=0.001 save_txt=True save_conf=True project={root.parent / 'runs'} name={root.name}-predict
+#   datagen evaluate {root} --predictions {root.parent / 'runs' / (root.name + '-predict') / 'labels'} --conf 0.25
+"""
+
+
+def data_yaml(root: Path, class_names: list[str], splits: tuple[str, ...] = SPLITS, *, imgsz: int = 864) -> str:
+    """Ultralytics' dataset file. ``train`` and ``val`` are the image lists ``train.txt``
+    and ``val.txt`` (written when the build finishes). No ``path:``: Ultralytics then
+    resolves them against the folder of data.yaml itself, so the dataset can move.
+    ``splits`` are the splits that have frames: Ultralytics needs both, so a split
+    without frames (``val_fraction: 0``, or a tiny build) borrows the other's."""
+    have = [s for s in SPLITS if s in splits] or ["train"]
+    lists = {s: f"{s if s in have else have[0]}.txt" for s in SPLITS}
+    note = "".join(f"# no {s} frames in this build: {s} uses {lists[s]}\n" for s in SPLITS if s not in have)
+    doc = {"train": lists["train"], "val": lists["val"],
+           "nc": len(class_names), "names": dict(enumerate(class_names))}
+    return ("# Ultralytics dataset (datagen); train.txt and val.txt list the images of each split.\n"
+            + _commands(root, imgsz) + note + yaml.safe_dump(doc, sort_keys=False))
+
+
+def hyp_yaml(scene: Scene, root: Path) -> str:
+    """A training recipe that keeps corrected centres and left/right classes intact."""
+    config = scene.config
+    imgsz = config.labels.train_imgsz
+    scale = min(scene.train_view.scale)
+    margin = config.labels.edge_margin_px * scale
+    return f"""\
+# Ultralytics training recipe for a datagen dataset ({config.name}).
+{_commands(root, imgsz)}# Corrected boxes are centred on the projection of a feature's true 3D centre, and
+# many classes come in left/right pairs. Augmentations that clip boxes at a crop
+# border (mosaic, translate, scale) move the box centre off the true centre, and a
+# horizontal flip turns a left-wing feature into a right-wing one without changing
+# its class: all are off. Photometric (HSV) augmentation is harmless and stays.
+# Label boxes are at least {config.labels.min_box_px:g} px at this imgsz (labels.min_box_px), so that every
+# label survives the trainer's 2 px rule and holds an anchor centre (datagen audit: learnable).
+imgsz: {imgsz}  # labels.train_imgsz; the {config.labels.edge_margin_px:g} px edge margin is {margin:.1f} px at this size
+mosaic: 0.0
+close_mosaic: 0
+mixup: 0.0
+cutmix: 0.0
+copy_paste: 0.0
+fliplr: 0.0
+flipud: 0.0
+degrees: 0.0
+translate: 0.0
+scale: 0.0
+shear: 0.0
+perspective: 0.0
+hsv_h: 0.015
+hsv_s: 0.7
+hsv_v: 0.4
+"""
+
+
+def write_image_lists(layout: Layout, jobs: list[ShardJob]) -> list[Path]:
+    """``train.txt`` and ``val.txt``: every image of each split in frame order, one
+    ``./images/...`` path per line (Ultralytics resolves ``./`` against the list's
+    folder, for training and for ``yolo predict source=``). Written when every shard
+    is done, so that a list never names a missing image."""
+    written = []
+    for split in SPLITS:
+        lines = [f"./{layout.image_rel(job.split, job.shard, i)}\n"
+                 for job in jobs if job.split == split for i in job.frames]
+        if lines:
+            written.append(write_text(layout.image_list(split), "".join(lines)))
+    return written
+
+
+def write_dataset_files(layout: Layout, scene: Scene, jobs: list[ShardJob], fingerprint: str, *, describe: bool,
+                        render: bool = True) -> None:
+    """dataset.json (when ``describe``: a new dataset), then data.yaml, hyp.yaml and
+    features.parquet, each atomically. dataset.json comes first so that a folder
+    with any datagen file in it is recognisable as a dataset; the other three are
+    pure functions of the scene and are rewritten by every run."""
+    names = list(scene.features.name)
+    root = layout.root
+    if describe:
+        write_text(layout.dataset_json,
+                   json.dumps(dataset_document(scene, jobs, fingerprint, render=render), indent=2) + "\n")
+    splits = tuple(sorted({job.split for job in jobs}))
+    write_text(root / "data.yaml", data_yaml(root, names, splits, imgsz=scene.config.labels.train_imgsz))
+    write_text(root / "hyp.yaml", hyp_yaml(scene, root))
+    write_features(root / "features.parquet", scene.features)

@@ -1,0 +1,223 @@
+"""Executors: shards in parallel in local processes or as Ray tasks, and each worker's
+process setup.
+
+``local`` runs shards in spawned processes (one scene and one Mitsuba thread pool
+of ``cores / workers`` threads each; one worker runs in the build's own process);
+``ray`` runs them as Ray tasks on the cluster at ``RAY_ADDRESS``, else a local one.
+A worker process is set up in one place, :func:`_bootstrap`: signals, dying with
+its parent, Mitsuba's thread count, and its :class:`~datagen.pipeline.writer.ShardWriter`
+(one scene per process, reused by every shard it runs). Labels and manifest rows
+depend on (scene, frame index) only, never on the executor or the worker count.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+from collections.abc import Callable
+from pathlib import Path
+from typing import Literal
+
+from datagen.core.errors import DatagenError
+from datagen.dataset.layout import ShardJob
+from datagen.pipeline.progress import ShardSummary
+from datagen.pipeline.writer import ShardWriter
+from datagen.scene.resolved import Scene
+
+__all__ = ["Executor", "cpu_count", "ctrl_c_flag", "ray_cluster", "run_local", "run_ray"]
+
+Executor = Literal["local", "ray"]
+Progress = Callable[[int], None]
+
+
+def cpu_count() -> int:
+    """The cores this process may run on."""
+    with contextlib.suppress(AttributeError):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+class _Worker:
+    """A worker process's state, made once by :func:`_bootstrap` (the process's entry point)."""
+
+    writer: ShardWriter | None = None
+    key: tuple | None = None
+    queue = None
+    args: tuple = ()
+
+
+def _writer(scene: Scene, root: str, threads: int, render: bool) -> ShardWriter:
+    """This process's writer for (scene, root): built once, reused by every shard."""
+    key = (id(scene), scene.config.model_dump_json(), root, render)
+    if _Worker.writer is None or _Worker.key != key:
+        _Worker.writer, _Worker.key = ShardWriter(scene, Path(root), render=render), key
+    if render:
+        from datagen.render.runtime import set_threads
+
+        set_threads(threads)
+    return _Worker.writer
+
+
+def _die_with_parent() -> None:
+    """Ask Linux to kill this worker when its parent dies (a SIGKILLed build must not
+    leave workers writing into a folder whose lock is gone)."""
+    with contextlib.suppress(Exception):
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+
+
+def _bootstrap(scene: Scene, root: str, threads: int, render: bool, queue) -> None:
+    """The entry point of a local worker process: everything process-wide is set here."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and terminates us
+    _die_with_parent()
+    _Worker.queue = queue
+    _Worker.args = (scene, root, threads, render)
+
+
+def _pool_run(job: ShardJob) -> ShardSummary:
+    queue = _Worker.queue
+    return _writer(*_Worker.args).run(job, lambda n: queue.put(n))
+
+
+@contextlib.contextmanager
+def ctrl_c_flag():
+    """Turn Ctrl-C into a flag the writer polls at safe points (a second Ctrl-C
+    interrupts at once). Mitsuba cancels a render on SIGINT and then passes the
+    signal on to this handler, so a cut-short image is caught by the flag."""
+    state = {"requested": False}
+
+    def handler(signum, frame):
+        if state["requested"]:
+            raise KeyboardInterrupt
+        state["requested"] = True
+
+    try:
+        previous = signal.signal(signal.SIGINT, handler)
+    except ValueError:  # not the main thread: leave signals alone
+        yield lambda: False
+        return
+    try:
+        yield lambda: state["requested"]
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def run_local(scene: Scene, root: Path, jobs: list[ShardJob], workers: int, render: bool,
+              progress: Progress, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
+    """Run ``jobs`` in ``workers`` processes (one: in this process), ``threads`` Mitsuba
+    threads each; report frames to ``progress`` and finished shards to ``done``."""
+    workers = min(workers, len(jobs))
+    threads = threads or max(1, cpu_count() // workers)
+    if workers == 1:
+        writer = _writer(scene, str(root), threads, render)
+        with ctrl_c_flag() as stop:
+            for job in jobs:
+                done(writer.run(job, progress, stop))
+        return
+    import multiprocessing as mp
+    import queue as queue_module
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
+
+    ctx = mp.get_context("spawn")  # never fork a process that may hold Dr.Jit threads
+    queue = ctx.Queue()
+
+    def drain() -> None:
+        with contextlib.suppress(queue_module.Empty):
+            while True:
+                progress(queue.get_nowait())
+
+    executor = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_bootstrap,
+                                   initargs=(scene, str(root), threads, render, queue))
+    try:
+        pending = {executor.submit(_pool_run, job): job for job in jobs}
+        while pending:
+            finished, _ = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+            drain()
+            for future in finished:
+                job = pending.pop(future)
+                try:
+                    done(future.result())  # re-raises a worker's exception here
+                except BrokenProcessPool:
+                    raise DatagenError(f"shard {job.name}: a worker process died (out of memory, or killed); "
+                                       "rerun the same command to finish the missing shards") from None
+        drain()
+    except BaseException:
+        # Ctrl-C or a failed shard: stop every worker now (their files are atomic, the
+        # temporaries they leave are swept) instead of waiting for their shards.
+        for process in list(getattr(executor, "_processes", {}).values()):
+            process.terminate()
+        executor.shutdown(wait=True, cancel_futures=True)
+        raise
+    executor.shutdown(wait=True)
+
+
+def _ray_run(scene: Scene, root: str, job: ShardJob, threads: int, render: bool, queue) -> ShardSummary:
+    """A Ray task (the entry point of its worker process for this dataset)."""
+    return _writer(scene, root, threads, render).run(job, lambda n: queue.put_nowait(n))
+
+
+@contextlib.contextmanager
+def ray_cluster(workers: int | None):
+    """Connect to Ray (``RAY_ADDRESS``, else a local cluster) before any work starts and
+    check ``workers`` against its CPUs; shuts down a cluster it started."""
+    try:
+        import ray
+    except ImportError:
+        raise DatagenError("--executor ray: Ray is not installed; install it with "
+                           "`pip install 'datagen[ray]'` (or use --executor local)") from None
+    started = False
+    if not ray.is_initialized():
+        address = os.environ.get("RAY_ADDRESS")
+        if address:
+            ray.init(address=address, log_to_driver=False)
+        else:
+            ray.init(include_dashboard=False, log_to_driver=False)
+        started = True
+    try:
+        cpus = int(ray.cluster_resources().get("CPU", 1))
+        if workers is not None and workers > cpus:
+            raise DatagenError(f"--workers: {workers} is more than the {cpus} CPUs of the Ray cluster "
+                               f"(at most {cpus})")
+        yield
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def run_ray(scene: Scene, root: Path, jobs: list[ShardJob], workers: int | None, render: bool,
+            progress: Progress, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
+    """Shards as Ray tasks on the cluster :func:`ray_cluster` connected to."""
+    import ray
+    from ray.util.queue import Queue
+
+    cpus = int(ray.cluster_resources().get("CPU", 1))
+    alive = [n for n in ray.nodes() if n.get("Alive")]
+    largest = max((int(n.get("Resources", {}).get("CPU", 0)) for n in alive), default=1) or 1
+    workers = workers or max(1, len(alive))
+    # A task that asks for more CPUs than any one node has would never be scheduled.
+    per_task = max(1, min(cpus // workers, largest))
+    task = ray.remote(num_cpus=per_task, max_retries=0)(_ray_run)
+    queue = Queue()
+    refs = {task.remote(scene, str(root), job, threads or per_task, render, queue): job for job in jobs}
+    pending = list(refs)
+    try:
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1, timeout=0.2)
+            for n in queue.get_nowait_batch(queue.qsize()) if queue.qsize() else []:
+                progress(n)
+            for ref in ready:
+                done(ray.get(ref))
+        for n in queue.get_nowait_batch(queue.qsize()) if queue.qsize() else []:
+            progress(n)
+    except BaseException:
+        for ref in pending:
+            with contextlib.suppress(Exception):
+                ray.cancel(ref, force=True)
+        raise
+    finally:
+        with contextlib.suppress(Exception):
+            queue.shutdown()

@@ -1,0 +1,126 @@
+"""``datagen build``: a config's frames into a sharded, resumable dataset.
+
+:func:`build_dataset` resolves the config once (:class:`~datagen.scene.resolved.Scene`),
+checks the folder and the executor before anything is created, takes the
+folder's lock, writes the metadata files, and has the executor run every shard
+that has no manifest yet (:mod:`datagen.pipeline.executors`, :mod:`datagen.pipeline.writer`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from pathlib import Path
+
+from datagen.config.schema import Config
+from datagen.core.errors import DatagenError
+from datagen.dataset.folder import DatasetLock, check_folder, prepare_folder, remove_owned, sweep_temporaries
+from datagen.dataset.layout import LOCK_NAME, Layout, plan_shards
+from datagen.dataset.metadata import config_fingerprint, write_dataset_files, write_image_lists
+from datagen.dataset.schema import read_manifest_summary
+from datagen.pipeline.executors import Executor, cpu_count, ray_cluster, run_local, run_ray
+from datagen.pipeline.progress import BuildReport, ShardSummary
+from datagen.scene.resolved import Scene
+
+__all__ = ["build_dataset"]
+
+def build_dataset(config: Config, out: Path, *, workers: int | None = None, executor: Executor = "local",
+                  overwrite: bool = False, render: bool = True, progress=None,
+                  threads: int | None = None) -> BuildReport:
+    """Build (or resume) the dataset of ``config`` in ``out``.
+
+    Args:
+        config: the resolved config (command-line overrides already applied).
+        out: dataset folder (created when missing).
+        workers: shards in parallel (``local``: processes, default 1; ``ray``:
+            tasks, default one per node).
+        executor: ``local`` or ``ray``.
+        overwrite: replace a dataset of another config in ``out``.
+        render: render images (False writes labels and manifests only).
+        progress: a :class:`BuildProgress`-like object (``start``, ``advance``,
+            ``shard_done``, ``close``), or None.
+        threads: Mitsuba threads per worker (default: the cores divided among the
+            workers). With 1, a seed gives the same image bytes on any machine, for
+            any worker count and across resumptions.
+
+    Raises:
+        DatagenError: the folder is locked by another build, holds something
+            else, or holds a dataset of another config (without ``overwrite``).
+    """
+    started = time.perf_counter()
+    if threads is not None and not 1 <= threads <= cpu_count():
+        raise DatagenError(f"--threads: {threads} is not between 1 and the {cpu_count()} cores this process may use")
+    if executor == "local" and workers is not None and workers > cpu_count():
+        raise DatagenError(f"--workers: {workers} is more than the {cpu_count()} cores this process may use "
+                           f"(at most {cpu_count()}; --executor ray for a cluster)")
+    scene = Scene.resolve(config)
+    root = Path(out).resolve()
+    layout = Layout(root, scene.image_suffix)
+    check_folder(layout)  # refuse someone else's folder before anything (the lock included) is created
+    jobs = plan_shards(config)
+    fingerprint = config_fingerprint(scene, render=render)
+    report = BuildReport(config.name, root, jobs)
+    cluster = ray_cluster(workers) if executor == "ray" else contextlib.nullcontext()
+    created = not root.exists()
+    try:
+        with cluster, DatasetLock(root):
+            resumed = prepare_folder(layout, fingerprint, scene, render=render, overwrite=overwrite)
+            write_dataset_files(layout, scene, jobs, fingerprint, describe=not resumed, render=render)
+            todo = []
+            for job in jobs:
+                manifest = layout.manifest(job)
+                if manifest.is_file():
+                    try:
+                        counts = read_manifest_summary(manifest)
+                    except Exception as exc:  # damaged outside datagen: manifests are written atomically
+                        raise DatagenError(f"{manifest}: unreadable manifest ({type(exc).__name__}); delete it to "
+                                           "render its shard again") from None
+                    report.shards[job.name] = ShardSummary(job.name, counts.get("frames", len(job.frames)),
+                                                           counts.get("labels", 0), counts.get("excluded", {}))
+                    report.resumed.append(job.name)
+                else:
+                    todo.append(job)
+            leftovers = [root, root / "manifests"] + [d for job in todo for d in layout.shard_dirs(job)]
+            sweep_temporaries(leftovers)
+
+            def shard_done(summary: ShardSummary) -> None:
+                report.shards[summary.name] = summary
+                if progress is not None:
+                    progress.shard_done(summary)
+
+            if progress is not None:
+                progress.start(report.frames, report.frames - sum(len(j.frames) for j in todo))
+            try:
+                if todo:
+                    run = run_ray if executor == "ray" else run_local
+                    if executor == "local":
+                        workers = workers or 1
+                    run(scene, root, todo, workers, render, progress.advance if progress else (lambda n: None),
+                        shard_done, threads)
+                if render and len(report.shards) == len(jobs):
+                    write_image_lists(layout, jobs)
+            except KeyboardInterrupt:
+                report.interrupted = True
+                sweep_temporaries(leftovers)
+            except OSError as exc:  # disk full, permissions: the file and the reason, on one line
+                sweep_temporaries(leftovers)
+                raise DatagenError(f"{exc.filename or root}: {exc.strerror or exc}; the finished shards are kept, "
+                                   "rerun the same command to finish the others") from None
+            finally:
+                if progress is not None:
+                    progress.close()
+    except (DatagenError, OSError):
+        if created and not any(layout.manifest(job).is_file() for job in jobs):
+            _discard_new(layout, config)  # a folder this build made and finished nothing in: leave no trace
+        raise
+    report.wall_s = time.perf_counter() - started
+    return report
+
+
+def _discard_new(layout: Layout, config: Config) -> None:
+    """Remove a dataset folder this build created: every file it wrote (its own plan names
+    them), its lock, and the folders left empty."""
+    with contextlib.suppress(OSError, DatagenError):
+        remove_owned(layout, {"config": config.model_dump(mode="json")})
+        (layout.root / LOCK_NAME).unlink(missing_ok=True)
+        layout.root.rmdir()

@@ -1,0 +1,147 @@
+"""The shard writer: renders and labels whole shards in one process and writes their
+files, a shard's manifest last.
+
+A shard is done exactly when its manifest exists. Every file goes through
+:mod:`datagen.files`, so an interrupted build leaves only complete files
+and hidden temporaries, which the next run removes before it finishes the
+missing shards. Frames whose image an interrupted run already wrote are not
+rendered again (their labels and rows are recomputed, which is cheap).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import platform
+import time
+from collections import Counter, deque
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from pathlib import Path
+
+from datagen.dataset.layout import Layout, ShardJob
+from datagen.dataset.schema import feature_records, manifest_row, write_manifest
+from datagen.dataset.yolo import yolo_lines
+from datagen.files import write_exr, write_image, write_text
+from datagen.pipeline.frame import FrameDraws, draw_frame, frame_labels
+from datagen.pipeline.progress import ShardSummary
+from datagen.scene.approach import FrameStates
+from datagen.scene.resolved import Scene
+
+__all__ = ["MAX_PENDING_WRITES", "ShardWriter"]
+
+Progress = Callable[[int], None]
+
+def _rss_mib() -> float:
+    """Resident set size of this process now, MiB (Linux; NaN elsewhere)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except OSError:
+        return math.nan
+
+
+#: Frames whose images may still be in the writer thread while the next one renders.
+MAX_PENDING_WRITES = 1
+
+
+class ShardWriter:
+    """Renders and labels whole shards in one process: one scene, one feature table."""
+
+    def __init__(self, scene: Scene, root: Path, *, render: bool = True) -> None:
+        self.scene = scene
+        self.states = FrameStates(scene.config)  # each approach chain simulated once per process
+        self.layout = Layout(Path(root), scene.image_suffix)
+        self.renderer = None
+        self._stop: Callable[[], bool] = lambda: False
+        # Images are encoded and written by one background thread while the next frame
+        # renders; at most MAX_PENDING_WRITES frames wait, so memory stays bounded.
+        self._io = ThreadPoolExecutor(1, thread_name_prefix="datagen-write")
+        self._writes: deque[Future] = deque()
+        if render:
+            from datagen.render.renderer import Renderer  # Mitsuba only when rendering
+
+            self.renderer = Renderer(scene)
+
+    def run(self, job: ShardJob, progress: Progress | None = None,
+            stop: Callable[[], bool] | None = None) -> ShardSummary:
+        """Write every frame of ``job``, then its manifest; return its summary.
+
+        ``stop`` is polled between frames and right after each render: when it
+        turns true the shard is abandoned with :class:`KeyboardInterrupt` before
+        anything of the current frame is written (a render cut short by Ctrl-C
+        never becomes a training image)."""
+        start = time.perf_counter()
+        self._stop = stop or (lambda: False)
+        rows, excluded, labels, rendered, render_s = [], Counter(), 0, 0, 0.0
+        for frame in job.frames:
+            if self._stop():
+                raise KeyboardInterrupt
+            row = self.frame(job, frame)
+            rows.append(row)
+            labels += row["n_labeled"]
+            excluded.update(row["features"].exclusion_counts())
+            if row["render_s"] is not None:
+                rendered += 1
+                render_s += row["render_s"]
+            if progress is not None:
+                progress(1)
+        self._wait_for_writes(0)
+        summary = ShardSummary(job.name, len(job.frames), labels, dict(excluded), rendered, render_s)
+        write_manifest(self.layout.manifest(job), rows, summary.counts())
+        summary.wall_s = time.perf_counter() - start
+        return summary
+
+    def frame(self, job: ShardJob, i: int) -> dict:
+        """Render, label and write frame ``i``; return its manifest row."""
+        started = time.perf_counter()
+        scene, layout = self.scene, self.layout
+        k, features = scene.intrinsics, scene.features
+        draws = draw_frame(scene, self.states, i)
+        labels = frame_labels(scene, draws.state)
+        image_rel = exr_rel = None
+        fraction = center_visible = render_s = None
+        if self.renderer is not None:
+            image_rel = layout.image_rel(job.split, job.shard, i)
+            exr_rel = layout.exr_rel(job.split, job.shard, i) if scene.config.render.exr else None
+            render_s = self._render(draws, layout.root / image_rel, layout.root / exr_rel if exr_rel else None)
+            fraction, center_visible = self.renderer.feature_visibility(draws.state, features)
+            labels = labels.with_visibility(fraction, scene.config.labels.min_visible_fraction)
+        label_rel = layout.label_rel(job.split, job.shard, i)
+        lines = yolo_lines(labels, features.class_id, k.width, k.height)
+        write_text(layout.root / label_rel, "".join(line + "\n" for line in lines))
+        return manifest_row(
+            frame=i, split=job.split, shard=job.shard, image_path=image_rel, label_path=label_rel,
+            exr_path=exr_rel, intrinsics=k, state=draws.state, look=draws.look, seed=draws.seed,
+            render_seed=draws.render_seed, spp=scene.config.render.spp if self.renderer is not None else None,
+            features=feature_records(labels, features.class_id, fraction, center_visible), n_labeled=len(lines),
+            render_s=render_s, frame_s=time.perf_counter() - started, worker=f"{platform.node()}:{os.getpid()}",
+            worker_rss_mib=_rss_mib())
+
+    def _render(self, draws: FrameDraws, image: Path, exr: Path | None) -> float | None:
+        """Render and write the frame's image (and EXR); a frame whose files an earlier,
+        interrupted run left complete is only posed. Returns seconds in mi.render."""
+        from datagen.render.tonemap import to_srgb8
+
+        renderer = self.renderer
+        if image.is_file() and (exr is None or exr.is_file()):
+            renderer.pose(draws.state, draws.look)
+            return None
+        result = renderer.render(draws.state, draws.look, draws.render_seed, geometry=exr is not None)
+        if self._stop():
+            raise KeyboardInterrupt
+        quality = self.scene.config.render.jpeg_quality
+
+        def write() -> None:  # the image first: a frame is complete once its last file exists
+            write_image(image, to_srgb8(result.rgb)[..., ::-1], jpeg_quality=quality)
+            if exr is not None:
+                write_exr(exr, result.rgb, result.depth, result.object_id)
+
+        self._writes.append(self._io.submit(write))
+        self._wait_for_writes(MAX_PENDING_WRITES)
+        return result.render_s
+
+    def _wait_for_writes(self, keep: int) -> None:
+        """Wait until at most ``keep`` image writes are pending; re-raise their errors."""
+        while len(self._writes) > keep:
+            self._writes.popleft().result()

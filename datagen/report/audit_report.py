@@ -1,0 +1,163 @@
+"""The audit's report: ``report.json`` (for gating in CI), the plots, and a
+self-contained ``report.html`` with plots and overlays embedded.
+
+``report.json`` is written last and lists every file the report wrote (``files``):
+it is the record ``--overwrite`` reads to remove them, and nothing else.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+from pathlib import Path
+
+import numpy as np
+
+from datagen.analysis.audit import AuditResult
+from datagen.dataset.reader import DatasetView
+from datagen.files import write_text
+
+__all__ = ["report_document", "write_report"]
+
+
+# --- the report --------------------------------------------------------------------------------
+def report_document(result: AuditResult) -> dict:
+    """report.json: machine-readable, for gating in CI (``passed`` and each check's)."""
+    stats = {k: v for k, v in result.stats.items() if not k.startswith("_")}
+    return {
+        "dataset": str(result.root),
+        "name": result.name,
+        "frames": result.frames,
+        "passed": result.passed,
+        "checks": [c.as_dict() for c in result.checks],
+        "stats": stats,
+    }
+
+
+def write_report(result: AuditResult, view: DatasetView, out: Path, *, overlays: int = 3) -> dict[str, Path]:
+    """Write report.json, plots/*.png and a self-contained report.html into ``out``."""
+    import cv2
+
+    from datagen.report.overlays import draw_overlay
+    from datagen.report.plots import plot_audit
+
+    out = Path(out)
+    plots = plot_audit(result.stats, out / "plots")
+
+    def data_uri(data: bytes, kind: str) -> str:
+        return f"data:image/{kind};base64,{base64.b64encode(data).decode()}"
+
+    esc = html.escape
+    rows = []
+    for c in result.checks:
+        status = "n/a" if not c.applicable else ("pass" if c.passed else "FAIL")
+        offenders = "".join(f"<li><code>{esc(o)}</code></li>" for o in c.offenders)
+        worst = "" if c.worst is None else f"{c.worst:.3g}"
+        rows.append(f"<tr class='{status.lower().replace('/', '')}'><td>{esc(c.name)}</td><td>{status}</td>"
+                    f"<td>{c.checked}</td><td>{c.failures}</td><td>{worst}</td><td>{esc(c.description)}"
+                    f"{'<ul>' + offenders + '</ul>' if offenders else ''}</td></tr>")
+    drift = result.stats["tight_drift_px"]
+
+    def cells(stat: dict) -> str:
+        """Count, mean, median, p95 and max cells of one drift bin (empty where no feature)."""
+        return f"<td>{stat['count']}</td>" + "".join(
+            f"<td>{stat[k]:.3f}</td>" if k in stat else "<td></td>" for k in ("mean", "median", "p95", "max"))
+
+    def table(bins: list[dict], label: str) -> str:
+        body = "".join(f"<tr><td>{b['lo']:g}-{b['hi']:g}</td>{cells(b)}</tr>" for b in bins)
+        return (f"<table><tr><th>{label}</th><th>features</th><th>mean</th><th>median</th><th>p95</th>"
+                f"<th>max</th></tr>{body}</table>")
+
+    sizes = "".join(f"<tr><td>{esc(s)}</td>{cells(v)}</tr>" for s, v in drift["by_size"].items())
+    figures = "".join(f"<figure><img alt='{esc(name)}' src='{data_uri(path.read_bytes(), 'png')}'>"
+                      f"<figcaption>{esc(name)}</figcaption></figure>" for name, path in plots.items())
+    overlay_html = []
+    for b in np.linspace(0, len(view) - 1, min(overlays, len(view))).round().astype(int) if len(view) else []:
+        image = draw_overlay(view, int(b), result.labels)
+        scale = min(1.0, 1200 / image.shape[1])
+        image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 85])
+        overlay_html.append(f"<figure><img alt='overlay frame {view.frame_id[b]}' "
+                            f"src='{data_uri(data.tobytes(), 'jpeg')}'><figcaption>frame {view.frame_id[b]} "
+                            f"({esc(view.split[b])})</figcaption></figure>")
+    verdict = "PASSED" if result.passed else "FAILED"
+    page = f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>datagen audit: {esc(result.name)}</title>
+<style>
+body {{ font: 14px/1.4 system-ui, sans-serif; margin: 2em; max-width: 1300px; }}
+table {{ border-collapse: collapse; margin: 1em 0; }} td, th {{ border: 1px solid #ccc; padding: 3px 8px; }}
+tr.fail td {{ background: #fdd; }} tr.pass td:nth-child(2) {{ color: #080; }} code {{ font-size: 12px; }}
+figure {{ display: inline-block; margin: 0.5em; }} img {{ max-width: 100%; border: 1px solid #ddd; }}
+.verdict {{ font-weight: bold; color: {'#080' if result.passed else '#c00'}; }}
+</style></head>
+<body>
+<h1>datagen audit: {esc(result.name)}</h1>
+<p><code>{esc(str(result.root))}</code>: {result.frames} frames, {len(view.features)} classes,
+{'corrected' if view.corrected else 'tight (uncorrected)'} boxes, edge margin {view.edge_margin_px:g} px.
+Verdict: <span class="verdict">{verdict}</span></p>
+<h2>Checks</h2>
+<table><tr><th>check</th><th>result</th><th>checked</th><th>failures</th><th>worst</th><th>what (worst offenders)</th></tr>
+{''.join(rows)}</table>
+{_learnable_html(result.stats["learnable"], esc)}
+<h2>Parallax: tight-box centre drift from the true centre projection</h2>
+<p>{drift['features']} features in view; median {_fmt(drift['median'])} px, 95th percentile {_fmt(drift['p95'])} px,
+max {_fmt(drift['max'])} px. Corrected boxes are centred on the true centre; a detector trained on tight
+boxes learns this drift.</p>
+{table(drift['by_distance_m'], 'distance (m)')}
+<table><tr><th>size</th><th>features</th><th>mean</th><th>median</th><th>p95</th><th>max</th></tr>{sizes}</table>
+{table(drift['by_obliqueness_deg'], 'obliqueness (deg)')}
+<h2>Plots</h2>
+{figures}
+<h2>Overlays</h2>
+<p>Magenta crosshair: true centre projection; amber: tight box; green: corrected box (the paper's label); cyan: the label box where it was grown to the minimum training size; grey: excluded.</p>
+{''.join(overlay_html)}
+<script>
+window.addEventListener("load", () => {{
+  const images = Array.from(document.images);
+  const shown = images.filter(i => i.complete && i.naturalWidth > 0).length;
+  document.body.dataset.images = shown + "/" + images.length;
+}});
+</script>
+</body></html>
+"""
+    write_text(out / "report.html", page)
+    # report.json last: it is the record of every file the report wrote (``files``, relative to
+    # the report folder), which --overwrite removes and nothing else.
+    doc = report_document(result)
+    doc["files"] = ["report.html", *(str(p.relative_to(out)) for p in plots.values())]
+    write_text(out / "report.json", json.dumps(doc, indent=2, allow_nan=False, default=_json_default) + "\n")
+    return {"json": out / "report.json", "html": out / "report.html", **plots}
+
+
+def _learnable_html(stats: dict, esc) -> str:
+    """The report's section on what Ultralytics' trainer can learn of the label lines."""
+    def pct(v: float | None) -> str:
+        return "-" if v is None else f"{100 * v:.1f}%"
+
+    def rows(items) -> str:
+        return "".join(f"<tr><td>{esc(str(k))}</td><td>{v['lines']}</td><td>{pct(v['share'])}</td></tr>"
+                       for k, v in items)
+
+    head = "<tr><th>{}</th><th>lines</th><th>learnable</th></tr>"
+    distance = [(f"{b['lo']:g}-{b['hi']:g}", b) for b in stats["by_distance_m"] if b["lines"]]
+    worst = [(w["class"], w) for w in stats["worst_classes"]]
+    return f"""<h2>Learnable by the detector</h2>
+<p>{stats['lines']} label lines; {pct(stats['share'])} survive Ultralytics' training transforms at imgsz
+{stats['train_imgsz']} ({pct(stats['share_survive_2px'])} have both sides above 2 px) and hold an anchor centre
+({pct(stats['share_with_anchor'])}); the check asks for {pct(stats['threshold'])}. Label boxes are at least
+{stats['min_box_px']:g} px there ({esc(stats['small_boxes'])} smaller ones).</p>
+<table>{head.format('distance (m)')}{rows(distance)}</table>
+<table>{head.format('size')}{rows(stats['by_size'].items())}</table>
+<table>{head.format('worst classes')}{rows(worst) or '<tr><td colspan=3>every class fully learnable</td></tr>'}</table>
+"""
+
+
+def _fmt(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3f}"
+
+
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"not JSON: {type(value).__name__}")

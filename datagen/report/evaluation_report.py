@@ -1,0 +1,64 @@
+"""The evaluation's outputs: ``evaluation.json`` (settings and each run's metrics),
+``results.parquet`` (a row per frame and run) and plots in the style of the
+paper's Figs 14-17.
+
+``evaluation.json`` is written last and lists every file the evaluation wrote
+(``files``): the record ``--overwrite`` reads to remove them, and nothing else.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import pyarrow as pa
+
+from datagen.analysis.evaluate import REASONS, PnPSettings, summarize
+from datagen.dataset.reader import DatasetView
+from datagen.files import write_parquet, write_text
+
+__all__ = ["write_evaluation"]
+
+
+def write_evaluation(view: DatasetView, runs: list[tuple[dict, dict]], out: Path,
+                     settings: PnPSettings = PnPSettings()) -> dict[str, Path]:
+    """``evaluation.json`` (settings and each run's metrics), ``results.parquet`` (one row
+    per frame and run) and PNG plots in the style of the paper's Figs 14-17.
+
+    Args:
+        runs: ``(source, result)`` pairs; ``source`` describes the 2D points, e.g.
+            ``{"source": "truth", "noise_px": 0.5}``.
+    """
+    from datagen.report.plots import plot_evaluation
+
+    out = Path(out)
+    summaries = [{**source, **summarize(result, settings)} for source, result in runs]
+    doc = {"dataset": str(view.root), "name": view.doc.get("name"), "frames": len(view),
+           "settings": dataclasses.asdict(settings), "reasons": list(REASONS), "runs": summaries}
+    tables = []
+    for source, r in runs:
+        n = len(r["frame_id"])
+        tables.append(pa.table({
+            "source": pa.array([source["source"]] * n),
+            "noise_px": pa.array([float(source.get("noise_px", math.nan))] * n),
+            "frame_id": pa.array(r["frame_id"]),
+            "distance_m": pa.array(r["distance_m"]),
+            "matches_receiver": pa.array(r["matches_receiver"]),
+            "matches_target": pa.array(r["matches_target"]),
+            "success": pa.array(r["success"]),
+            "reason": pa.array([REASONS[i] for i in r["reason"]]),
+            "ptd_m": pa.FixedSizeListArray.from_arrays(pa.array(r["ptd_m"].ravel()), 3),
+            "truth_m": pa.FixedSizeListArray.from_arrays(pa.array(r["truth_m"].ravel()), 3),
+            "error_m": pa.array(r["error_m"]),
+            "error_to_drogue_m": pa.array(r["error_to_drogue_m"]),
+            "solve_s": pa.array(r["solve_s"]),
+        }))
+    write_parquet(out / "results.parquet", pa.concat_tables(tables), compression="zstd")
+    plots = plot_evaluation(runs, summaries, out / "plots", name=str(view.doc.get("name", "")))
+    # evaluation.json last: the record of every file the evaluation wrote (``files``, relative to
+    # its folder), which --overwrite removes and nothing else.
+    doc["files"] = ["results.parquet", *(str(p.relative_to(out)) for p in plots.values())]
+    write_text(out / "evaluation.json", json.dumps(doc, indent=2) + "\n")
+    return {"json": out / "evaluation.json", "parquet": out / "results.parquet", **plots}
