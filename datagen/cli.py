@@ -20,7 +20,7 @@ from typing import Annotated, TypeVar
 import typer
 
 from datagen import __version__
-from datagen.config import load_config
+from datagen.config import find_config, load_config
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import ConfigError, DatagenError
 from datagen.core.features import FEATURE_VARIANTS
@@ -106,7 +106,8 @@ def _root(
 @app.command()
 @user_errors
 def validate(
-    configs: Annotated[list[Path], typer.Argument(help="Scene config files (YAML).", show_default=False)],
+    configs: Annotated[list[Path], typer.Argument(help="Scene config files (YAML), or shipped scenes by name.",
+                                                  show_default=False)],
 ) -> None:
     """Check configs against the schema, and their meshes and feature files;
     print every problem, one line each."""
@@ -117,12 +118,13 @@ def validate(
         try:
             config = load_config(path)
             scene = Scene.resolve(config)
+            found = find_config(path)
         except ConfigError as exc:
             failed.append(exc)
             continue
         cam, k, table = config.camera, scene.intrinsics, scene.features
         typer.echo(
-            f"{path}: ok ({config.name}: {cam.mount}, {cam.hfov_deg:g} deg hFOV, "
+            f"{path}{'' if found == path else f' ({found})'}: ok ({config.name}: {cam.mount}, {cam.hfov_deg:g} deg hFOV, "
             f"{cam.width}x{cam.height}, fx=fy={k.fx:.3f} px, {config.dataset.frames} frames, "
             f"{'corrected' if config.labels.corrected else 'tight'} labels, {len(table)} classes "
             f"({config.features.variant} features of {' + '.join(config.features.objects)}))"
@@ -133,8 +135,27 @@ def validate(
 
 @app.command()
 @user_errors
+def scenes() -> None:
+    """List the shipped scenes: paper model, camera, field of view, range, features, frames."""
+    from datagen.config import shipped_scenes
+
+    rows = [("scene", "model", "camera", "hFOV", "range", "features", "frames")]
+    for name, path in shipped_scenes().items():
+        c = load_config(path)
+        lo, hi = c.approach.range_m
+        rows.append((name, c.paper_model or "-", c.camera.mount, f"{c.camera.hfov_deg:g} deg", f"{lo:g}-{hi:g} m",
+                     f"{c.features.variant} of {' + '.join(c.features.objects)}", f"{c.dataset.frames:,}"))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    for row in rows:
+        typer.echo("  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)).rstrip())
+    typer.echo("Use a name as --config (datagen build --config wingcam55); a local file of that name wins.")
+
+
+@app.command()
+@user_errors
 def approach(
-    config: Annotated[Path, typer.Option("--config", help="Scene config file (YAML).")],
+    config: Annotated[Path, typer.Option("--config", help="Scene config file (YAML), or a shipped scene by name "
+                                              "(datagen scenes).")],
     plot: Annotated[Path | None, typer.Option("--plot", help="Write a PNG of the approaches here.")] = None,
     approaches: Annotated[int, typer.Option("--approaches", min=1, max=50, help="Approaches to draw.")] = 5,
     frames: Annotated[int, typer.Option("--frames", min=0, max=MAX_PRINTED_FRAMES,
@@ -165,7 +186,8 @@ def approach(
 @app.command()
 @user_errors
 def build(
-    config: Annotated[Path, typer.Option("--config", help="Scene config file (YAML).")],
+    config: Annotated[Path, typer.Option("--config", help="Scene config file (YAML), or a shipped scene by name "
+                                              "(datagen scenes).")],
     out: Annotated[Path | None, typer.Option("--out", help="Dataset folder (default: datasets/<config name>).")] = None,
     frames: Annotated[int | None, typer.Option("--frames", min=1, help="Override dataset.frames.")] = None,
     seed: Annotated[int | None, typer.Option("--seed", min=0, help="Override dataset.seed.")] = None,
@@ -196,7 +218,9 @@ def build(
         raise DatagenError(f"--executor: unknown executor {executor!r} (choose local or ray)")
     if out is not None:
         output_path(out, "--out")
+    config = find_config(config)
     cfg = load_config(config)
+    typer.echo(f"config: {config.resolve()}")
     updates = {"dataset.frames": frames, "dataset.seed": seed, "render.spp": spp,
                "dataset.shard_size": shard_size, "render.exr": True if exr else None}
     cfg = override_config(cfg, {k: v for k, v in updates.items() if v is not None})
@@ -366,7 +390,8 @@ def _m(value: float | None) -> str:
 @app.command()
 @user_errors
 def render(
-    config: Annotated[Path, typer.Option("--config", help="Scene config file (YAML).")],
+    config: Annotated[Path, typer.Option("--config", help="Scene config file (YAML), or a shipped scene by name "
+                                              "(datagen scenes).")],
     frames: Annotated[str, typer.Option("--frames", help="Frame indices, e.g. 0,5,9 or 0-7.")] = "0",
     out: Annotated[Path, typer.Option("--out", help="Folder for the images.")] = Path("renders"),
     spp: Annotated[int | None, typer.Option("--spp", min=1, max=MAX_SPP,
@@ -392,11 +417,10 @@ def gallery(
     spp: Annotated[int, typer.Option("--spp", min=1, max=MAX_SPP, help="Samples per pixel.")] = 16,
 ) -> None:
     """Render four frames each of wingcam55, podcam15 and dashcam75 into one sheet."""
-    from datagen.report.gallery import write_gallery
+    from datagen.report.gallery import GALLERY_SCENES, write_gallery
 
     output_path(out, "--out")
-    root = Path(__file__).resolve().parent.parent / "scenes"
-    configs = [load_config(root / f"{name}.yaml") for name in ("wingcam55", "podcam15", "dashcam75")]
+    configs = [load_config(name) for name in GALLERY_SCENES]
     typer.echo(f"wrote {write_gallery(configs, out, spp=spp)}")
 
 
@@ -475,18 +499,19 @@ def assets_show(
 @assets_app.command("preview")
 @user_errors
 def assets_preview(
-    out: Annotated[Path | None, typer.Option("--out", help="Folder for the PNGs (default: assets/previews).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", help="Folder for the PNGs (default: assets/previews, the "
+                                            "repository's documentation).")] = None,
     objects: Annotated[list[str] | None, typer.Option("--object", help="Only this object (repeatable).")] = None,
     spp: Annotated[int, typer.Option("--spp", min=1, max=MAX_SPP, help="Samples per pixel.")] = 64,
     config: Annotated[Path | None, typer.Option("--config", help="Use this config's mesh and feature files.")] = None,
 ) -> None:
     """Render a contact sheet of each object from six views, feature centres marked."""
-    from datagen.assets.files import BUILTIN_DIR, builtin_paths, load_features, load_mesh
+    from datagen.assets.files import builtin_paths, load_features, load_mesh
     from datagen.assets.table import object_paths
     from datagen.report.contact_sheets import write_contact_sheet
 
     cfg = load_config(config) if config is not None else None
-    folder = output_path(out, "--out") if out else BUILTIN_DIR / "previews"
+    folder = output_path(out, "--out") if out else Path("assets") / "previews"
     for name in objects or RIGID_OBJECTS:
         name = _object_name(name)
         mesh_path, features_path = object_paths(cfg, name) if cfg else builtin_paths(name)

@@ -139,7 +139,7 @@ def test_labels_only_build_and_its_metadata(tmp_path: Path) -> None:
     assert doc["edge_margin_px"] == 2.0 and doc["corrected"] is True and doc["pixel_convention"] == "continuous"
     assert [o["name"] for o in doc["objects"]] == ["tanker", "receiver", "drogue", "hose"]
     assert [o["id"] for o in doc["objects"]] == [1, 2, 3, 4]
-    assert doc["config"]["dataset"]["frames"] == 8 and doc["manifest_version"] == "2"
+    assert doc["config"]["dataset"]["frames"] == 8 and doc["manifest_version"] == "3"
     assert doc["label_size"]["train_imgsz"] == 864 and doc["label_size"]["min_box_px"] == 8.0
     np.testing.assert_allclose(doc["label_size"]["min_label_size_px"], [8 / 6.75, 8 / 6.75], rtol=1e-12)
     assert doc["schema"] == "datagen.dataset" and doc["schema_version"] == 1
@@ -150,7 +150,7 @@ def test_labels_only_build_and_its_metadata(tmp_path: Path) -> None:
     assert all(r["image_path"] is None and r["render_s"] is None for r in rows.values())
     assert all(f["visible_fraction"] is None for r in rows.values() for f in r["features"])
     assert pq.read_schema(next((root / "manifests").glob("*.parquet"))).metadata[
-        b"datagen.manifest_version"] == b"2"
+        b"datagen.manifest_version"] == b"3"
     assert not temporaries(root)
 
 
@@ -278,8 +278,11 @@ def test_labels_recompute_from_manifest_and_features_alone(reference) -> None:
         stored = row["features"]
         assert [f["class_id"] for f in stored] == features.class_id.tolist()
         for name in ("center_px", "tight_xyxy", "corrected_xyxy"):
-            np.testing.assert_allclose(np.array([f[name] for f in stored], dtype=float),
-                                       getattr(labels, name), rtol=0, atol=1e-6)
+            fresh = getattr(labels, name)
+            # A projection that does not exist (a point behind the camera) is stored as a null.
+            assert [f[name] is None for f in stored] == (~np.isfinite(fresh).all(axis=1)).tolist()
+            values = np.array([f[name] or [np.nan] * fresh.shape[1] for f in stored], dtype=float)
+            np.testing.assert_allclose(values, fresh, rtol=0, atol=1e-6)
         labeled = np.array([f["labeled"] for f in stored])
         np.testing.assert_array_equal(labeled, labels.labeled)
         assert all((f["label_xyxy"] is None) == (not f["labeled"]) for f in stored)
@@ -436,8 +439,8 @@ def test_the_manifest_readme_recompute_example_runs_and_matches(tmp_path: Path) 
     exec(compile(code, "manifests/README.md", "exec"), scope)  # noqa: S102 (the project's own documentation)
     labels, row = scope["labels"], scope["row"]
     stored = row["features"]
-    np.testing.assert_allclose(labels.center_px, np.array([f["center_px"] for f in stored], dtype=float),
-                               atol=1e-6)
+    np.testing.assert_allclose(labels.center_px, np.array([f["center_px"] or [np.nan] * 2 for f in stored],
+                                                          dtype=float), atol=1e-6)
     labeled = np.array([f["labeled"] for f in stored])
     np.testing.assert_array_equal(labels.labeled, labeled)
     np.testing.assert_allclose(labels.label_xyxy[labeled], np.array([f["label_xyxy"] for f in stored if f["labeled"]]),

@@ -1,12 +1,12 @@
 """Meshes and feature files: reading and validating the built-in assets and a user's own.
 
-Files
-    ``assets/meshes/{object}.glb``: one GLB per object in its body frame
+Files (package data under :data:`BUILTIN_DIR`, found through ``importlib.resources``)
+    ``meshes/{object}.glb``: one GLB per object in its body frame
     (metres), one named geometry per part (``paint``, ``glass``, ``metal``...).
     A user may give any OBJ, PLY or GLB instead; its geometry names become part
     names.
 
-    ``assets/features/{object}.json``: the object's feature sets, format
+    ``features/{object}.json``: the object's feature sets, format
     ``datagen.features/1``::
 
         {"format": "datagen.features/1", "object": "receiver", "small_radius_m": 0.06,
@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
 from typing import Final
 
@@ -56,8 +57,8 @@ __all__ = [
     "read_feature_file",
 ]
 
-#: The built-in assets, beside the package in the source tree.
-BUILTIN_DIR: Final = Path(__file__).resolve().parents[2] / "assets"
+#: The built-in meshes and feature files: package data of datagen.assets.
+BUILTIN_DIR: Final = Path(str(resources.files("datagen.assets") / "builtin"))
 
 
 FEATURE_FORMAT: Final = "datagen.features/1"

@@ -1,5 +1,9 @@
 """Reading a config: the YAML file, through the bounded reader, into the frozen schema.
 
+:func:`find_config` turns what a user typed after ``--config`` into a file: an
+existing path always wins; otherwise a shipped scene by name (``wingcam55``,
+``wingcam55.yaml`` or ``scenes/wingcam55.yaml``), the way Ultralytics resolves
+``coco8.yaml``. The shipped scenes are package data (:data:`SCENES_DIR`).
 :func:`load_config` reads a config file, checks it against
 :class:`~datagen.config.schema.Config` (unknown keys are errors, so typos cannot
 pass silently) and either returns the frozen model or raises
@@ -11,8 +15,9 @@ resolved against the config's folder, so a config means the same from anywhere.
 from __future__ import annotations
 
 import difflib
+from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 import yaml
 from pydantic import BaseModel, ValidationError
@@ -22,19 +27,52 @@ from datagen.config.schema import Config, ObjectSpec
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import ConfigError, Problem
 
-__all__ = ["load_config", "override_config", "parse_config"]
+__all__ = ["SCENES_DIR", "find_config", "load_config", "override_config", "parse_config", "shipped_scenes"]
+
+#: The scene configs shipped with datagen (package data).
+SCENES_DIR: Final = Path(str(resources.files("datagen") / "scenes"))
+
+
+def shipped_scenes() -> dict[str, Path]:
+    """Every shipped scene config by name (the file name without ``.yaml``), sorted."""
+    if not SCENES_DIR.is_dir():
+        raise ConfigError([Problem(SCENES_DIR, "", "datagen's shipped scenes are missing from its installation; "
+                                   "reinstall datagen")])
+    return {p.stem: p for p in sorted(SCENES_DIR.glob("*.yaml"), key=lambda p: p.stem)}
+
+
+def find_config(value: str | Path) -> Path:
+    """The config file ``value`` names: an existing path as it is, else the shipped scene of
+    that name (``wingcam55``, ``wingcam55.yaml`` and ``scenes/wingcam55.yaml`` alike).
+
+    Raises:
+        ConfigError: one line naming ``value`` and the closest shipped scenes.
+    """
+    path = Path(value)
+    if path.exists() or path.is_symlink():
+        return path
+    if str(path.parent) not in (".", "scenes"):  # a path, not a name: it does not exist
+        raise ConfigError([Problem(path, "", "no such file")])
+    name = path.name.removesuffix(".yaml").removesuffix(".yml")
+    scenes = shipped_scenes()
+    if name in scenes:
+        return scenes[name]
+    close = difflib.get_close_matches(name, list(scenes), n=3, cutoff=0.5)
+    hint = f"; close: {', '.join(close)}" if close else ""
+    raise ConfigError([Problem(path, "", f"no such file, and no shipped scene of that name{hint} "
+                               "(`datagen scenes` lists them)")])
 
 
 # --- loading -------------------------------------------------------------------
 def load_config(path: str | Path) -> Config:
-    """Read, parse and validate a config file.
+    """Read, parse and validate a config file (or a shipped scene by name: :func:`find_config`).
 
     Raises:
         ConfigError: listing every problem found (missing file, YAML syntax, input
             bombs (:mod:`datagen.config.inputs`), duplicate keys, unknown keys, bad values,
             missing asset files).
     """
-    path = Path(path)
+    path = find_config(path)
     return parse_config(read_text(path, "YAML config file"), path)
 
 

@@ -1,7 +1,7 @@
 """The configuration schema: pydantic models, frozen, unknown keys refused, one docstring
 per field, every number finite and bounded.
 
-A scene config is a YAML file (see ``scenes/``); :mod:`datagen.config.load` reads it.
+A scene config is a YAML file (the shipped ones: ``datagen scenes``); :mod:`datagen.config.load` reads it.
 
 Angles are degrees in configs and radians in code; lengths are metres; pixel
 quantities are continuous pixels (:mod:`datagen.core.conventions`).
@@ -476,6 +476,9 @@ class Config(_Section):
 
     description: str = Field("", max_length=10_000)
     """Free text: what the config is for."""
+
+    paper_model: str | None = Field(None, pattern=r"^[A-Z]$")
+    """The model of the paper's Table 3 this config reproduces (A-L), if any."""
 
     camera: CameraConfig
     """The camera."""

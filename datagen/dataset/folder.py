@@ -20,6 +20,7 @@ from typing import Final
 from datagen.config.schema import Config
 from datagen.core.errors import DatagenError
 from datagen.dataset.layout import LOCK_NAME, MANIFEST_NAME, Layout, plan_shards
+from datagen.dataset.metadata import is_dataset_card
 from datagen.files import is_temporary
 from datagen.scene.resolved import Scene
 
@@ -212,7 +213,9 @@ def owned_files(layout: Layout, doc: dict) -> list[Path]:
             listed = []
         reports += [p for rel in listed if isinstance(listed, list) and (p := _inside(root / folder, rel))]
         reports.append(path)
-    ordered = manifests + [p for rel in frames if (p := _inside(root, rel))] + reports + [root / m for m in METADATA]
+    card = [root / "README.md"] if is_dataset_card(root / "README.md") else []  # a user's README stays
+    ordered = (manifests + [p for rel in frames if (p := _inside(root, rel))] + reports + card
+               + [root / m for m in METADATA])
     return list(dict.fromkeys(ordered))
 
 

@@ -145,17 +145,21 @@ def _check_document(doc: dict, path: Path) -> None:
 
 
 def _floats(array: pa.Array, shape: tuple[int, ...]) -> NDArray[np.float64]:
-    """A float column (or fixed-size lists of floats) as an array of ``shape``, NaN where null."""
+    """A float column, or (nested) fixed-size lists of floats, as an array of ``shape``, NaN
+    where a value or a list is null."""
+    return _flat_floats(array).reshape(shape)
+
+
+def _flat_floats(array: pa.Array) -> NDArray[np.float64]:
     if pa.types.is_fixed_size_list(array.type):
         n = array.type.list_size
-        values = _floats(array.values.slice(array.offset * n, len(array) * n), (len(array), n))
+        values = _flat_floats(array.values.slice(array.offset * n, len(array) * n)).reshape(len(array), -1)
         null = np.asarray(array.is_null())
         if null.any():
             values = values.copy()
             values[null] = np.nan  # a null list hides its (arbitrary) values
-        return values.reshape(shape)
-    return np.asarray(pc.fill_null(array, float("nan")).to_numpy(zero_copy_only=False),
-                      dtype=np.float64).reshape(shape)
+        return values.reshape(-1)
+    return np.asarray(pc.fill_null(array, float("nan")).to_numpy(zero_copy_only=False), dtype=np.float64)
 
 
 def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> DatasetView:

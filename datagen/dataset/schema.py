@@ -50,7 +50,7 @@ __all__ = [
 ]
 
 #: Version of the manifest and feature-table schemas (bumped on any incompatible change).
-MANIFEST_VERSION: Final = "2"
+MANIFEST_VERSION: Final = "3"
 #: Manifest columns that describe the run rather than the frame: they differ between
 #: two builds of the same config; every other column is identical.
 RUN_COLUMNS: Final = ("render_s", "frame_s", "worker", "worker_rss_mib")
@@ -62,8 +62,9 @@ def _vec(n: int) -> pa.DataType:
     return pa.list_(_F64, n)
 
 
-#: A 4x4 homogeneous transform, row-major.
-MATRIX: Final = _vec(16)
+#: A 4x4 homogeneous transform: four rows of four (row-major), so that every reader gets the
+#: matrix back without reshaping (``np.array(row["cam_from_world"].tolist())`` in pandas).
+MATRIX: Final = pa.list_(_vec(4), 4)
 
 FEATURE_RECORD: Final = pa.struct([
     ("class_id", pa.int32()),
@@ -198,9 +199,9 @@ def read_features(path: Path) -> FeatureTable:
     )
 
 
-def matrix_field(m: np.ndarray) -> list[float]:
-    """A 4x4 transform as the 16 row-major floats of a manifest column."""
-    return np.asarray(m, dtype=np.float64).reshape(16).tolist()
+def matrix_field(m: np.ndarray) -> list[list[float]]:
+    """A 4x4 transform as the four rows of a manifest column."""
+    return np.asarray(m, dtype=np.float64).reshape(4, 4).tolist()
 
 
 def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, label_path: str,
@@ -305,8 +306,14 @@ def _features_column(frames: Sequence[FeatureColumns]) -> pa.Array:
         return np.concatenate(arrays) if width == 0 else np.concatenate(arrays).reshape(-1, width)
 
     def fixed(values: NDArray, width: int, mask: NDArray | None = None) -> pa.Array:
+        """Fixed-size lists, null where a value is not finite (a point behind the camera has no
+        projection: a null, which every table tool skips, not a NaN that poisons a mean) or ``mask``."""
+        missing = ~np.isfinite(values).all(axis=1)
+        if mask is not None:
+            missing |= mask
+        values = np.where(missing[:, None], 0.0, values)  # a null list hides its values
         return pa.FixedSizeListArray.from_arrays(pa.array(values.reshape(-1), _F64), width,
-                                                 mask=None if mask is None else pa.array(mask))
+                                                 mask=pa.array(missing))
 
     def optional(name: str, dtype) -> pa.Array:
         values = np.zeros(n, dtype=dtype)

@@ -16,7 +16,12 @@ from datagen.config.schema import Config
 from datagen.core.errors import DatagenError
 from datagen.dataset.folder import DatasetLock, check_folder, prepare_folder, remove_owned, sweep_temporaries
 from datagen.dataset.layout import LOCK_NAME, Layout, plan_shards
-from datagen.dataset.metadata import config_fingerprint, write_dataset_files, write_image_lists
+from datagen.dataset.metadata import (
+    config_fingerprint,
+    write_dataset_card,
+    write_dataset_files,
+    write_image_lists,
+)
 from datagen.dataset.schema import read_manifest_summary
 from datagen.pipeline.executors import Executor, cpu_count, ray_cluster, run_local, run_ray
 from datagen.pipeline.progress import BuildReport, ShardSummary
@@ -97,8 +102,11 @@ def build_dataset(config: Config, out: Path, *, workers: int | None = None, exec
                         workers = workers or 1
                     run(scene, root, todo, workers, render, progress.advance if progress else (lambda n: None),
                         shard_done, threads)
-                if render and len(report.shards) == len(jobs):
-                    write_image_lists(layout, jobs)
+                if len(report.shards) == len(jobs):  # finished: what describes the whole dataset
+                    if render:
+                        write_image_lists(layout, jobs)
+                    write_dataset_card(layout, scene, jobs, render=render, labels=report.labels,
+                                       excluded=report.excluded)
             except KeyboardInterrupt:
                 report.interrupted = True
                 sweep_temporaries(leftovers)

@@ -18,7 +18,10 @@ from datagen.scene.resolved import Scene
 if TYPE_CHECKING:
     from datagen.config.schema import Config
 
-__all__ = ["GALLERY_FRAMES", "render_frames", "write_gallery"]
+__all__ = ["GALLERY_FRAMES", "GALLERY_SCENES", "render_frames", "write_gallery"]
+
+#: The shipped scenes of the gallery, a row each.
+GALLERY_SCENES: Final = ("wingcam55", "podcam15", "dashcam75")
 
 def render_frames(config: Config, frames, out: Path, *, spp: int | None = None, scale: float = 1.0,
                   exr: bool = False, seed: int | None = None) -> list[Path]:
