@@ -414,7 +414,8 @@ def render(
 @user_errors
 def gallery(
     out: Annotated[Path, typer.Option("--out", help="Gallery image (JPEG or PNG).")] = Path("docs/gallery.jpg"),
-    spp: Annotated[int, typer.Option("--spp", min=1, max=MAX_SPP, help="Samples per pixel.")] = 16,
+    spp: Annotated[int | None, typer.Option("--spp", min=1, max=MAX_SPP,
+                                            help="Samples per pixel (default: each config's render.spp).")] = None,
 ) -> None:
     """Render four frames each of wingcam55, podcam15 and dashcam75 into one sheet."""
     from datagen.report.gallery import GALLERY_SCENES, write_gallery

@@ -30,7 +30,7 @@ from datagen.core.labels import compute_labels
 from datagen.core.training import label_options
 from datagen.dataset.folder import DatasetLock
 from datagen.dataset.layout import SPLITS, frame_split, plan_shards
-from datagen.dataset.schema import features_schema, manifest_schema, read_features
+from datagen.dataset.schema import MANIFEST_VERSION, features_schema, manifest_schema, read_features
 from datagen.pipeline.run import build_dataset
 
 from .support import (
@@ -139,7 +139,7 @@ def test_labels_only_build_and_its_metadata(tmp_path: Path) -> None:
     assert doc["edge_margin_px"] == 2.0 and doc["corrected"] is True and doc["pixel_convention"] == "continuous"
     assert [o["name"] for o in doc["objects"]] == ["tanker", "receiver", "drogue", "hose"]
     assert [o["id"] for o in doc["objects"]] == [1, 2, 3, 4]
-    assert doc["config"]["dataset"]["frames"] == 8 and doc["manifest_version"] == "3"
+    assert doc["config"]["dataset"]["frames"] == 8 and doc["manifest_version"] == MANIFEST_VERSION
     assert doc["label_size"]["train_imgsz"] == 864 and doc["label_size"]["min_box_px"] == 8.0
     np.testing.assert_allclose(doc["label_size"]["min_label_size_px"], [8 / 6.75, 8 / 6.75], rtol=1e-12)
     assert doc["schema"] == "datagen.dataset" and doc["schema_version"] == 1
@@ -150,7 +150,7 @@ def test_labels_only_build_and_its_metadata(tmp_path: Path) -> None:
     assert all(r["image_path"] is None and r["render_s"] is None for r in rows.values())
     assert all(f["visible_fraction"] is None for r in rows.values() for f in r["features"])
     assert pq.read_schema(next((root / "manifests").glob("*.parquet"))).metadata[
-        b"datagen.manifest_version"] == b"3"
+        b"datagen.manifest_version"] == MANIFEST_VERSION.encode()
     assert not temporaries(root)
 
 

@@ -44,8 +44,19 @@ def test_missing_values_are_nulls_and_matrices_are_4x4(dataset) -> None:
     assert matrix.shape == (4, 4) and np.allclose(matrix[3], [0, 0, 0, 1])
 
 
+def require(module: str):
+    """``module`` imported, or the test skipped: a folder of that name (such as the
+    repository's own ``datasets/``, where README command 1 writes) is not the package."""
+    import importlib.util
+
+    spec = importlib.util.find_spec(module)
+    if spec is None or spec.origin is None:
+        pytest.skip(f"{module} is not installed (the tables extra: pip install -e '.[tables]')")
+    return importlib.import_module(module)
+
+
 def test_duckdb_averages_unnested_centres(dataset) -> None:
-    duckdb = pytest.importorskip("duckdb")
+    duckdb = require("duckdb")
     every = duckdb.sql(f"SELECT avg(f.center_px[1]) FROM (SELECT unnest(features) AS f "
                        f"FROM '{dataset}/manifests/*.parquet')").fetchall()[0][0]
     labeled = duckdb.sql(f"SELECT avg(f.center_px[1]) FROM (SELECT unnest(features) AS f "
@@ -54,7 +65,7 @@ def test_duckdb_averages_unnested_centres(dataset) -> None:
 
 
 def test_pandas_reads_rows_features_and_matrices(dataset) -> None:
-    pd = pytest.importorskip("pandas")
+    pd = require("pandas")
     df = pd.read_parquet(dataset / "manifests")
     assert len(df) == 40 and np.stack(df.loc[0, "cam_from_world"]).shape == (4, 4)
     per_feature = pd.json_normalize(df.explode("features")["features"].dropna().tolist())
@@ -63,14 +74,14 @@ def test_pandas_reads_rows_features_and_matrices(dataset) -> None:
 
 
 def test_polars_reads_the_fixed_size_lists_as_arrays(dataset) -> None:
-    pl = pytest.importorskip("polars")
+    pl = require("polars")
     u = (pl.read_parquet(f"{dataset}/manifests/*.parquet").explode("features").unnest("features")
          .filter(pl.col("labeled")).select(pl.col("center_px").arr.get(0).mean()).item())
     assert u == pytest.approx(labeled_u_mean(dataset), rel=1e-12)
 
 
 def test_hugging_face_datasets_loads_the_folder_through_the_card(dataset) -> None:
-    datasets = pytest.importorskip("datasets")
+    datasets = require("datasets")
     loaded = datasets.load_dataset(str(dataset))
     view = load_dataset(dataset)
     assert {name: len(split) for name, split in loaded.items()} == {s: view.split.count(s) for s in ("train", "val")}
@@ -82,7 +93,7 @@ def test_hugging_face_datasets_loads_the_folder_through_the_card(dataset) -> Non
 
 def test_the_manifest_readme_table_lines_run(dataset) -> None:
     for module in ("datasets", "duckdb", "pandas", "polars"):
-        pytest.importorskip(module)
+        require(module)
     text = (ROOT / "manifests" / "README.md").read_text()
     section = text[text.index("## Reading a dataset with table tools"):]
     code = section[section.index("```python") + len("```python"):]

@@ -72,8 +72,10 @@ def test_a_box_of_at_least_8_training_px_is_always_learnable(x, y, extra) -> Non
 
 
 @given(x=st.floats(30.0, 2000.0, **finite), y=st.floats(30.0, 1030.0, **finite),
-       side=st.floats(0.0, 2.0, **finite), other=st.floats(0.0, 60.0, **finite), axis=st.integers(0, 1))
-def test_a_side_of_2_training_px_or_less_is_dropped(x, y, side, other, axis) -> None:
+       side=st.floats(0.0, 2.0 - 1e-6, **finite), other=st.floats(0.0, 60.0, **finite), axis=st.integers(0, 1))
+def test_a_side_under_2_training_px_is_dropped(x, y, side, other, axis) -> None:
+    """(A side of exactly 2 px lands on either side of Ultralytics' ``> 2`` by the float
+    rounding of the box corners, in Ultralytics as here: it is left out.)"""
     sides = np.array([other, other], dtype=float)
     sides[axis] = side
     w, h = sides / np.array(TABLE1.scale)

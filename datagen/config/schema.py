@@ -360,8 +360,32 @@ class MaterialsConfig(_Section):
         return self
 
 
+class SeaConfig(_Section):
+    """The sea's surface roughness (one principled BSDF over a plane at sea level).
+
+    ``cox_munk`` (default) draws a wind speed and derives the microfacet roughness from
+    Cox and Munk's (1954) sun-glint measurements of the open sea: the mean square wave
+    slope is 0.003 + 5.12e-3 W for a wind of W m/s (:func:`datagen.scene.look.cox_munk_roughness`).
+    ``uniform`` draws the roughness itself from ``roughness``; its default (0.05-0.25, a
+    mirror-calm sea no wind gives) is what datagen drew before: a glossy sea reflects the
+    sun onto the aircraft as a caustic the path tracer samples as fireflies that no spp
+    count removes (measured in ``bench/bench_quality.py``)."""
+
+    model: Literal["cox_munk", "uniform"] = "cox_munk"
+    """How the roughness is drawn: from a wind speed (Cox-Munk) or uniformly."""
+
+    wind_speed_mps: Annotated[Range, _within(0.0, 30.0)] = (3.0, 12.0)
+    """Wind speed over the sea, m/s (model cox_munk): 3-12 m/s is a moderate open-ocean breeze."""
+
+    roughness: Annotated[Range, _within(0.0, 1.0)] = (0.05, 0.25)
+    """Principled roughness of the sea (model uniform)."""
+
+
 class RandomizationConfig(_Section):
     """Per-frame appearance randomization; every range is drawn from the frame's RNG."""
+
+    sea: SeaConfig = SeaConfig()
+    """The sea's roughness: from a drawn wind speed (Cox-Munk) or uniform."""
 
     sky: SkyConfig = SkyConfig()
     """Sky and sun."""
@@ -383,11 +407,24 @@ class RenderConfig(_Section):
     variant: Literal["auto", "llvm_ad_rgb", "cuda_ad_rgb", "scalar_rgb"] = "auto"
     """Mitsuba variant; 'auto' picks cuda_ad_rgb with a GPU, else llvm_ad_rgb, else scalar_rgb."""
 
-    spp: Integer = Field(16, ge=1, le=65536)
-    """Samples per pixel."""
+    spp: Integer = Field(4, ge=1, le=65536)
+    """Samples per pixel (4 with the denoiser: 43.6 dB against a converged reference in
+    bench/bench_quality.py, where 16 spp without it gave 31.7 dB in more time)."""
 
     max_depth: Integer = Field(6, ge=1, le=64)
     """Path tracer maximum depth."""
+
+    denoise: Literal["off", "oidn"] = "oidn"
+    """Denoise the linear image with Intel Open Image Denoise (``mitsuba-oidn``) before
+    exposure and encoding, on the variant's device; the EXR keeps the denoised linear image."""
+
+    denoise_guides: Flag = False
+    """Give the denoiser the first hit's albedo and shading normal (Mitsuba's ``aov``
+    integrator; the beauty image is unchanged by it). Off by default: measured, they
+    gain 0.1-0.3 dB and double the time in ``mi.render``."""
+
+    denoise_quality: Literal["fast", "balanced", "high"] = "high"
+    """OIDN's filter quality: ``fast`` takes about half the time of ``high``."""
 
     image_format: Literal["png", "jpg"] = "png"
     """8-bit sRGB training image format."""

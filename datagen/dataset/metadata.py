@@ -59,10 +59,27 @@ def config_fingerprint(scene: Scene, *, render: bool = True) -> str:
 
 def _versions() -> dict[str, str]:
     out = {"python": platform.python_version()}
-    for dist in ("datagen", "mitsuba", "drjit", "numpy", "pyarrow", "trimesh", "opencv-python-headless"):
+    for dist in ("datagen", "mitsuba", "drjit", "mitsuba-oidn", "numpy", "pyarrow", "trimesh",
+                 "opencv-python-headless"):
         with contextlib.suppress(metadata.PackageNotFoundError):
             out[dist] = metadata.version(dist)
     return out
+
+
+def _rendered(config) -> str:
+    r = config.render
+    denoised = ", denoised with Intel Open Image Denoise" if r.denoise == "oidn" else ""
+    return f"rendered with Mitsuba 3 at {r.spp} spp{denoised}"
+
+
+def _images(config) -> dict:
+    """How the images were made: what a user needs to compare two datasets' pixels."""
+    r = config.render
+    return {"spp": r.spp, "max_depth": r.max_depth, "denoise": r.denoise,
+            "denoise_guides": r.denoise_guides if r.denoise != "off" else None,
+            "denoise_quality": r.denoise_quality if r.denoise != "off" else None,
+            "sea_model": config.randomization.sea.model, "format": r.image_format,
+            "exr": "linear radiance x exposure (denoised when denoise is on), Z, object_id" if r.exr else None}
 
 
 # --- metadata files ---------------------------------------------------------------------------
@@ -83,6 +100,7 @@ def dataset_document(scene: Scene, jobs: list[ShardJob], fingerprint: str, *, re
         "name": config.name,
         "fingerprint": fingerprint,
         "render": render,
+        "images": _images(config) if render else None,
         "versions": _versions(),
         "image_width": cam.width,
         "image_height": cam.height,
@@ -210,8 +228,7 @@ def dataset_card(scene: Scene, jobs: list[ShardJob], *, render: bool, labels: in
 Synthetic frames of vision-based aerial refueling made by datagen from the scene config
 `{config.name}` (root seed {config.dataset.seed}): Monte Carlo refueling approaches over {lo:g}-{hi:g} m
 seen by the {cam.mount} camera ({cam.hfov_deg:g} deg hFOV, {k.width}x{k.height}, pinhole, fx = fy = {k.fx:.3f} px,
-cx = {k.cx:g}, cy = {k.cy:g}), {"rendered with Mitsuba 3 at " + str(config.render.spp) + " spp" if render else
-"labels only (no images)"}.
+cx = {k.cx:g}, cy = {k.cy:g}), {_rendered(config) if render else "labels only (no images)"}.
 
 - **Frames**: {frames['train']:,} train, {frames['val']:,} val; {len(scene.features)} classes (the
   {config.features.variant} features of {' and '.join(config.features.objects)}).

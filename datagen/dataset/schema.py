@@ -50,10 +50,10 @@ __all__ = [
 ]
 
 #: Version of the manifest and feature-table schemas (bumped on any incompatible change).
-MANIFEST_VERSION: Final = "3"
+MANIFEST_VERSION: Final = "4"
 #: Manifest columns that describe the run rather than the frame: they differ between
 #: two builds of the same config; every other column is identical.
-RUN_COLUMNS: Final = ("render_s", "frame_s", "worker", "worker_rss_mib")
+RUN_COLUMNS: Final = ("render_s", "denoise_s", "frame_s", "worker", "worker_rss_mib")
 
 _F64 = pa.float64()
 
@@ -112,6 +112,7 @@ def manifest_schema() -> pa.Schema:
         pa.field("seed", pa.int64(), nullable=False),
         pa.field("render_seed", pa.int64(), nullable=False),
         pa.field("spp", pa.int32()),
+        pa.field("denoise", pa.string()),
         pa.field("mount", pa.string(), nullable=False),
         pa.field("approach_index", pa.int64(), nullable=False),
         pa.field("approach_number", pa.int32(), nullable=False),
@@ -126,11 +127,13 @@ def manifest_schema() -> pa.Schema:
         pa.field("sky_scale", _F64, nullable=False),
         pa.field("exposure_ev", _F64, nullable=False),
         pa.field("sea_roughness", _F64, nullable=False),
+        pa.field("sea_wind_speed_mps", _F64),
         pa.field("haze_visibility_m", _F64),
         pa.field("materials", pa.list_(MATERIAL_RECORD), nullable=False),
         pa.field("n_labeled", pa.int32(), nullable=False),
         pa.field("features", pa.list_(FEATURE_RECORD), nullable=False),
         pa.field("render_s", _F64),
+        pa.field("denoise_s", _F64),
         pa.field("frame_s", _F64),
         pa.field("worker", pa.string()),
         pa.field("worker_rss_mib", _F64),
@@ -206,8 +209,9 @@ def matrix_field(m: np.ndarray) -> list[list[float]]:
 
 def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, label_path: str,
                  exr_path: str | None, intrinsics: Intrinsics, state: FrameState, look: FrameLook, seed: int,
-                 render_seed: int, spp: int | None, features: FeatureColumns, n_labeled: int,
-                 render_s: float | None, frame_s: float, worker: str, worker_rss_mib: float) -> dict:
+                 render_seed: int, spp: int | None, denoise: str | None, features: FeatureColumns,
+                 n_labeled: int, render_s: float | None, denoise_s: float | None, frame_s: float, worker: str,
+                 worker_rss_mib: float) -> dict:
     """One frame's manifest row, column by column (:func:`manifest_schema`): the frame,
     its files, the camera, the poses, the approach, every appearance draw, the features
     and the run columns (:data:`RUN_COLUMNS`)."""
@@ -234,6 +238,7 @@ def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, 
         "seed": seed,
         "render_seed": render_seed,
         "spp": spp,
+        "denoise": denoise,
         "mount": state.mount,
         "approach_index": state.approach_index,
         "approach_number": state.approach_number,
@@ -250,6 +255,7 @@ def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, 
         "n_labeled": n_labeled,
         "features": features,
         "render_s": render_s,
+        "denoise_s": denoise_s,
         "frame_s": frame_s,
         "worker": worker,
         "worker_rss_mib": worker_rss_mib,

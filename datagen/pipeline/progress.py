@@ -24,6 +24,8 @@ class ShardSummary:
     excluded: dict[str, int]
     rendered: int = 0  # frames rendered by this run (0 for a shard done earlier)
     render_s: float = 0.0  # seconds inside mi.render
+    denoise_s: float = 0.0  # seconds in the denoiser
+    frame_s: float = 0.0  # seconds of the rendered frames, whole (render, denoise and the rest)
     wall_s: float = 0.0
 
     def counts(self) -> dict:
@@ -71,6 +73,14 @@ class BuildReport:
         return sum(s.render_s for s in self.shards.values())
 
     @property
+    def denoise_s(self) -> float:
+        return sum(s.denoise_s for s in self.shards.values())
+
+    @property
+    def rendered_frame_s(self) -> float:
+        return sum(s.frame_s for s in self.shards.values())
+
+    @property
     def frames_this_run(self) -> int:
         return sum(s.frames for n, s in self.shards.items() if n not in self.resumed)
 
@@ -82,9 +92,15 @@ class BuildReport:
             out.append(f"  resumed: {len(self.resumed)} of {len(self.jobs)} shards were done by an earlier run")
         n, wall = self.frames_this_run, self.wall_s
         rate = n / wall if wall > 0 else 0.0
-        per_frame = f"; mi.render {self.render_s / self.rendered:.2f} s per frame" if self.rendered else ""
         out.append(f"  this run: {n} frames ({self.rendered} rendered) in {wall:.1f} s, "
-                   f"{rate:.3f} frames/s = {3600 * rate:,.0f} frames/h{per_frame}")
+                   f"{rate:.3f} frames/s = {3600 * rate:,.0f} frames/h")
+        if self.rendered:
+            k = self.rendered
+            frame, render, denoise = self.rendered_frame_s / k, self.render_s / k, self.denoise_s / k
+            other = max(frame - render - denoise, 0.0)
+            share = (frame - render) / frame if frame > 0 else 0.0
+            out.append(f"  per rendered frame: {frame:.2f} s = mi.render {render:.2f} s + denoise {denoise:.2f} s "
+                       f"+ other {other:.2f} s ({share:.0%} outside mi.render)")
         excluded = ", ".join(f"{k} {v}" for k, v in self.excluded.items())
         scope = "" if done == len(self.jobs) else f" (in the {done} finished shards)"
         out.append(f"  labels: {self.labels} boxes{scope}; excluded: {excluded}")

@@ -73,7 +73,8 @@ class ShardWriter:
         never becomes a training image)."""
         start = time.perf_counter()
         self._stop = stop or (lambda: False)
-        rows, excluded, labels, rendered, render_s = [], Counter(), 0, 0, 0.0
+        rows, excluded, labels = [], Counter(), 0
+        rendered, render_s, denoise_s, frame_s = 0, 0.0, 0.0, 0.0
         for frame in job.frames:
             if self._stop():
                 raise KeyboardInterrupt
@@ -84,10 +85,13 @@ class ShardWriter:
             if row["render_s"] is not None:
                 rendered += 1
                 render_s += row["render_s"]
+                denoise_s += row["denoise_s"] or 0.0
+                frame_s += row["frame_s"]
             if progress is not None:
                 progress(1)
         self._wait_for_writes(0)
-        summary = ShardSummary(job.name, len(job.frames), labels, dict(excluded), rendered, render_s)
+        summary = ShardSummary(job.name, len(job.frames), labels, dict(excluded), rendered, render_s, denoise_s,
+                               frame_s)
         write_manifest(self.layout.manifest(job), rows, summary.counts())
         summary.wall_s = time.perf_counter() - start
         return summary
@@ -100,11 +104,12 @@ class ShardWriter:
         draws = draw_frame(scene, self.states, i)
         labels = frame_labels(scene, draws.state)
         image_rel = exr_rel = None
-        fraction = center_visible = render_s = None
+        fraction = center_visible = render_s = denoise_s = None
         if self.renderer is not None:
             image_rel = layout.image_rel(job.split, job.shard, i)
             exr_rel = layout.exr_rel(job.split, job.shard, i) if scene.config.render.exr else None
-            render_s = self._render(draws, layout.root / image_rel, layout.root / exr_rel if exr_rel else None)
+            render_s, denoise_s = self._render(draws, layout.root / image_rel,
+                                               layout.root / exr_rel if exr_rel else None)
             fraction, center_visible = self.renderer.feature_visibility(draws.state, features)
             labels = labels.with_visibility(fraction, scene.config.labels.min_visible_fraction)
         label_rel = layout.label_rel(job.split, job.shard, i)
@@ -114,19 +119,21 @@ class ShardWriter:
             frame=i, split=job.split, shard=job.shard, image_path=image_rel, label_path=label_rel,
             exr_path=exr_rel, intrinsics=k, state=draws.state, look=draws.look, seed=draws.seed,
             render_seed=draws.render_seed, spp=scene.config.render.spp if self.renderer is not None else None,
+            denoise=scene.config.render.denoise if self.renderer is not None else None,
             features=feature_records(labels, features.class_id, fraction, center_visible), n_labeled=len(lines),
-            render_s=render_s, frame_s=time.perf_counter() - started, worker=f"{platform.node()}:{os.getpid()}",
+            render_s=render_s, denoise_s=denoise_s, frame_s=time.perf_counter() - started, worker=f"{platform.node()}:{os.getpid()}",
             worker_rss_mib=_rss_mib())
 
-    def _render(self, draws: FrameDraws, image: Path, exr: Path | None) -> float | None:
+    def _render(self, draws: FrameDraws, image: Path, exr: Path | None) -> tuple[float | None, float | None]:
         """Render and write the frame's image (and EXR); a frame whose files an earlier,
-        interrupted run left complete is only posed. Returns seconds in mi.render."""
+        interrupted run left complete is only posed. Returns seconds in mi.render and in
+        the denoiser (None for a frame not rendered, or not denoised)."""
         from datagen.render.tonemap import to_srgb8
 
         renderer = self.renderer
         if image.is_file() and (exr is None or exr.is_file()):
             renderer.pose(draws.state, draws.look)
-            return None
+            return None, None
         result = renderer.render(draws.state, draws.look, draws.render_seed, geometry=exr is not None)
         if self._stop():
             raise KeyboardInterrupt
@@ -139,7 +146,7 @@ class ShardWriter:
 
         self._writes.append(self._io.submit(write))
         self._wait_for_writes(MAX_PENDING_WRITES)
-        return result.render_s
+        return result.render_s, result.denoise_s
 
     def _wait_for_writes(self, keep: int) -> None:
         """Wait until at most ``keep`` image writes are pending; re-raise their errors."""

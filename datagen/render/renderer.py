@@ -72,6 +72,7 @@ class RenderResult:
     depth: NDArray[np.float32] | None  # (H, W) camera z-depth, metres, +inf where nothing is hit
     object_id: NDArray[np.uint32] | None  # (H, W); both None unless the geometry pass ran
     render_s: float  # seconds inside mi.render
+    denoise_s: float | None = None  # seconds in the denoiser (None: not denoised)
 
 
 def _principled(m: Material) -> dict:
@@ -99,10 +100,19 @@ class Renderer:
         self.intrinsics = scene.intrinsics if width is None and height is None else \
             Intrinsics.from_hfov_deg(width or cam.width, height or cam.height, cam.hfov_deg)
         self.spp = spp or config.render.spp
+        self.denoise = config.render.denoise
+        self.guides = self.denoise != "off" and config.render.denoise_guides
+        if self.denoise != "off":
+            from datagen.render.denoise import oidn_version
+
+            oidn_version()  # one line saying how to install it, before any rendering
         first = neutral_look(config)
+        integrator: dict = {"type": "path", "max_depth": config.render.max_depth}
+        if self.guides:  # the beauty channels are the path tracer's own (same samples, same bytes)
+            integrator = {"type": "aov", "aovs": "albedo:albedo,normal:sh_normal", "integrator": integrator}
         description: dict = {
             "type": "scene",
-            "integrator": {"type": "path", "max_depth": config.render.max_depth},
+            "integrator": integrator,
             "sensor": sensor_dict(self.intrinsics, np.eye(4), self.spp),
             # Mitsuba 3.9's sunsky is z-up, like our world frame (measured: black below z = 0).
             "sky": {"type": "sunsky", "sun_direction": [0.0, 0.5, 0.866]},
@@ -208,15 +218,33 @@ class Renderer:
         self.pose(state, look)
         start = time.perf_counter()
         image = mi.render(self.scene, seed=seed, spp=self.spp)
-        rgb = np.array(image, dtype=np.float32)[..., :3]
+        self._dr.eval(image)  # the render happens here (Dr.Jit evaluates lazily)
+        self._dr.sync_thread()
         render_s = time.perf_counter() - start
+        denoise_s = None
+        if self.denoise == "off":
+            rgb = np.array(image, dtype=np.float32)[..., :3]
+        else:
+            start = time.perf_counter()
+            rgb = self._denoised(image)
+            denoise_s = time.perf_counter() - start
         depth = ids = None
         if geometry or look.haze_visibility_m is not None:
             depth, ids = self.geometry_pass()
         rgb *= exposure_scale(look.exposure_ev)
         if look.haze_visibility_m is not None:
             rgb = haze(rgb, depth, ids, look.haze_visibility_m)
-        return RenderResult(rgb, depth, ids, render_s)
+        return RenderResult(rgb, depth, ids, render_s, denoise_s)
+
+    def _denoised(self, image) -> NDArray[np.float32]:
+        """OIDN on the render's linear RGB, guided by its albedo and normal channels when
+        the aov integrator made them. The channels are sliced as Dr.Jit tensors, so that
+        the filter runs on the variant's device (the GPU with cuda_ad_rgb)."""
+        from datagen.render.denoise import denoise
+
+        guides = [image[..., 3:6], image[..., 6:9]] if self.guides else []
+        out = denoise(image[..., 0:3], *guides, quality=self.config.render.denoise_quality)
+        return np.maximum(np.array(out, dtype=np.float32), np.float32(0.0))
 
     @functools.cached_property
     def _pixel_rays(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:

@@ -50,7 +50,7 @@ def render_frames(config: Config, frames, out: Path, *, spp: int | None = None, 
 GALLERY_FRAMES: Final = (0, 7, 21, 45)
 
 
-def write_gallery(configs, out: Path, *, spp: int = 16, tile=(512, 270)) -> Path:
+def write_gallery(configs, out: Path, *, spp: int | None = None, tile=(512, 270)) -> Path:
     """Render :data:`GALLERY_FRAMES` of each config at twice the tile size, scale
     them down and write one sheet (a row per config) with captions."""
     import cv2

@@ -29,6 +29,7 @@ __all__ = [
     "SKY_SCALE_LEVELS",
     "FrameLook",
     "Material",
+    "cox_munk_roughness",
     "draw_look",
     "neutral_look",
     "sun_direction_world",
@@ -40,6 +41,19 @@ SKY_SCALE_LEVELS: Final = 5
 
 #: Haze visibility (distance at which contrast falls to 1/e), metres, when haze is on.
 HAZE_VISIBILITY_M: Final = (15_000.0, 60_000.0)
+
+
+def cox_munk_roughness(wind_speed_mps: float) -> float:
+    """The principled-BSDF roughness of a sea under a wind of ``wind_speed_mps``.
+
+    Cox and Munk (1954) measured the mean square slope of the open sea from sun
+    glitter as sigma^2 = 0.003 + 5.12e-3 W (W in m/s, clean surface, both axes
+    together). A Beckmann-like microfacet lobe of width alpha has mean square slope
+    alpha^2, and the principled BSDF's alpha is its roughness squared, so
+    roughness = sigma^2 ** (1/4): 0.37 at 3 m/s, 0.50 at 12 m/s. The lobe stands
+    for wave facets smaller than a pixel; the sun's glint then spreads over the
+    area of the sea whose slopes reflect it, as it does in photographs."""
+    return float((0.003 + 5.12e-3 * float(wind_speed_mps)) ** 0.25)
 
 
 @dataclass(frozen=True)
@@ -61,6 +75,7 @@ class FrameLook:
     sky_scale: float
     exposure_ev: float
     sea_roughness: float
+    sea_wind_speed_mps: float | None  # the wind the roughness follows (None: drawn uniformly)
     haze_visibility_m: float | None
     materials: dict[str, dict[str, Material]] = field(default_factory=dict)  # object -> class -> material
 
@@ -97,8 +112,13 @@ def draw_look(config: Config, rng: np.random.Generator) -> FrameLook:
         sun_scale=_levels(rng, sky.sun_scale),
         sky_scale=_levels(rng, sky.sky_scale),
         exposure_ev=_uniform(rng, r.exposure_ev),
-        sea_roughness=_uniform(rng, (0.05, 0.25)),
     )
+    # One draw either way, so that the sea's model changes no other draw.
+    if r.sea.model == "cox_munk":
+        wind = _uniform(rng, r.sea.wind_speed_mps)
+        look.update(sea_roughness=cox_munk_roughness(wind), sea_wind_speed_mps=wind)
+    else:
+        look.update(sea_roughness=_uniform(rng, r.sea.roughness), sea_wind_speed_mps=None)
     haze = _uniform(rng, HAZE_VISIBILITY_M) if r.haze else None
     materials: dict[str, dict[str, Material]] = {}
     for obj in OBJECT_NAMES:
@@ -128,7 +148,7 @@ def neutral_look(config: Config) -> FrameLook:
     classes["metal"] = Material((0.75, 0.75, 0.75), mid(mat.metal_roughness), 1.0)
     classes["glass"] = Material((0.03, 0.03, 0.03), 0.05, 0.0, 1.0)
     return FrameLook(mid(sky.sun_elevation_deg), mid(sky.sun_azimuth_deg), mid(sky.turbidity), mid(sky.sun_scale),
-                     mid(sky.sky_scale), mid(r.exposure_ev), 0.15, None,
+                     mid(sky.sky_scale), mid(r.exposure_ev), 0.15, None, None,
                      {obj: dict(classes) for obj in OBJECT_NAMES})
 
 

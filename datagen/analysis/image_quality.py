@@ -1,0 +1,80 @@
+"""Image quality against a reference: PSNR and SSIM on the encoded image, and the share of
+isolated outlier pixels ("fireflies") in a linear image (numpy and scipy only).
+
+PSNR and SSIM compare what a detector is trained on: the 8-bit sRGB encoding of the
+exposure-scaled linear image (:func:`datagen.render.tonemap.to_srgb8`), as floats in [0, 1].
+"""
+
+from __future__ import annotations
+
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.ndimage import gaussian_filter, rank_filter
+
+__all__ = ["FIREFLY_MIN_EXCESS", "FIREFLY_RATIO", "fireflies", "luminance", "psnr", "ssim"]
+
+#: A pixel is a firefly when its luminance exceeds the second brightest of its 8
+#: neighbours by this factor ...
+FIREFLY_RATIO: Final = 4.0
+#: ... and by at least this much display-linear luminance (1 is white at the frame's
+#: exposure): an isolated speckle a viewer sees, not a dim pixel beside a black one.
+FIREFLY_MIN_EXCESS: Final = 0.25
+
+_REC709: Final = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+
+
+def luminance(rgb: NDArray[np.floating]) -> NDArray[np.float32]:
+    """Rec. 709 luminance of linear RGB ``(H, W, 3)``."""
+    return np.asarray(rgb, dtype=np.float32) @ _REC709
+
+
+def fireflies(rgb: NDArray[np.floating]) -> NDArray[np.bool_]:
+    """Pixels of a display-linear RGB image that stand far above their neighbourhood:
+    luminance above :data:`FIREFLY_RATIO` times the second brightest of the 8
+    neighbours and above it by :data:`FIREFLY_MIN_EXCESS`. A sun glint or a specular
+    highlight covers several pixels, or at least a line of them, so that two of its
+    neighbours are bright too, and does not count (but the last pixel of a line that
+    ends abruptly would); two speckles side by side do count."""
+    lum = luminance(rgb)
+    ring = np.ones((3, 3), dtype=bool)
+    ring[1, 1] = False
+    second = rank_filter(lum, rank=-2, footprint=ring, mode="nearest")
+    return (lum > FIREFLY_RATIO * second) & (lum - second > FIREFLY_MIN_EXCESS)
+
+
+def _unit(image: NDArray) -> NDArray[np.float64]:
+    a = np.asarray(image)
+    return a.astype(np.float64) / 255.0 if a.dtype == np.uint8 else a.astype(np.float64)
+
+
+def psnr(image: NDArray, reference: NDArray) -> float:
+    """Peak signal-to-noise ratio in dB of ``image`` against ``reference`` (8-bit, or
+    floats in [0, 1]); infinite when they are equal."""
+    mse = float(np.mean((_unit(image) - _unit(reference)) ** 2))
+    return float("inf") if mse == 0.0 else float(10.0 * np.log10(1.0 / mse))
+
+
+def ssim(image: NDArray, reference: NDArray) -> float:
+    """Structural similarity (Wang et al. 2004: Gaussian window sigma 1.5, K1 0.01,
+    K2 0.03, data range 1) of ``image`` against ``reference``, averaged over the
+    pixels and the channels."""
+    x, y = _unit(image), _unit(reference)
+    if x.ndim == 2:
+        x, y = x[..., None], y[..., None]
+    c1, c2 = 0.01**2, 0.03**2
+    values = []
+    for ch in range(x.shape[-1]):
+        a, b = x[..., ch], y[..., ch]
+
+        def blur(v):
+            return gaussian_filter(v, 1.5, truncate=3.5)
+
+        mu_a, mu_b = blur(a), blur(b)
+        var_a = blur(a * a) - mu_a**2
+        var_b = blur(b * b) - mu_b**2
+        cov = blur(a * b) - mu_a * mu_b
+        s = ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) / ((mu_a**2 + mu_b**2 + c1) * (var_a + var_b + c2))
+        values.append(s.mean())
+    return float(np.mean(values))

@@ -1,0 +1,48 @@
+"""Denoising of the linear image with Intel Open Image Denoise (``mitsuba-oidn``).
+
+OIDN's ``RT`` filter takes the noisy linear radiance (``hdr``) and, optionally, the
+first hit's albedo and shading normal as guides (noisy at the same spp, so it
+prefilters them). It runs on the device of the arrays it is given (the CPU for
+numpy arrays) on Dr.Jit's thread pool, so :func:`datagen.render.runtime.set_threads`
+sizes it too: with one thread its output is the same bytes every time.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Final
+
+from datagen.core.errors import DatagenError
+
+__all__ = ["OIDN_HINT", "denoise", "oidn_version"]
+
+OIDN_HINT: Final = ("render.denoise: oidn needs the mitsuba-oidn package: install it with "
+                    "`pip install mitsuba-oidn` (scripts/install.sh does), or set render.denoise: off")
+
+
+@functools.cache
+def _oidn():
+    try:
+        import mitsuba_oidn
+    except ImportError as exc:
+        raise DatagenError(f"{OIDN_HINT} ({exc})") from None
+    return mitsuba_oidn
+
+
+def oidn_version() -> str:
+    """The version of the installed ``mitsuba-oidn`` (raises the install hint without it)."""
+    from importlib.metadata import version
+
+    _oidn()
+    return version("mitsuba-oidn")
+
+
+def denoise(rgb, albedo=None, normal=None, *, quality: str = "high"):
+    """The denoised ``(H, W, 3)`` linear radiance ``rgb``, guided by ``albedo`` (in [0, 1])
+    and ``normal`` (``(H, W, 3)`` each) when both are given. numpy arrays and Dr.Jit LLVM
+    tensors are filtered on the CPU, Dr.Jit CUDA tensors on their GPU; the result is of
+    the input's kind."""
+    oidn = _oidn()
+    guides = {"albedo": albedo, "normal": normal} if albedo is not None and normal is not None else {}
+    q = {"fast": oidn.Quality.Fast, "balanced": oidn.Quality.Balanced, "high": oidn.Quality.High}[quality]
+    return oidn.denoise(rgb, hdr=True, quality=q, **guides)

@@ -1,0 +1,62 @@
+"""The image-quality measures of bench/bench_quality.py and the sea's Cox-Munk roughness."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from datagen.analysis.image_quality import FIREFLY_MIN_EXCESS, fireflies, psnr, ssim
+from datagen.config import load_config, override_config
+from datagen.core.conventions import frame_rng
+from datagen.scene.look import cox_munk_roughness, draw_look
+
+
+def test_fireflies_are_isolated_speckles_and_a_glint_is_not_one() -> None:
+    image = np.full((40, 60, 3), 0.2, dtype=np.float32)
+    image[10, 10] = 3.0  # a speckle
+    image[20:24, 30:35] = 5.0  # a glint several pixels across
+    image[5, 40:52] = [[v] * 3 for v in (0.5, 1.5, *[4.0] * 8, 1.5, 0.5)]  # a highlight along a thin edge, tapering
+    image[33, 20:22] = 4.0  # two speckles side by side
+    image[30, 50] = 0.2 + FIREFLY_MIN_EXCESS / 2  # too faint to be seen as one
+    found = fireflies(image)
+    assert found[10, 10] and found[33, 20:22].all() and found.sum() == 3
+
+
+def test_psnr_and_ssim_of_an_image_against_itself_and_against_noise() -> None:
+    rng = np.random.default_rng(0)
+    ref = rng.integers(0, 256, (50, 70, 3), dtype=np.uint8)
+    assert psnr(ref, ref) == float("inf") and ssim(ref, ref) == pytest.approx(1.0)
+    noisy = np.clip(ref.astype(int) + rng.integers(-8, 9, ref.shape), 0, 255).astype(np.uint8)
+    mse = np.mean((noisy / 255.0 - ref / 255.0) ** 2)
+    assert psnr(noisy, ref) == pytest.approx(10 * np.log10(1 / mse))
+    assert 0.5 < ssim(noisy, ref) < 1.0
+    assert ssim(255 - ref, ref) < ssim(noisy, ref)
+
+
+@given(st.floats(0.0, 30.0))
+def test_cox_munk_roughness_squared_squared_is_the_mean_square_slope(wind: float) -> None:
+    """Principled alpha = roughness^2 and alpha^2 = mean square slope = 0.003 + 5.12e-3 W."""
+    assert cox_munk_roughness(wind) ** 4 == pytest.approx(0.003 + 5.12e-3 * wind, rel=1e-12)
+
+
+def test_cox_munk_gives_a_rougher_sea_than_the_glassy_uniform_draw() -> None:
+    assert cox_munk_roughness(3.0) == pytest.approx(0.368, abs=1e-3)
+    assert cox_munk_roughness(12.0) == pytest.approx(0.504, abs=1e-3)
+    assert cox_munk_roughness(3.0) > 0.25  # above the old uniform range's top
+
+
+def test_the_sea_model_changes_no_other_draw_of_a_frame() -> None:
+    config = load_config("wingcam55")
+    uniform = override_config(config, {"randomization.sea.model": "uniform"})
+    assert config.randomization.sea.model == "cox_munk"
+    for i in range(20):
+        a, b = draw_look(config, frame_rng(55, i)), draw_look(uniform, frame_rng(55, i))
+        lo, hi = config.randomization.sea.wind_speed_mps
+        assert lo <= a.sea_wind_speed_mps <= hi and a.sea_roughness == cox_munk_roughness(a.sea_wind_speed_mps)
+        assert b.sea_wind_speed_mps is None and 0.05 <= b.sea_roughness <= 0.25
+        same = {"sea_roughness": 0.0, "sea_wind_speed_mps": None}
+        assert dataclasses.replace(a, **same) == dataclasses.replace(b, **same)
