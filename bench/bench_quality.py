@@ -44,12 +44,10 @@ from datagen.render.tonemap import to_srgb8
 from datagen.scene.approach import FrameStates
 from datagen.scene.resolved import Scene
 
-MODES = {  # name -> render config overrides
-    "off": {"render.denoise": "off"},
-    "oidn-fast": {"render.denoise": "oidn", "render.denoise_quality": "fast", "render.denoise_guides": False},
-    "oidn-fast-guided": {"render.denoise": "oidn", "render.denoise_quality": "fast", "render.denoise_guides": True},
-    "oidn-high": {"render.denoise": "oidn", "render.denoise_quality": "high", "render.denoise_guides": False},
-    "oidn-high-guided": {"render.denoise": "oidn", "render.denoise_quality": "high", "render.denoise_guides": True},
+MODES = {"off": {"render.denoise": "off"}} | {  # name -> render config overrides
+    f"oidn-{quality}{'-guided' if guides else ''}": {"render.denoise": "oidn", "render.denoise_quality": quality,
+                                                      "render.denoise_guides": guides}
+    for quality in ("fast", "high") for guides in (False, True)
 }
 CHUNK_SPP = 64
 NOFIX = {"randomization.sea.model": "uniform"}

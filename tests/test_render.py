@@ -32,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 import mitsuba as mi  # noqa: E402  (after the marker: every test here needs Mitsuba)
 
-from datagen.render.denoise import denoise  # noqa: E402
+from datagen.render.denoise import denoise_render, guided_integrator  # noqa: E402
 from datagen.render.mitsuba import sensor_dict, visible  # noqa: E402
 from datagen.render.runtime import set_threads, thread_count, use_variant  # noqa: E402
 
@@ -66,7 +66,7 @@ def sphere_scene(hfov_deg: float, spp: int, *, radius_px: float = 1.6, dark: boo
     points_world = apply_transform(world_from_cam, points_cam)
     integrator: dict = {"type": "path", "max_depth": 6}
     if guides:
-        integrator = {"type": "aov", "aovs": "albedo:albedo,normal:sh_normal", "integrator": integrator}
+        integrator = guided_integrator(integrator)
     # Render in a camera-centred frame, as the renderer does.
     origin = world_from_cam[:3, 3]
     scene = {"type": "scene", "integrator": integrator,
@@ -89,9 +89,8 @@ def render_spheres(scene, seed: int = 3, *, denoised: bool = False) -> np.ndarra
     guided by the aov channels when the scene has them)."""
     image = np.asarray(mi.render(scene, seed=seed), dtype=np.float32)
     if denoised:
-        guides = [image[..., 3:6], image[..., 6:9]] if image.shape[-1] >= 9 else []
-        quality = RenderConfig().denoise_quality
-        return denoise(image[..., :3], *guides, quality=quality).mean(axis=-1)
+        out = denoise_render(image, guides=image.shape[-1] >= 9, quality=RenderConfig().denoise_quality)
+        return np.asarray(out).mean(axis=-1)
     return image[..., :3].mean(axis=-1)
 
 

@@ -121,8 +121,8 @@ class ShardWriter:
             render_seed=draws.render_seed, spp=scene.config.render.spp if self.renderer is not None else None,
             denoise=scene.config.render.denoise if self.renderer is not None else None,
             features=feature_records(labels, features.class_id, fraction, center_visible), n_labeled=len(lines),
-            render_s=render_s, denoise_s=denoise_s, frame_s=time.perf_counter() - started, worker=f"{platform.node()}:{os.getpid()}",
-            worker_rss_mib=_rss_mib())
+            render_s=render_s, denoise_s=denoise_s, frame_s=time.perf_counter() - started,
+            worker=f"{platform.node()}:{os.getpid()}", worker_rss_mib=_rss_mib())
 
     def _render(self, draws: FrameDraws, image: Path, exr: Path | None) -> tuple[float | None, float | None]:
         """Render and write the frame's image (and EXR); a frame whose files an earlier,

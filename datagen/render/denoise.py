@@ -14,7 +14,7 @@ from typing import Final
 
 from datagen.core.errors import DatagenError
 
-__all__ = ["OIDN_HINT", "denoise", "oidn_version"]
+__all__ = ["OIDN_HINT", "denoise", "denoise_render", "guided_integrator", "oidn_version"]
 
 OIDN_HINT: Final = ("render.denoise: oidn needs the mitsuba-oidn package: install it with "
                     "`pip install mitsuba-oidn` (scripts/install.sh does), or set render.denoise: off")
@@ -46,3 +46,18 @@ def denoise(rgb, albedo=None, normal=None, *, quality: str = "high"):
     guides = {"albedo": albedo, "normal": normal} if albedo is not None and normal is not None else {}
     q = {"fast": oidn.Quality.Fast, "balanced": oidn.Quality.Balanced, "high": oidn.Quality.High}[quality]
     return oidn.denoise(rgb, hdr=True, quality=q, **guides)
+
+
+def guided_integrator(integrator: dict) -> dict:
+    """Mitsuba's ``aov`` integrator around ``integrator``: a render's channels are then
+    the beauty RGB (the inner integrator's own samples), the first hit's albedo and its
+    shading normal, as :func:`denoise_render` reads them."""
+    return {"type": "aov", "aovs": "albedo:albedo,normal:sh_normal", "integrator": integrator}
+
+
+def denoise_render(image, *, guides: bool, quality: str = "high"):
+    """:func:`denoise` of a render's ``(H, W, C)`` tensor: its first three channels,
+    guided by the albedo and normal of :func:`guided_integrator` when ``guides``. Slices
+    of a Dr.Jit tensor stay on its device."""
+    extra = [image[..., 3:6], image[..., 6:9]] if guides else []
+    return denoise(image[..., 0:3], *extra, quality=quality)

@@ -109,7 +109,9 @@ class Renderer:
         first = neutral_look(config)
         integrator: dict = {"type": "path", "max_depth": config.render.max_depth}
         if self.guides:  # the beauty channels are the path tracer's own (same samples, same bytes)
-            integrator = {"type": "aov", "aovs": "albedo:albedo,normal:sh_normal", "integrator": integrator}
+            from datagen.render.denoise import guided_integrator
+
+            integrator = guided_integrator(integrator)
         description: dict = {
             "type": "scene",
             "integrator": integrator,
@@ -240,10 +242,9 @@ class Renderer:
         """OIDN on the render's linear RGB, guided by its albedo and normal channels when
         the aov integrator made them. The channels are sliced as Dr.Jit tensors, so that
         the filter runs on the variant's device (the GPU with cuda_ad_rgb)."""
-        from datagen.render.denoise import denoise
+        from datagen.render.denoise import denoise_render
 
-        guides = [image[..., 3:6], image[..., 6:9]] if self.guides else []
-        out = denoise(image[..., 0:3], *guides, quality=self.config.render.denoise_quality)
+        out = denoise_render(image, guides=self.guides, quality=self.config.render.denoise_quality)
         return np.maximum(np.array(out, dtype=np.float32), np.float32(0.0))
 
     @functools.cached_property
