@@ -175,7 +175,7 @@ def main() -> None:
                     renderer.render(warm.state, warm.look, warm.render_seed)  # kernel compilation
                     start = time.perf_counter()  # the build's frame pipeline, timed whole
                     draws = draw_frame(scene, states, i)
-                    frame_labels(scene, draws.state)
+                    frame_labels(scene, draws)
                     result = renderer.render(draws.state, draws.look, draws.render_seed)
                     renderer.feature_visibility(draws.state, scene.features)
                     image = to_srgb8(result.rgb)

@@ -2,6 +2,13 @@
 
     python bench/bench_render.py [--config scenes/wingcam55.yaml] [--spp 4 16 64] [--frames 3]
                                  [--variant auto] [--denoise off|oidn]
+    python bench/bench_render.py --randomizers [--frames 8]
+
+``--randomizers`` times the world's randomizers at the config's spp: every one off
+(today's images), each one alone, and all on, interleaved frame by frame (frame i in
+every mode, then frame i + 1), so that a noisy machine slows every mode alike; it
+prints each mode's mean and median whole-frame time, its ratio to all-off, and the
+process's peak RSS.
 
 For each spp: seconds per frame in ``mi.render`` and in the denoiser; seconds per
 frame for the whole frame (approach state, material draws, posing through
@@ -22,10 +29,10 @@ import time
 from pathlib import Path
 
 from datagen.config import load_config, override_config
+from datagen.config.schema import WORLD_RANDOMIZERS, world_off
 from datagen.files import write_image
-from datagen.pipeline.frame import draw_frame, frame_labels
+from datagen.pipeline.frame import draw_frame, frame_labels, training_image
 from datagen.render.renderer import Renderer
-from datagen.render.tonemap import to_srgb8
 from datagen.scene.approach import FrameStates
 from datagen.scene.resolved import Scene
 
@@ -37,10 +44,14 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=3, help="counted frames per spp")
     parser.add_argument("--variant", default=None)
     parser.add_argument("--denoise", default=None, choices=["off", "oidn"], help="override render.denoise")
+    parser.add_argument("--randomizers", action="store_true", help="time each world randomizer and all of them")
     args = parser.parse_args()
     config = load_config(args.config)
     if args.denoise is not None:
         config = override_config(config, {"render.denoise": args.denoise})
+    if args.randomizers:
+        randomizers(config, args)
+        return
     scene = Scene.resolve(config)
     print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs; config {args.config}, "
           f"{config.camera.width}x{config.camera.height}")
@@ -52,10 +63,10 @@ def main() -> None:
             for n, i in enumerate(range(args.frames + 1)):
                 start = time.perf_counter()  # the build's frame pipeline (datagen.pipeline.frame), timed whole
                 draws = draw_frame(scene, states, i)
-                frame_labels(scene, draws.state)
+                frame_labels(scene, draws)
                 result = renderer.render(draws.state, draws.look, draws.render_seed)
                 renderer.feature_visibility(draws.state, scene.features)
-                write_image(Path(tmp) / f"{i}.png", to_srgb8(result.rgb)[..., ::-1])
+                write_image(Path(tmp) / f"{i}.png", training_image(result, draws.look)[0][..., ::-1])
                 elapsed = time.perf_counter() - start
                 if n > 0:
                     render_s += result.render_s
@@ -67,6 +78,39 @@ def main() -> None:
                   f"denoise {denoise_s / k:5.2f} s/frame, whole frame {total_s / k:6.2f} s/frame, outside mi.render "
                   f"{100 * (1 - render_s / total_s):4.1f}% (denoise {100 * denoise_s / total_s:4.1f}%), "
                   f"peak RSS {peak:,.0f} MiB")
+
+
+#: Every world randomizer's switch, off (today's images) and on.
+def randomizers(config, args) -> None:
+    """Whole-frame time with the world's randomizers off, each alone, and all on."""
+    import numpy as np
+
+    others = {name: world_off(*(n for n in WORLD_RANDOMIZERS if n != name)) for name in WORLD_RANDOMIZERS}
+    modes = {"all off": world_off(), **others, "all on": {}}  # "on": as the config (shipped: all on)
+    print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs; config {args.config}, "
+          f"{config.camera.width}x{config.camera.height}, spp {config.render.spp}, denoise {config.render.denoise}")
+    runs = {}
+    for name, switches in modes.items():
+        mode_config = override_config(config, switches)
+        scene = Scene.resolve(mode_config)
+        runs[name] = (scene, Renderer(scene), FrameStates(mode_config))
+    times: dict[str, list[float]] = {name: [] for name in modes}
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in range(args.frames + 1):  # frame 0 warms every mode up (kernel compilation)
+            for name, (scene, renderer, states) in runs.items():
+                start = time.perf_counter()
+                draws = draw_frame(scene, states, n * 7)  # spread over approach chains and distances
+                frame_labels(scene, draws)
+                result = renderer.render(draws.state, draws.look, draws.render_seed)
+                renderer.feature_visibility(draws.state, scene.features)
+                write_image(Path(tmp) / "frame.png", training_image(result, draws.look)[0][..., ::-1])
+                if n > 0:
+                    times[name].append(time.perf_counter() - start)
+    base = float(np.mean(times["all off"]))
+    for name, t in times.items():
+        print(f"{name:12s} whole frame {np.mean(t):6.2f} s/frame (median {np.median(t):5.2f}), "
+              f"{np.mean(t) / base:4.2f}x all off")
+    print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:,.0f} MiB ({len(modes)} scenes loaded)")
 
 
 if __name__ == "__main__":

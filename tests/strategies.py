@@ -54,3 +54,15 @@ def cam_from_model_in_front(draw, min_depth: float = 5.0, max_depth: float = 150
     depth = draw(st.floats(min_depth, max_depth, **finite))
     lateral = draw(arrays(np.float64, 2, elements=st.floats(-0.3, 0.3, **finite))) * depth
     return make_transform(rot, [lateral[0], lateral[1], depth])
+
+
+@st.composite
+def lens_distortions(draw) -> np.ndarray:
+    """OpenCV distortion coefficients ``(k1, k2, p1, p2, 0)`` within the config's default
+    ranges (:class:`datagen.config.schema.SensorConfig`)."""
+    from datagen.config.schema import SensorConfig
+
+    s = SensorConfig()
+    k1, k2 = draw(st.floats(*s.k1)), draw(st.floats(*s.k2))
+    p1, p2 = draw(st.floats(*s.tangential)), draw(st.floats(*s.tangential))
+    return np.array([k1, k2, p1, p2, 0.0])

@@ -15,7 +15,7 @@ from datagen.core.labels import Exclusion, boxes_from_uv, compute_labels
 from datagen.core.transforms import make_transform, rotation_from_ypr
 from datagen.dataset.yolo import YOLO_DECIMALS, yolo_lines
 
-from .strategies import cam_from_model_in_front, finite, intrinsics, point_sets, rotations
+from .strategies import cam_from_model_in_front, finite, intrinsics, lens_distortions, point_sets, rotations
 
 WIDE = Intrinsics.from_hfov_deg(2048, 1080, 75.0)
 
@@ -24,16 +24,17 @@ def one_feature(points: np.ndarray, center: np.ndarray | None = None) -> Feature
     return FeatureTable.from_point_sets([points], objects=["receiver"], centers=[center])
 
 
-def paper_recipe(points_model, center_model, cam_from_model, k: Intrinsics):
+def paper_recipe(points_model, center_model, cam_from_model, k: Intrinsics, distortion=None):
     """Fig. 10 as the paper words it, with cv2 doing the projection.
 
     Tight box from min/max; (dx, dy) = true - perceived; grow the side facing the
     true centre by 2*dx (resp. 2*dy).
     """
+    distortion = np.zeros(5) if distortion is None else distortion
     rvec = cam_from_model[:3, :3]  # cv2 takes the 3x3 matrix as is
     tvec = cam_from_model[:3, 3]
-    uv, _ = cv2.projectPoints(np.asarray(points_model, float), rvec, tvec, k.K, np.zeros(5))
-    c, _ = cv2.projectPoints(np.asarray(center_model, float)[None], rvec, tvec, k.K, np.zeros(5))
+    uv, _ = cv2.projectPoints(np.asarray(points_model, float), rvec, tvec, k.K, distortion)
+    c, _ = cv2.projectPoints(np.asarray(center_model, float)[None], rvec, tvec, k.K, distortion)
     uv, c = uv.reshape(-1, 2), c.reshape(2)
     x0, y0 = uv.min(axis=0)
     x1, y1 = uv.max(axis=0)
@@ -70,6 +71,20 @@ def test_matches_paper_recipe(k, points, cam_from_model, explicit, w) -> None:
     c, box = paper_recipe(points, table.center_model[0], cam_from_model, k)
     np.testing.assert_allclose(labels.center_px[0], c, rtol=0, atol=1e-9)
     np.testing.assert_allclose(labels.corrected_xyxy[0], box, rtol=0, atol=1e-9)
+
+
+@given(k=intrinsics(), points=point_sets(), cam_from_model=cam_from_model_in_front(), distortion=lens_distortions())
+def test_labels_through_lens_distortion_are_cv2_project_points_with_the_same_coefficients(
+        k, points, cam_from_model, distortion) -> None:
+    """With the camera model's lens distortion on, the label centre is cv2.projectPoints of
+    the true centre with the same distortion coefficients, and the corrected box the paper's
+    recipe on the distorted projections."""
+    table = one_feature(points)
+    labels = compute_labels(table, cam_from_model[None], k, corrected=True, distortion=distortion)
+    c, box = paper_recipe(points, table.center_model[0], cam_from_model, k, distortion)
+    scale = max(1.0, float(np.abs(c).max()))
+    np.testing.assert_allclose(labels.center_px[0], c, rtol=0, atol=1e-9 * scale)
+    np.testing.assert_allclose(labels.corrected_xyxy[0], box, rtol=0, atol=1e-9 * max(scale, np.abs(box).max()))
 
 
 @given(k=intrinsics(), points=point_sets(), cam_from_model=cam_from_model_in_front())

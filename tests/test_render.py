@@ -15,16 +15,17 @@ from datagen.assets.files import load_mesh
 from datagen.assets.rig import body_from_cam_looking
 from datagen.assets.table import feature_table, object_paths
 from datagen.config import load_config, override_config
-from datagen.config.schema import RenderConfig
-from datagen.core.camera import Intrinsics, project_points
+from datagen.config.schema import RenderConfig, world_off
+from datagen.core.camera import Intrinsics, project_points, project_xyz
 from datagen.core.conventions import frame_rng, object_id, render_seed
 from datagen.core.errors import DatagenError
 from datagen.core.transforms import apply_transform, invert_rigid, make_transform, rotation_from_ypr
 from datagen.files import write_exr
 from datagen.render.renderer import Renderer, visibility_tolerance_m
 from datagen.render.tonemap import haze, to_srgb8
+from datagen.render.world import SURFACES
 from datagen.scene.approach import frame_state
-from datagen.scene.look import draw_look
+from datagen.scene.look import draw_look, frame_look
 from datagen.scene.resolved import Scene
 
 pytestmark = pytest.mark.render
@@ -51,10 +52,13 @@ def one_thread():
     set_threads(before)
 
 
-def sphere_scene(hfov_deg: float, spp: int, *, radius_px: float = 1.6, dark: bool = False, guides: bool = False):
+def sphere_scene(hfov_deg: float, spp: int, *, radius_px: float = 1.6, dark: bool = False, guides: bool = False,
+                 margin_px: int = 0, distortion=None):
     """Twelve small spheres (``radius_px`` in the image) on a jittered grid seen through a
     tilted, offset 192x108 camera: emitting on black, or (``dark``) dark grey before a
-    white sky. Returns the Mitsuba scene and the label module's projection of the centres."""
+    white sky. Returns the Mitsuba scene and the label module's projection of the centres
+    (through the lens ``distortion`` when given; the scene's pinhole camera then renders
+    the image grown by ``margin_px``, as the renderer does for the sensor to distort)."""
     k = Intrinsics.from_hfov_deg(192, 108, hfov_deg)
     rng = np.random.default_rng(int(hfov_deg))
     world_from_cam = make_transform(rotation_from_ypr(0.4, -0.3, 0.7), [120.0, -40.0, 6000.0])
@@ -70,7 +74,8 @@ def sphere_scene(hfov_deg: float, spp: int, *, radius_px: float = 1.6, dark: boo
     # Render in a camera-centred frame, as the renderer does.
     origin = world_from_cam[:3, 3]
     scene = {"type": "scene", "integrator": integrator,
-             "sensor": sensor_dict(k, make_transform(world_from_cam[:3, :3], [0.0, 0.0, 0.0]), spp)}
+             "sensor": sensor_dict(k.with_margin(margin_px), make_transform(world_from_cam[:3, :3], [0.0, 0.0, 0.0]),
+                                   spp)}
     if dark:
         scene["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": 1.0}}
     for i, (p, z) in enumerate(zip(points_world - origin, depth, strict=True)):
@@ -80,7 +85,9 @@ def sphere_scene(hfov_deg: float, spp: int, *, radius_px: float = 1.6, dark: boo
         else:
             sphere["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": 1.0}}
         scene[f"s{i}"] = sphere
-    expected = project_points(apply_transform(invert_rigid(world_from_cam), points_world), k)
+    points_cam = apply_transform(invert_rigid(world_from_cam), points_world)
+    expected = project_points(points_cam, k) if distortion is None else np.stack(
+        project_xyz(*points_cam.T, k, distortion), axis=-1)
     return mi.load_dict(scene, optimize=False), expected
 
 
@@ -118,6 +125,28 @@ def test_emissive_spheres_land_on_their_label_projection(hfov_deg: float) -> Non
     scene, expected = sphere_scene(hfov_deg, 256)
     errors, _ = sphere_stats(render_spheres(scene), expected)
     assert errors.max() < 0.1, (hfov_deg, errors)
+
+
+@pytest.mark.parametrize(("hfov_deg", "distortion"), [(55.0, (-0.12, 0.03, 0.001, -0.001, 0.0)),
+                                                     (25.0, (0.04, 0.03, -0.001, 0.001, 0.0)),
+                                                     (75.0, (-0.08, 0.01, 0.0005, 0.0, 0.0))])
+def test_emissive_spheres_land_on_their_distorted_label_projection(hfov_deg: float, distortion) -> None:
+    """Through the camera model's lens distortion (a pinhole render with a margin, resampled
+    by :func:`datagen.render.sensor.distort_image`), the spheres' centroids lie within 0.1 px
+    of the labels' projection through the same distortion, and far from the pinhole one."""
+    from datagen.render.sensor import distort_image, distortion_margin_px
+
+    k = Intrinsics.from_hfov_deg(192, 108, hfov_deg)
+    k1, k2, p1, p2, _ = distortion
+    margin = distortion_margin_px(k, (k1, k1), (k2, k2), (min(p1, p2), max(p1, p2)))
+    scene, expected = sphere_scene(hfov_deg, 256, margin_px=margin, distortion=distortion)
+    _, pinhole = sphere_scene(hfov_deg, 4)
+    grey = render_spheres(scene)
+    assert grey.shape == (108 + 2 * margin, 192 + 2 * margin)
+    image = distort_image({"rgb": np.repeat(grey[..., None], 3, axis=-1)}, k, margin, distortion)["rgb"].mean(axis=-1)
+    errors, _ = sphere_stats(image, expected)
+    assert errors.max() < 0.1, (hfov_deg, errors)
+    assert np.linalg.norm(expected - pinhole, axis=1).max() > 0.15  # the lens moves them beyond the tolerance
 
 
 @pytest.mark.parametrize("hfov_deg", [15.0, 25.0, 55.0, 75.0])
@@ -170,9 +199,9 @@ def test_object_id_silhouette_matches_projected_mesh(config_name: str, frame: in
     state = frame_state(config, frame)
     # Unoccluded: move the hose (which hangs in front of the drogue seen from the pod) away.
     state = dataclasses.replace(state, hose_points_world=state.hose_points_world + [0.0, 0.0, 5000.0])
-    look = draw_look(config, frame_rng(config.dataset.seed, frame))
+    look = frame_look(config, state)
     renderer.pose(state, look)
-    _, ids = renderer.geometry_pass()
+    _, ids, _ = renderer.geometry_pass()
     mask = ids == object_id(obj)
     assert mask.sum() > 50, "the object should be in view"
     rows, cols = np.nonzero(mask)
@@ -192,7 +221,7 @@ def test_per_frame_parameters_reproduce_a_fresh_scene_load(one_thread) -> None:
     b, _ = renderer_for("dashcam75.yaml")
     seed = config.dataset.seed
     first, second = frame_state(config, 0), frame_state(config, 7)
-    look0, look7 = (draw_look(config, frame_rng(seed, i)) for i in (0, 7))
+    look0, look7 = frame_look(config, first), frame_look(config, second)
     a.render(first, look0, render_seed(seed, 0))  # a: posed and dressed twice
     again = a.render(second, look7, render_seed(seed, 7), geometry=True)
     fresh = b.render(second, look7, render_seed(seed, 7), geometry=True)  # b: from a fresh load
@@ -212,7 +241,8 @@ def test_a_frame_renders_the_same_first_in_its_process_or_after_another(one_thre
     scene = Scene.resolve(config)
 
     def render(renderer, i):
-        return renderer.render(frame_state(config, i), draw_look(config, frame_rng(seed, i)), render_seed(seed, i)).rgb
+        state = frame_state(config, i)
+        return renderer.render(state, frame_look(config, state), render_seed(seed, i)).rgb
 
     first = render(Renderer(scene), 5)
     later = Renderer(scene)
@@ -223,8 +253,8 @@ def test_a_frame_renders_the_same_first_in_its_process_or_after_another(one_thre
 def test_depth_is_camera_z_on_the_tanker_and_the_sea_and_infinite_on_the_sky() -> None:
     renderer, config = renderer_for("wingcam55.yaml")
     state = frame_state(config, 2)
-    renderer.pose(state, draw_look(config, frame_rng(config.dataset.seed, 2)))
-    depth, ids = renderer.geometry_pass()
+    renderer.pose(state, frame_look(config, state))
+    depth, ids, surface = renderer.geometry_pass()
     tanker = ids == object_id("tanker")
     cam_from_tanker = invert_rigid(state.world_from_cam) @ state.world_from_tanker
     mesh = load_mesh(object_paths(config, "tanker")[0], "tanker").combined
@@ -238,13 +268,16 @@ def test_depth_is_camera_z_on_the_tanker_and_the_sea_and_infinite_on_the_sky() -
     d_cam /= np.linalg.norm(d_cam, axis=-1, keepdims=True)
     d_world = d_cam @ state.world_from_cam[:3, :3].T
     height = state.world_from_cam[2, 3]
-    sea = (ids == 0) & np.isfinite(depth)
+    sea = surface == SURFACES.index("sea")
     assert sea.sum() > 1000, "this frame looks down on the sea"
     expected = height / -d_world[..., 2] * d_cam[..., 2]
     np.testing.assert_allclose(depth[sea], expected[sea], rtol=1e-3)
-    # Rays that rise above the horizon and miss the aircraft hit nothing: infinite depth.
-    sky = (d_world[..., 2] > 1e-3) & (ids == 0)
-    assert sky.sum() > 1000 and np.isinf(depth[sky]).all()
+    # Rays that rise above the horizon and miss the aircraft and the clouds hit nothing:
+    # infinite depth; cloud pixels have the depth of their layer's plane.
+    sky = surface == SURFACES.index("sky")
+    assert sky.sum() > 1000 and np.isinf(depth[sky]).all() and (d_world[..., 2][sky] > -1e-3).all()
+    cloud = surface == SURFACES.index("cloud")
+    assert np.isfinite(depth[cloud]).all() and (depth[cloud] > 0).all()
 
 
 def test_feature_visibility_sees_into_the_basket_only_from_behind() -> None:
@@ -265,7 +298,8 @@ def test_feature_visibility_sees_into_the_basket_only_from_behind() -> None:
         # Each fraction is the share of that feature's own points a ray reaches (padding aside).
         for f in (centre, coupling):
             points = apply_transform(world_from_drogue, features.point_set(f)) - eye
-            seen = visible(renderer.scene, np.zeros(3), points,
+            origin = renderer.camera_render
+            seen = visible(renderer.scene, origin, points + origin,
                            visibility_tolerance_m(np.linalg.norm(points, axis=1)))
             assert fraction[f] == seen.mean() and fraction[f] * features.n_points[f] % 1 == 0
         results[side] = (centre_seen[centre], fraction[coupling], centre_seen[coupling])
@@ -323,7 +357,7 @@ def test_exr_has_linear_rgb_depth_and_object_ids(tmp_path: Path) -> None:
 
     renderer, config = renderer_for("podcam15.yaml", spp=1)
     state = frame_state(config, 0)
-    result = renderer.render(state, draw_look(config, frame_rng(15, 0)), render_seed(15, 0), geometry=True)
+    result = renderer.render(state, frame_look(config, state), render_seed(15, 0), geometry=True)
     path = tmp_path / "f.exr"
     write_exr(path, result.rgb, result.depth, result.object_id)
     with OpenEXR.File(str(path), separate_channels=True) as exr:
@@ -374,7 +408,7 @@ def test_a_visibility_threshold_excludes_occluded_features() -> None:
     renderer, config = renderer_for("podcam15.yaml")
     state = frame_state(config, 0)
     features = feature_table(config)
-    renderer.pose(state, draw_look(config, frame_rng(15, 0)))
+    renderer.pose(state, frame_look(config, state))
     fraction, _ = renderer.feature_visibility(state, features)
     cam_from_objects = np.stack([invert_rigid(state.world_from_cam) @ state.world_from(o) for o in features.objects])
     labels = compute_labels(features, cam_from_objects, renderer.intrinsics, edge_margin_px=2)
@@ -389,17 +423,18 @@ def test_a_visibility_threshold_excludes_occluded_features() -> None:
 def test_scalar_fallback_agrees_with_the_vectorized_variant() -> None:
     config = load_config(ROOT / "scenes" / "podcam15.yaml")
     state = frame_state(config, 45)
-    look = draw_look(config, frame_rng(15, 45))
+    look = frame_look(config, state)
     features = feature_table(config)
     out = {}
     for name in ("scalar_rgb", "auto"):
         renderer = Renderer(Scene.resolve(config), variant=name, width=96, height=51, spp=1)
         renderer.pose(state, look)
-        out[name] = (*renderer.geometry_pass(), *renderer.feature_visibility(state, features))
+        depth, ids, surface = renderer.geometry_pass()
+        out[name] = (depth, ids, surface, *renderer.feature_visibility(state, features))
     use_variant("auto")
-    (d_s, id_s, f_s, c_s), (d_v, id_v, f_v, c_v) = out["scalar_rgb"], out["auto"]
+    (d_s, id_s, s_s, f_s, c_s), (d_v, id_v, s_v, f_v, c_v) = out["scalar_rgb"], out["auto"]
     assert len(set(id_v.ravel().tolist())) >= 3  # sea, drogue, hose and receiver in view
-    assert (id_s == id_v).mean() > 0.998
+    assert (id_s == id_v).mean() > 0.998 and (s_s == s_v).mean() > 0.998
     both = np.isfinite(d_s) & np.isfinite(d_v)
     np.testing.assert_allclose(d_s[both], d_v[both], rtol=1e-4)
     np.testing.assert_array_equal(c_s, c_v)
@@ -424,9 +459,11 @@ def test_denoise_off_leaves_the_path_tracers_image_unchanged(one_thread) -> None
     from datagen.render.tonemap import exposure_scale
 
     config = override_config(load_config("wingcam55"), {"camera.width": 160, "camera.height": 84,
-                                                        "render.spp": 2, "render.denoise": "off"})
+                                                        "render.spp": 2, "render.denoise": "off",
+                                                        "randomization.sensor.enabled": False})
     renderer = Renderer(Scene.resolve(config))
-    state, look = frame_state(config, 3), draw_look(config, frame_rng(55, 3))
+    state = frame_state(config, 3)
+    look = frame_look(config, state)
     result = renderer.render(state, look, render_seed(55, 3))
     raw = np.asarray(mi.render(renderer.scene, seed=render_seed(55, 3), spp=2), dtype=np.float32)
     assert raw.shape[-1] == 3 and result.denoise_s is None
@@ -437,7 +474,8 @@ def test_denoiser_guides_leave_the_beauty_channels_unchanged(one_thread) -> None
     """The aov integrator that makes the albedo and normal guides renders the same beauty
     channels as the plain path tracer (same samples), so the guides cost no noise."""
     base = override_config(load_config("dashcam75"), {"camera.width": 160, "camera.height": 84, "render.spp": 2})
-    state, look = frame_state(base, 5), draw_look(base, frame_rng(75, 5))
+    state = frame_state(base, 5)
+    look = frame_look(base, state)
     images = []
     for updates in ({"render.denoise": "off"}, {"render.denoise": "oidn", "render.denoise_guides": True}):
         renderer = Renderer(Scene.resolve(override_config(base, updates)))
@@ -452,7 +490,8 @@ def test_a_denoised_frame_is_the_same_bytes_in_two_processes_with_one_thread(one
     config = override_config(load_config("podcam15"), {"camera.width": 160, "camera.height": 84,
                                                        "render.denoise": "oidn"})
     scene = Scene.resolve(config)
-    state, look = frame_state(config, 2), draw_look(config, frame_rng(15, 2))
+    state = frame_state(config, 2)
+    look = frame_look(config, state)
     a = Renderer(scene).render(state, look, 99)
     b = Renderer(scene).render(state, look, 99)
     assert a.denoise_s is not None and a.denoise_s > 0
@@ -483,11 +522,14 @@ def test_the_sun_glint_on_a_cox_munk_sea_is_still_there() -> None:
     from datagen.analysis.image_quality import luminance
     from datagen.scene.look import sun_direction_world
 
+    # Clouds could shade the sun and the sensor would rescale the image: off; the waves stay.
     config = override_config(load_config("dashcam75"), {"camera.width": 256, "camera.height": 135,
-                                                        "render.spp": 16, "render.denoise": "off"})
-    assert config.randomization.sea.model == "cox_munk"
+                                                        "render.spp": 16, "render.denoise": "off",
+                                                        **world_off("clouds", "sensor", "backlit sun")})
+    assert config.randomization.sea.model == "cox_munk" and config.randomization.sea.waves
     frame, seed = 209, config.dataset.seed  # a low sun ahead: its mirror image lies in the view
-    state, look = frame_state(config, frame), draw_look(config, frame_rng(seed, frame))
+    state = frame_state(config, frame)
+    look = frame_look(config, state)
     sun = sun_direction_world(state, look)
     renderer = Renderer(Scene.resolve(config))
     u, v = project_points((state.cam_from_world[:3, :3] @ (sun * [1, 1, -1]))[None], renderer.intrinsics)[0]
@@ -507,13 +549,17 @@ def test_the_cox_munk_sea_removes_most_fireflies_from_the_tanker() -> None:
     the same spp, at least 5 times fewer pixels stand out of their neighbourhood."""
     from datagen.analysis.image_quality import fireflies
 
+    # The sea's reflectance model alone: the world's randomizers (waves would roughen the glassy sea) off.
     base = override_config(load_config("wingcam55"), {"camera.width": 512, "camera.height": 270,
-                                                      "render.spp": 64, "render.denoise": "off"})
+                                                      "render.spp": 64, "render.denoise": "off", **world_off(),
+                                                      # the sun range the frame below was picked with
+                                                      "randomization.sky.sun_elevation_deg": [15.0, 70.0]})
     frame, seed = 14, base.dataset.seed  # the tanker 12 m ahead, the sun 17 degrees high
     counts = {}
     for model in ("uniform", "cox_munk"):
         config = override_config(base, {"randomization.sea.model": model})
-        state, look = frame_state(config, frame), draw_look(config, frame_rng(seed, frame))
+        state = frame_state(config, frame)
+        look = frame_look(config, state)
         result = Renderer(Scene.resolve(config)).render(state, look, render_seed(seed, frame), geometry=True)
         counts[model] = int((fireflies(result.rgb) & (result.object_id == object_id("tanker"))).sum())
     assert counts["uniform"] > 20 and counts["cox_munk"] * 5 < counts["uniform"], counts

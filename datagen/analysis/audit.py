@@ -193,6 +193,7 @@ def audit(view: DatasetView, *, min_learnable: float = MIN_LEARNABLE_SHARE) -> A
     ]
     stats = _statistics(view, labels)
     stats["learnable"] = learnable_stats
+    stats["appearance"] = appearance(view.appearance)
     return AuditResult(view.root, str(view.doc.get("name", view.root.name)), len(view), [c.finish() for c in checks],
                        stats, labels)
 
@@ -592,3 +593,38 @@ def _statistics(view: DatasetView, labels) -> dict:
 
 
 
+
+
+#: Bins of the appearance section's histograms.
+APPEARANCE_BINS: Final = 10
+
+
+def appearance(columns: dict[str, list]) -> dict:
+    """The appearance section: per dimension (:data:`datagen.dataset.schema.APPEARANCE`) and
+    column, how many frames drew it and the distribution of the draws (a histogram of
+    :data:`APPEARANCE_BINS` bins for numbers, counts per value for names and flags). A
+    column no frame drew (its randomizer off) has ``frames`` 0."""
+    from datagen.dataset.schema import APPEARANCE
+
+    out: dict[str, dict] = {}
+    for dimension, names in APPEARANCE.items():
+        section = {}
+        for name in names:
+            if name not in columns:
+                continue
+            drawn = [v for v in columns[name] if v is not None]
+            entry: dict = {"frames": len(drawn)}
+            if drawn and isinstance(drawn[0], (bool, str)):
+                entry["values"] = dict(sorted(Counter(str(v).lower() if isinstance(v, bool) else v
+                                                      for v in drawn).items()))
+            elif drawn:
+                values = np.asarray(drawn, dtype=np.float64)
+                values = values[np.isfinite(values)]
+                if values.size:
+                    lo, hi = float(values.min()), float(values.max())
+                    counts, edges = np.histogram(values, bins=APPEARANCE_BINS, range=(lo, hi if hi > lo else lo + 1.0))
+                    entry.update(min=lo, max=hi, mean=float(values.mean()), edges=edges.tolist(),
+                                 histogram=counts.tolist())
+            section[name] = entry
+        out[dimension] = section
+    return out

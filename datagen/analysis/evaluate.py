@@ -73,8 +73,10 @@ class PnPSettings:
 
 # --- one frame ---------------------------------------------------------------------------
 def solve_pose(points_model: NDArray, uv_px: NDArray, k: Intrinsics, settings: PnPSettings,
-               guess: tuple[NDArray, NDArray] | None = None) -> tuple[NDArray, NDArray] | None:
-    """``(rvec, tvec)`` of the object in the OpenCV camera frame, or None.
+               guess: tuple[NDArray, NDArray] | None = None,
+               distortion: NDArray | None = None) -> tuple[NDArray, NDArray] | None:
+    """``(rvec, tvec)`` of the object in the OpenCV camera frame, or None; ``distortion``:
+    the frame's lens (OpenCV's five coefficients), None for a pinhole camera.
 
     Four or more matches: RANSAC with the paper's settings (and ``guess`` as the
     extrinsic guess), checked against SQPnP on its inliers. Exactly three: SQPnP,
@@ -88,13 +90,13 @@ def solve_pose(points_model: NDArray, uv_px: NDArray, k: Intrinsics, settings: P
     obj = np.ascontiguousarray(points_model, dtype=np.float64).reshape(-1, 1, 3)
     img = np.ascontiguousarray(uv_px, dtype=np.float64).reshape(-1, 1, 2)
     if n < 4:
-        ok, rvec, tvec = cv2.solvePnP(obj, img, k.K, None, flags=cv2.SOLVEPNP_SQPNP)
+        ok, rvec, tvec = cv2.solvePnP(obj, img, k.K, distortion, flags=cv2.SOLVEPNP_SQPNP)
         return (rvec.ravel(), tvec.ravel()) if ok else None
     use_guess = guess is not None
     rvec0 = np.array(guess[0], dtype=np.float64).reshape(3, 1) if use_guess else None
     tvec0 = np.array(guess[1], dtype=np.float64).reshape(3, 1) if use_guess else None
     ok, rvec, tvec, inliers = cv2.solvePnPRansac(
-        obj, img, k.K, None, rvec=rvec0, tvec=tvec0, useExtrinsicGuess=use_guess,
+        obj, img, k.K, distortion, rvec=rvec0, tvec=tvec0, useExtrinsicGuess=use_guess,
         iterationsCount=settings.iterations, reprojectionError=settings.reprojection_px,
         confidence=settings.confidence, flags=cv2.SOLVEPNP_ITERATIVE)
     if not ok or inliers is None or len(inliers) < settings.min_matches:
@@ -104,17 +106,18 @@ def solve_pose(points_model: NDArray, uv_px: NDArray, k: Intrinsics, settings: P
     # noise-free points); the iterative refinement then stays in that minimum. SQPnP
     # on the inliers finds the global minimum: keep whichever reprojects better.
     obj_in, img_in = obj[inliers.ravel()], img[inliers.ravel()]
-    ok_sq, rvec_sq, tvec_sq = cv2.solvePnP(obj_in, img_in, k.K, None, flags=cv2.SOLVEPNP_SQPNP)
-    if ok_sq and _reprojection_rms(obj_in, img_in, rvec_sq, tvec_sq, k) < _reprojection_rms(
-            obj_in, img_in, rvec, tvec, k):
+    ok_sq, rvec_sq, tvec_sq = cv2.solvePnP(obj_in, img_in, k.K, distortion, flags=cv2.SOLVEPNP_SQPNP)
+    if ok_sq and _reprojection_rms(obj_in, img_in, rvec_sq, tvec_sq, k, distortion) < _reprojection_rms(
+            obj_in, img_in, rvec, tvec, k, distortion):
         rvec, tvec = rvec_sq, tvec_sq
     return rvec.ravel(), tvec.ravel()
 
 
-def _reprojection_rms(obj: NDArray, img: NDArray, rvec: NDArray, tvec: NDArray, k: Intrinsics) -> float:
+def _reprojection_rms(obj: NDArray, img: NDArray, rvec: NDArray, tvec: NDArray, k: Intrinsics,
+                      distortion: NDArray | None = None) -> float:
     import cv2
 
-    projected, _ = cv2.projectPoints(obj, rvec, tvec, k.K, None)
+    projected, _ = cv2.projectPoints(obj, rvec, tvec, k.K, distortion)
     return float(np.sqrt(np.mean(np.sum((projected - img) ** 2, axis=-1))))
 
 
@@ -291,7 +294,8 @@ def evaluate(view: DatasetView, *, noise_px: float = 0.0, run: int = 0, seed: in
             if sel.sum() < settings.min_matches:
                 poses[name] = "few"
                 continue
-            poses[name] = solve_pose(centers[sel], uv[sel], k, settings, guesses.get(name))
+            poses[name] = solve_pose(centers[sel], uv[sel], k, settings, guesses.get(name),
+                                     view.distortion[i] if view.distortion[i].any() else None)
         out["solve_s"][i] = time.perf_counter() - start
         if "few" in poses.values():
             reason = "too_few_matches"

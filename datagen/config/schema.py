@@ -10,7 +10,7 @@ quantities are continuous pixels (:mod:`datagen.core.conventions`).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Final, Literal
 
 from pydantic import (
     AfterValidator,
@@ -28,21 +28,26 @@ from datagen.core.conventions import CAMERA_MOUNTS, RIGID_OBJECTS
 from datagen.core.features import FEATURE_VARIANTS
 
 __all__ = [
+    "WORLD_RANDOMIZERS",
     "ApproachConfig",
     "CameraConfig",
+    "CloudsConfig",
     "Config",
     "DatasetConfig",
     "DrogueConfig",
     "FeaturesConfig",
     "LabelsConfig",
+    "LiveryConfig",
     "MaterialsConfig",
     "MountJitterConfig",
     "ObjectSpec",
     "ObjectsConfig",
     "RandomizationConfig",
     "RenderConfig",
+    "SensorConfig",
     "SkyConfig",
     "TankerConfig",
+    "world_off",
 ]
 
 Mount = Literal[CAMERA_MOUNTS]  # type: ignore[valid-type]
@@ -93,6 +98,29 @@ def _within(low: float, high: float) -> AfterValidator:
         return bounds
 
     return AfterValidator(check)
+
+
+#: Clouds keep at least this far (metres) beyond the approach's far end from the tanker's altitude.
+CLOUD_CLEARANCE_M = 200.0
+#: The world's randomizers (issue 18) by name, each as the config overrides that switch it
+#: off: the ablation switches a user flips, bench/bench_render.py times and the tests check.
+WORLD_RANDOMIZERS: Final[dict[str, dict[str, Any]]] = {
+    "clouds": {"randomization.clouds.enabled": False},
+    "sea": {"randomization.sea.waves": False, "randomization.sea.whitecaps": False,
+            "randomization.sea.colour": False},
+    "livery": {"randomization.livery.enabled": False},
+    "sensor": {"randomization.sensor.enabled": False},
+    "backlit sun": {"randomization.sky.backlit_fraction": 0.0},
+}
+
+
+def world_off(*names: str) -> dict[str, Any]:
+    """Config overrides that switch the named world randomizers off (every one when none is
+    named): with all of them off a build renders the world it rendered before issue 18."""
+    unknown = set(names) - set(WORLD_RANDOMIZERS)
+    if unknown:
+        raise KeyError(f"no world randomizer {sorted(unknown)}; there are {list(WORLD_RANDOMIZERS)}")
+    return {k: v for name in (names or WORLD_RANDOMIZERS) for k, v in WORLD_RANDOMIZERS[name].items()}
 
 
 class _Section(BaseModel):
@@ -305,8 +333,9 @@ class TankerConfig(_Section):
 class SkyConfig(_Section):
     """Physically based sky (Mitsuba ``sunsky``) and sun."""
 
-    sun_elevation_deg: Range = (15.0, 70.0)
-    """Sun elevation above the horizon, degrees."""
+    sun_elevation_deg: Range = (2.0, 70.0)
+    """Sun elevation above the horizon, degrees (from 2: low, reddened sun and long shadows;
+    sunsky is black below the horizon)."""
 
     sun_azimuth_deg: Annotated[Range, _within(-720.0, 720.0)] = (0.0, 360.0)
     """Sun azimuth, degrees counter-clockwise from the tanker's initial heading."""
@@ -321,6 +350,14 @@ class SkyConfig(_Section):
 
     sky_scale: Range = (0.8, 1.2)
     """Multiplier on the sky's radiance, drawn from 5 evenly spaced levels across the range."""
+
+    backlit_fraction: Number = Field(0.2, ge=0.0, le=1.0)
+    """Share of frames whose sun is put within ``backlit_azimuth_deg`` of the camera's
+    forward azimuth (the target backlit, the sun in or near the view: lens glare). 0 keeps
+    every frame's azimuth as drawn from ``sun_azimuth_deg``."""
+
+    backlit_azimuth_deg: Number = Field(25.0, ge=0.0, le=180.0)
+    """Half-width of the backlit azimuth window around the camera's forward azimuth, degrees."""
 
     @model_validator(mode="after")
     def _physical(self) -> SkyConfig:
@@ -380,6 +417,151 @@ class SeaConfig(_Section):
     roughness: Annotated[Range, _within(0.0, 1.0)] = (0.05, 0.25)
     """Principled roughness of the sea (model uniform)."""
 
+    waves: Flag = True
+    """Waves a pilot sees: a normal map from a directional Pierson-Moskowitz spectrum at the
+    drawn wind (the resolved slopes; the microfacet roughness then keeps the rest of Cox and
+    Munk's slope variance), so that the sun's glint follows the wave slopes."""
+
+    wind_direction_deg: Annotated[Range, _within(-720.0, 720.0)] = (0.0, 360.0)
+    """Direction the wind blows towards, degrees counter-clockwise from world x (waves)."""
+
+    whitecaps: Flag = True
+    """Whitecaps (breaking crests) covering Monahan and O'Muircheartaigh's (1980) fraction
+    3.84e-6 W^3.41 of the sea at the drawn wind. At 4-8 km a whitecap is smaller than a
+    pixel, so they lift the sea's mean albedo towards foam's (0.22) by that fraction."""
+
+    colour: Flag = True
+    """Draw the sea's body colour (deep blue to blue-green); off: one dark blue."""
+
+
+#: Livery schemes :mod:`datagen.assets.textures` paints.
+LiveryScheme = Literal["grey_camouflage", "two_tone", "high_visibility", "bare_metal"]
+
+
+def _unit_range(bounds: tuple[float, float]) -> tuple[float, float]:
+    lo, hi = bounds
+    if lo < 0.0 or hi > 1.0:
+        raise ValueError(f"must lie within [0, 1], got [{lo:g}, {hi:g}]")
+    return bounds
+
+
+#: A :data:`Range` within [0, 1].
+UnitRange = Annotated[Range, AfterValidator(_unit_range)]
+
+
+class CloudsConfig(_Section):
+    """Cloud layers: a deck below the aircraft and a scattered layer above or below them.
+
+    Each layer is a horizontal sheet whose opacity is a thresholded fractal-noise field
+    (coverage), lit by the sun and sky (a white diffuse sheet's brightness): a layer between
+    the sun and the aircraft shades them, one between the camera and the sea hides the sea.
+    Altitudes are drawn per approach relative to the tanker's (constant over an approach),
+    never closer to it than the approach's far end plus 200 m, so that no cloud lies between
+    the camera and a labeled feature."""
+
+    enabled: Flag = True
+    """Render cloud layers; off: a clear sky, today's images bit for bit."""
+
+    deck_coverage: UnitRange = (0.0, 0.9)
+    """Share of the deck's area that is cloud."""
+
+    deck_below_m: Annotated[Range, _within(0.0, 20_000.0)] = (600.0, 3000.0)
+    """How far below the tanker the deck lies, metres."""
+
+    layer_coverage: UnitRange = (0.0, 0.5)
+    """Share of the scattered layer's area that is cloud."""
+
+    layer_offset_m: Annotated[Range, _within(0.0, 20_000.0)] = (600.0, 4000.0)
+    """How far above or below the tanker the scattered layer lies (the side is drawn), metres."""
+
+    opacity: UnitRange = (0.6, 1.0)
+    """Opacity of a cloud's thick core (optical thickness): thin layers let the sun through."""
+
+    albedo: UnitRange = (0.6, 0.95)
+    """Diffuse reflectance of the cloud tops (brightness)."""
+
+
+class LiveryConfig(_Section):
+    """Aircraft paint: generated liveries on the receiver's and tanker's painted parts."""
+
+    enabled: Flag = True
+    """Paint liveries; off: one flat colour per material class, as before."""
+
+    schemes: tuple[LiveryScheme, ...] = Field(
+        ("grey_camouflage", "two_tone", "high_visibility", "bare_metal"), min_length=1, max_length=4)
+    """Schemes drawn from (equally likely)."""
+
+    panel_lines: Flag = True
+    """Dark panel lines and rivet rows."""
+
+    markings: Flag = True
+    """National roundels and aircraft numbers."""
+
+    weathering: UnitRange = (0.0, 0.7)
+    """Grime and fading strength (0 clean, 1 heavily weathered)."""
+
+
+class SensorConfig(_Section):
+    """The camera model applied to the linear image after the render, each effect
+    switchable; every parameter is drawn per frame and recorded in the manifest.
+
+    Order (the light's): motion blur, lens distortion, vignetting, glare, exposure (auto
+    or fixed), photon shot and read noise at the drawn ISO, then the sRGB encoding and a
+    JPEG round trip. Labels follow the distortion exactly (:mod:`datagen.core.camera`)."""
+
+    enabled: Flag = True
+    """Apply the camera model; off: today's images bit for bit."""
+
+    auto_exposure: Flag = True
+    """Meter the frame (centre-weighted log-average luminance to mid-grey, clamped to
+    +-2 stops of the fixed exposure) before ``exposure_ev`` compensation."""
+
+    iso: Annotated[Range, _within(25.0, 102_400.0)] = (100.0, 1600.0)
+    """Sensor gain, ISO (log-uniform): full well 15,000 e- at ISO 100, 3 e- read noise."""
+
+    noise: Flag = True
+    """Photon shot noise and read noise at the drawn ISO."""
+
+    exposure_time_s: Annotated[Range, _within(1.0e-5, 1.0)] = (1.0 / 4000.0, 1.0 / 250.0)
+    """Exposure time, seconds (log-uniform): the length of the motion blur."""
+
+    motion_blur: Flag = True
+    """Blur each pixel along its true image motion (relative camera and object motion from
+    the approach) over the exposure, centred on the frame's time."""
+
+    vignetting: UnitRange = (0.0, 0.4)
+    """Light falloff towards the corners: the corners receive (1 - v) of the centre."""
+
+    glare: UnitRange = (0.0, 1.0)
+    """Strength of the lens's veiling glare and ghosts when the sun is in or near the view."""
+
+    distortion: Flag = False
+    """Brown-Conrady lens distortion (OpenCV's k1, k2, p1, p2, k3 = 0) drawn per frame;
+    labels are projected through it (the paper assumed none)."""
+
+    k1: Annotated[Range, _within(-0.5, 0.5)] = (-0.12, 0.04)
+    """Radial coefficient k1 (negative: barrel)."""
+
+    k2: Annotated[Range, _within(-0.5, 0.5)] = (-0.03, 0.03)
+    """Radial coefficient k2."""
+
+    tangential: Annotated[Range, _within(-0.05, 0.05)] = (-0.001, 0.001)
+    """Tangential coefficients p1 and p2 (each drawn from this range)."""
+
+    jpeg_quality: Annotated[tuple[Integer, Integer], AfterValidator(_ordered)] = (70, 98)
+    """JPEG quality of the compression round trip (integer range; 100 keeps the image closest)."""
+
+    jpeg: Flag = True
+    """Round-trip the 8-bit image through JPEG at the drawn quality (the artefacts of a
+    compressed video link), whatever ``render.image_format`` stores."""
+
+    @field_validator("jpeg_quality")
+    @classmethod
+    def _quality(cls, q: tuple[int, int]) -> tuple[int, int]:
+        if q[0] < 1 or q[1] > 100:
+            raise ValueError(f"must lie within [1, 100], got [{q[0]}, {q[1]}]")
+        return q
+
 
 class RandomizationConfig(_Section):
     """Per-frame appearance randomization; every range is drawn from the frame's RNG."""
@@ -398,6 +580,16 @@ class RandomizationConfig(_Section):
 
     haze: Flag = False
     """Add a homogeneous haze between the camera and the scene."""
+
+    clouds: CloudsConfig = CloudsConfig()
+    """Cloud deck and scattered layer."""
+
+    livery: LiveryConfig = LiveryConfig()
+    """Aircraft liveries, panel lines, markings and weathering."""
+
+    sensor: SensorConfig = SensorConfig()
+    """The camera model after the render: exposure, noise, blur, vignetting, glare,
+    distortion, JPEG."""
 
 
 # --- render --------------------------------------------------------------------
@@ -560,26 +752,15 @@ class Config(_Section):
             raise ValueError(f"labels.min_box_px {self.labels.min_box_px:g} at train_imgsz {self.labels.train_imgsz} "
                              f"is a {box_w:.0f}x{box_h:.0f} px box, which does not fit inside the edge margin "
                              f"of a {w}x{h} image")
+        clouds = self.randomization.clouds
+        if clouds.enabled:
+            clear = self.approach.range_m[1] + CLOUD_CLEARANCE_M
+            for key in ("deck_below_m", "layer_offset_m"):
+                if getattr(clouds, key)[0] < clear:
+                    raise ValueError(f"randomization.clouds.{key} must start at {clear:g} m or more (approach.range_m's "
+                                     f"far end plus {CLOUD_CLEARANCE_M:g} m), so that no cloud lies between the camera "
+                                     f"and a feature; got {list(getattr(clouds, key))}")
+            if clouds.deck_below_m[1] >= self.tanker.altitude_m[0]:
+                raise ValueError(f"randomization.clouds.deck_below_m {list(clouds.deck_below_m)} must stay below "
+                                 f"tanker.altitude_m's low end {self.tanker.altitude_m[0]:g} m (the deck is above the sea)")
         return self
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-
-

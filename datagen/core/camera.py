@@ -3,6 +3,11 @@
 Paper Table 1: no distortion, ``cx = W / 2``, ``cy = H / 2``,
 ``fx = fy = cx / tan(hFOV / 2)``. Pixel coordinates are continuous (see
 :mod:`datagen.core.conventions`). Camera frame is OpenCV (x right, y down, z forward).
+
+Lens distortion, when a frame has it, is OpenCV's Brown-Conrady model with the
+coefficients ``(k1, k2, p1, p2, k3)`` (:func:`distort_normalized`), so that
+``cv2.projectPoints`` with the same coefficients gives the same pixels, and
+``cv2.solvePnP`` can take them back out. All zeros is the pinhole exactly.
 """
 
 from __future__ import annotations
@@ -15,7 +20,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from datagen.core.conventions import NEAR_PLANE_M
 
-__all__ = ["Intrinsics", "depth_in_front", "in_front", "project_points", "project_xyz"]
+__all__ = [
+    "Intrinsics",
+    "depth_in_front",
+    "distort_normalized",
+    "in_front",
+    "project_points",
+    "project_xyz",
+    "undistort_px",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -47,6 +60,12 @@ class Intrinsics:
     def from_hfov_deg(cls, width: int, height: int, hfov_deg: float) -> Intrinsics:
         return cls.from_hfov(width, height, math.radians(hfov_deg))
 
+    def with_margin(self, margin_px: int) -> Intrinsics:
+        """The same camera's image grown by ``margin_px`` pixels on every side (same focal
+        length and optical axis): a pixel ``(u, v)`` here is ``(u + margin, v + margin)`` there."""
+        m = int(margin_px)
+        return Intrinsics(self.width + 2 * m, self.height + 2 * m, self.fx, self.fy, self.cx + m, self.cy + m)
+
     @property
     def K(self) -> FloatArray:
         """The 3x3 camera matrix."""
@@ -71,6 +90,39 @@ def depth_in_front(z_cam: ArrayLike) -> NDArray[np.bool_]:
     return np.asarray(z_cam) > NEAR_PLANE_M
 
 
+def distort_normalized(x: FloatArray, y: FloatArray, distortion: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """OpenCV's distortion of normalized image coordinates ``x = X / Z``, ``y = Y / Z``;
+    ``distortion`` ``(..., 5)`` holds ``k1, k2, p1, p2, k3`` and broadcasts against ``x``
+    with its last axis dropped."""
+    d = np.asarray(distortion, dtype=np.float64)
+    k1, k2, p1, p2, k3 = (d[..., i] for i in range(5))
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xy = x * y
+    return (x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * x * x),
+            y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * xy)
+
+
+def undistort_px(uv_px: ArrayLike, intrinsics: Intrinsics, distortion: ArrayLike,
+                 iterations: int = 30) -> FloatArray:
+    """The pinhole pixels ``(..., 2)`` that ``distortion`` moves to ``uv_px``: the inverse of
+    :func:`project_points` with distortion, by fixed-point iteration (OpenCV's own
+    method for ``undistortPoints``, run to float64 convergence for moderate lenses)."""
+    k = intrinsics
+    uv = np.asarray(uv_px, dtype=np.float64)
+    xd, yd = (uv[..., 0] - k.cx) / k.fx, (uv[..., 1] - k.cy) / k.fy
+    d = np.asarray(distortion, dtype=np.float64)
+    k1, k2, p1, p2, k3 = (d[..., i] for i in range(5))
+    x, y = xd.copy(), yd.copy()
+    for _ in range(iterations):
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        dx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+        dy = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+        x, y = (xd - dx) / radial, (yd - dy) / radial
+    return np.stack([x * k.fx + k.cx, y * k.fy + k.cy], axis=-1)
+
+
 def project_points(points_cam: ArrayLike, intrinsics: Intrinsics) -> FloatArray:
     """Continuous pixel coordinates ``(..., 2)`` of camera-frame points ``(..., 3)``.
 
@@ -84,13 +136,18 @@ def project_points(points_cam: ArrayLike, intrinsics: Intrinsics) -> FloatArray:
 
 
 def project_xyz(
-    x: FloatArray, y: FloatArray, z: FloatArray, intrinsics: Intrinsics
+    x: FloatArray, y: FloatArray, z: FloatArray, intrinsics: Intrinsics, distortion: ArrayLike | None = None
 ) -> tuple[FloatArray, FloatArray]:
-    """:func:`project_points` on separate coordinate arrays (any equal shapes).
+    """:func:`project_points` on separate coordinate arrays (any equal shapes), through
+    the lens ``distortion`` (``(..., 5)``, broadcasting as in :func:`distort_normalized`)
+    when given.
 
     The layout the label hot path uses: reductions then run along contiguous memory.
     """
     inv_z = np.divide(1.0, z, out=np.full(np.shape(z), np.nan), where=depth_in_front(z))
+    if distortion is not None:
+        xn, yn = distort_normalized(x * inv_z, y * inv_z, distortion)
+        return xn * intrinsics.fx + intrinsics.cx, yn * intrinsics.fy + intrinsics.cy
     u = x * inv_z
     u *= intrinsics.fx
     u += intrinsics.cx

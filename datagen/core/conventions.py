@@ -69,7 +69,11 @@ Randomness
     splits without changing any frame's sky, materials or pose. Mitsuba's
     sampler seed of frame ``i`` is :func:`render_seed` ``(seed, i)``, the first
     word of the frame's own seed sequence; ``datagen evaluate``'s pixel noise
-    comes from :func:`evaluation_rng` ``(seed, i, run)``.
+    comes from :func:`evaluation_rng` ``(seed, i, run)``. The world's draws
+    (sun, clouds, sea, liveries, sensor) come from :func:`world_rng` ``(seed,
+    index, dimension)``, spawn key ``(index, WORLD_STREAM, dimension)``; a
+    procedural texture or noise field is made from a seed drawn there and
+    recorded in the manifest, through :func:`texture_rng` ``(texture_seed)``.
     No module uses a global RNG.
 """
 
@@ -93,6 +97,8 @@ __all__ = [
     "OBJECT_NAMES",
     "PIXEL_CONVENTION",
     "RIGID_OBJECTS",
+    "WORLD_DIMENSIONS",
+    "WORLD_STREAM",
     "approach_rng",
     "drawing_px",
     "evaluation_rng",
@@ -102,6 +108,8 @@ __all__ = [
     "random_features_rng",
     "render_seed",
     "split_uniform",
+    "texture_rng",
+    "world_rng",
 ]
 
 # --- body frames -------------------------------------------------------------
@@ -212,3 +220,26 @@ def evaluation_rng(seed: int, frame_index: int, run: int) -> np.random.Generator
     """The RNG of the pixel noise ``datagen evaluate`` adds to frame ``frame_index`` in
     its ``run``-th noise setting (spawn key ``(frame, EVALUATION_STREAM, run)``)."""
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(frame_index, EVALUATION_STREAM, run)))
+
+
+#: Second spawn-key element of the world streams (clouds, sea state, liveries, sensor, backlit sun).
+WORLD_STREAM: Final[int] = 5
+#: The world's randomization dimensions, each with its own stream (third spawn-key element: the
+#: index here), so that switching one on or off changes no draw of another, nor of the look.
+#: The sun and the sensor are drawn per frame; clouds, sea and liveries per approach chain.
+WORLD_DIMENSIONS: Final[tuple[str, ...]] = ("sun", "clouds", "sea", "livery", "sensor")
+
+
+def world_rng(seed: int, index: int, dimension: str) -> np.random.Generator:
+    """The RNG of one world dimension: of frame ``index`` (sun, sensor) or of approach chain
+    ``index`` (clouds, sea, livery); spawn key ``(index, WORLD_STREAM, WORLD_DIMENSIONS.index(dimension))``
+    (the dimensions keep the two kinds of index apart)."""
+    key = (index, WORLD_STREAM, WORLD_DIMENSIONS.index(dimension))
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=key))
+
+
+def texture_rng(texture_seed: int) -> np.random.Generator:
+    """The RNG that makes a procedural texture or noise field (a cloud layer, the waves, a
+    livery, a frame's sensor noise) from its seed, itself drawn from a :func:`world_rng`
+    stream and recorded in the manifest (so that the texture can be remade from the row)."""
+    return np.random.default_rng(texture_seed)

@@ -234,6 +234,7 @@ def compute_labels(
     corrected: bool = True,
     min_size_px: float | tuple[float, float] = 0.0,
     small_boxes: SmallBoxes = "grow",
+    distortion: ArrayLike | None = None,
 ) -> FrameLabels:
     """Labels for every feature of ``features`` in one or many frames.
 
@@ -249,6 +250,8 @@ def compute_labels(
             ``labels.min_box_px`` at the training size); 0 keeps every box as it is.
         small_boxes: ``"grow"`` smaller label boxes about their centre, or
             ``"exclude"`` their features as ``too_small``.
+        distortion: ``(*B, 5)`` OpenCV lens distortion per frame (``k1, k2, p1, p2, k3``),
+            or None for the pinhole: points, centres and boxes are projected through it.
 
     Returns:
         :class:`FrameLabels` with leading shape ``B``.
@@ -271,7 +274,9 @@ def compute_labels(
         + cam_from_model[..., i, 3, :]
         for i in range(3)
     )
-    u, v = project_xyz(x, y, z, intrinsics)
+    if distortion is not None:  # one row per frame, against (*B, F, P + 1) coordinates
+        distortion = np.asarray(distortion, dtype=np.float64)[..., None, None, :]
+    u, v = project_xyz(x, y, z, intrinsics, distortion)
     center = np.stack([u[..., -1], v[..., -1]], axis=-1)
     return _boxes(
         u[..., :-1],

@@ -29,7 +29,7 @@ from datagen.core.features import FeatureTable
 from datagen.core.labels import FrameLabels, compute_labels
 from datagen.core.training import TrainView, label_options
 from datagen.dataset.layout import MANIFEST_NAME
-from datagen.dataset.schema import MANIFEST_VERSION, manifest_schema, read_features
+from datagen.dataset.schema import APPEARANCE, MANIFEST_VERSION, manifest_schema, read_features
 
 __all__ = ["DatasetView", "image_size", "load_dataset"]
 
@@ -66,6 +66,8 @@ class DatasetView:
     exclusion: NDArray[np.object_]  # (B, F) reason or None
     visible_fraction: NDArray[np.float64]  # (B, F), NaN where not rendered
     center_visible: NDArray[np.float64]  # (B, F) 1, 0 or NaN
+    distortion: NDArray[np.float64]  # (B, 5) the lens's OpenCV coefficients, zeros for a pinhole frame
+    appearance: dict[str, list]  # column -> per-row value (None where not drawn), of schema.APPEARANCE
 
     def __len__(self) -> int:
         return len(self.frame_id)
@@ -97,7 +99,8 @@ class DatasetView:
         manifest's visibility for the optional occlusion rule)."""
         rules = self.label_rules
         labels = compute_labels(self.features, self.cam_from_objects(), self.intrinsics,
-                                **label_options(rules, self.intrinsics.width, self.intrinsics.height))
+                                **label_options(rules, self.intrinsics.width, self.intrinsics.height),
+                                distortion=self.distortion if self.distortion.any() else None)
         threshold = rules.min_visible_fraction
         if threshold > 0:
             fraction = np.where(np.isnan(self.visible_fraction), 1.0, self.visible_fraction)
@@ -280,7 +283,22 @@ def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> Dataset
         exclusion=exclusion,
         visible_fraction=_floats(flat.field("visible_fraction"), (b, f)),
         center_visible=_floats(pc.cast(flat.field("center_visible"), pa.float64()), (b, f)),
+        distortion=_distortion(table, b),
+        appearance={c: table.column(c).to_pylist() for cols in APPEARANCE.values() for c in cols
+                    if c in table.column_names},
     )
+
+
+def _distortion(table, b: int) -> NDArray[np.float64]:
+    """``(B, 5)`` lens coefficients from the ``sensor_distortion`` column (zeros where it is
+    null, or in a manifest from before the camera model)."""
+    out = np.zeros((b, 5))
+    if "sensor_distortion" not in table.column_names:
+        return out
+    for i, value in enumerate(table.column("sensor_distortion").to_pylist()):
+        if value is not None:
+            out[i] = value
+    return out
 
 
 def image_size(head: bytes) -> tuple[int, int] | None:

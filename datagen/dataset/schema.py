@@ -29,13 +29,16 @@ from datagen.core.camera import Intrinsics
 from datagen.core.features import FeatureTable
 from datagen.core.labels import Exclusion
 from datagen.files import write_parquet
+from datagen.render.tonemap import IMAGE_STATISTICS
 from datagen.scene.look import FrameLook, sun_direction_world
 
 if TYPE_CHECKING:
     from datagen.scene.approach import FrameState
 
 __all__ = [
+    "APPEARANCE",
     "MANIFEST_VERSION",
+    "MEASURED_COLUMNS",
     "FeatureColumns",
     "RUN_COLUMNS",
     "feature_records",
@@ -50,10 +53,27 @@ __all__ = [
 ]
 
 #: Version of the manifest and feature-table schemas (bumped on any incompatible change).
-MANIFEST_VERSION: Final = "4"
+MANIFEST_VERSION: Final = "5"
 #: Manifest columns that describe the run rather than the frame: they differ between
 #: two builds of the same config; every other column is identical.
 RUN_COLUMNS: Final = ("render_s", "denoise_s", "frame_s", "worker", "worker_rss_mib")
+#: Manifest columns measured on the rendered frame (the camera model's metering and motion,
+#: the image statistics): null where the frame was not rendered (labels-only builds).
+MEASURED_COLUMNS: Final = ("auto_exposure_ev", "motion_blur_px", "sun_in_view", *IMAGE_STATISTICS)
+#: The appearance dimensions of a frame and their manifest columns, as the audit's appearance
+#: section shows their coverage (a column is null in every row where its randomizer is off).
+APPEARANCE: Final[dict[str, tuple[str, ...]]] = {
+    "sun and sky": ("sun_elevation_deg", "sun_azimuth_deg", "sun_backlit", "turbidity", "sun_scale", "sky_scale",
+                    "exposure_ev", "haze_visibility_m"),
+    "clouds": ("cloud_deck_coverage", "cloud_deck_altitude_m", "cloud_layer_coverage", "cloud_layer_altitude_m",
+               "cloud_opacity", "cloud_albedo"),
+    "sea": ("sea_wind_speed_mps", "sea_roughness", "sea_wind_direction_deg", "sea_wave_slope_variance",
+            "sea_whitecap_fraction"),
+    "livery": ("receiver_livery", "tanker_livery", "livery_weathering"),
+    "sensor": ("sensor_iso", "sensor_exposure_time_s", "sensor_vignetting", "sensor_glare", "sensor_jpeg_quality",
+               "auto_exposure_ev", "motion_blur_px", "sun_in_view"),
+    "image": IMAGE_STATISTICS,
+}
 
 _F64 = pa.float64()
 
@@ -130,6 +150,34 @@ def manifest_schema() -> pa.Schema:
         pa.field("sea_wind_speed_mps", _F64),
         pa.field("haze_visibility_m", _F64),
         pa.field("materials", pa.list_(MATERIAL_RECORD), nullable=False),
+        pa.field("sun_backlit", pa.bool_()),
+        pa.field("cloud_deck_coverage", _F64),
+        pa.field("cloud_deck_altitude_m", _F64),
+        pa.field("cloud_layer_coverage", _F64),
+        pa.field("cloud_layer_altitude_m", _F64),
+        pa.field("cloud_opacity", _F64),
+        pa.field("cloud_albedo", _F64),
+        pa.field("cloud_seed", pa.int64()),
+        pa.field("sea_wind_direction_deg", _F64),
+        pa.field("sea_wave_slope_variance", _F64),
+        pa.field("sea_whitecap_fraction", _F64),
+        pa.field("sea_colour", _vec(3)),
+        pa.field("sea_seed", pa.int64()),
+        pa.field("receiver_livery", pa.string()),
+        pa.field("tanker_livery", pa.string()),
+        pa.field("livery_weathering", _F64),
+        pa.field("livery_seed", pa.int64()),
+        pa.field("sensor_iso", _F64),
+        pa.field("sensor_exposure_time_s", _F64),
+        pa.field("sensor_vignetting", _F64),
+        pa.field("sensor_glare", _F64),
+        pa.field("sensor_distortion", _vec(5)),
+        pa.field("sensor_jpeg_quality", pa.int32()),
+        pa.field("sensor_seed", pa.int64()),
+        pa.field("auto_exposure_ev", _F64),
+        pa.field("motion_blur_px", _F64),
+        pa.field("sun_in_view", pa.bool_()),
+        *(pa.field(name, _F64) for name in IMAGE_STATISTICS),
         pa.field("n_labeled", pa.int32(), nullable=False),
         pa.field("features", pa.list_(FEATURE_RECORD), nullable=False),
         pa.field("render_s", _F64),
@@ -211,10 +259,12 @@ def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, 
                  exr_path: str | None, intrinsics: Intrinsics, state: FrameState, look: FrameLook, seed: int,
                  render_seed: int, spp: int | None, denoise: str | None, features: FeatureColumns,
                  n_labeled: int, render_s: float | None, denoise_s: float | None, frame_s: float, worker: str,
-                 worker_rss_mib: float) -> dict:
+                 worker_rss_mib: float, rendered: dict | None = None) -> dict:
     """One frame's manifest row, column by column (:func:`manifest_schema`): the frame,
-    its files, the camera, the poses, the approach, every appearance draw, the features
-    and the run columns (:data:`RUN_COLUMNS`)."""
+    its files, the camera, the poses, the approach, every appearance draw, the features,
+    what the render measured (:data:`MEASURED_COLUMNS`, from ``rendered``) and the run
+    columns (:data:`RUN_COLUMNS`)."""
+    rendered = rendered or {}
     k = intrinsics
     return {
         "frame_id": frame,
@@ -252,6 +302,7 @@ def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, 
              "metallic": m.metallic, "specular": m.specular}
             for obj, classes in look.materials.items() for cls, m in classes.items()
         ],
+        **{name: rendered.get(name) for name in MEASURED_COLUMNS},
         "n_labeled": n_labeled,
         "features": features,
         "render_s": render_s,

@@ -17,13 +17,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from datagen.core.conventions import frame_rng, render_seed
+from datagen.core.conventions import render_seed
 from datagen.core.labels import FrameLabels, compute_labels
 from datagen.scene.approach import FrameState, FrameStates
-from datagen.scene.look import FrameLook, draw_look
+from datagen.scene.look import FrameLook, frame_look
 from datagen.scene.resolved import Scene
 
-__all__ = ["FrameDraws", "draw_frame", "frame_labels"]
+__all__ = ["FrameDraws", "draw_frame", "frame_labels", "training_image"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,11 +41,27 @@ def draw_frame(scene: Scene, states: FrameStates, i: int) -> FrameDraws:
     """Frame ``i``'s state (from ``states``, the scene's approach chains), look and
     Mitsuba sampler seed, all from the scene's root seed."""
     seed = scene.config.dataset.seed
-    return FrameDraws(i, seed, render_seed(seed, i), states(i), draw_look(scene.config, frame_rng(seed, i)))
+    state = states(i)
+    return FrameDraws(i, seed, render_seed(seed, i), state, frame_look(scene.config, state))
 
 
-def frame_labels(scene: Scene, state: FrameState) -> FrameLabels:
-    """Every feature's labels in a frame's camera (before the occlusion rule)."""
-    features = scene.features
+def frame_labels(scene: Scene, draws: FrameDraws) -> FrameLabels:
+    """Every feature's labels in a frame's camera (before the occlusion rule), through the
+    frame's lens distortion when its look has one."""
+    features, state, look = scene.features, draws.state, draws.look
     cam_from_objects = np.stack([state.cam_from_world @ state.world_from(o) for o in features.objects])
-    return compute_labels(features, cam_from_objects, scene.intrinsics, **scene.label_options)
+    distortion = None if look.sensor_distortion is None else np.asarray(look.sensor_distortion)
+    return compute_labels(features, cam_from_objects, scene.intrinsics, **scene.label_options, distortion=distortion)
+
+
+def training_image(result, look: FrameLook) -> tuple[np.ndarray, dict]:
+    """The 8-bit sRGB training image of a :class:`~datagen.render.renderer.RenderResult`
+    (through the sensor's JPEG round trip when the look has one) and what the render
+    measured, the image statistics included (:data:`datagen.dataset.schema.MEASURED_COLUMNS`)."""
+    from datagen.render.sensor import jpeg_round_trip
+    from datagen.render.tonemap import image_statistics, to_srgb8
+
+    srgb = to_srgb8(result.rgb)
+    if look.sensor_jpeg_quality is not None:
+        srgb = jpeg_round_trip(srgb, look.sensor_jpeg_quality)
+    return srgb, {**(result.measured or {}), **image_statistics(srgb, result.surface)}

@@ -23,7 +23,7 @@ from datagen.dataset.layout import Layout, ShardJob
 from datagen.dataset.schema import feature_records, manifest_row, write_manifest
 from datagen.dataset.yolo import yolo_lines
 from datagen.files import write_exr, write_image, write_text
-from datagen.pipeline.frame import FrameDraws, draw_frame, frame_labels
+from datagen.pipeline.frame import FrameDraws, draw_frame, frame_labels, training_image
 from datagen.pipeline.progress import ShardSummary
 from datagen.scene.approach import FrameStates
 from datagen.scene.resolved import Scene
@@ -102,14 +102,15 @@ class ShardWriter:
         scene, layout = self.scene, self.layout
         k, features = scene.intrinsics, scene.features
         draws = draw_frame(scene, self.states, i)
-        labels = frame_labels(scene, draws.state)
+        labels = frame_labels(scene, draws)
         image_rel = exr_rel = None
         fraction = center_visible = render_s = denoise_s = None
+        rendered: dict = {}
         if self.renderer is not None:
             image_rel = layout.image_rel(job.split, job.shard, i)
             exr_rel = layout.exr_rel(job.split, job.shard, i) if scene.config.render.exr else None
-            render_s, denoise_s = self._render(draws, layout.root / image_rel,
-                                               layout.root / exr_rel if exr_rel else None)
+            render_s, denoise_s, rendered = self._render(draws, layout.root / image_rel,
+                                                         layout.root / exr_rel if exr_rel else None)
             fraction, center_visible = self.renderer.feature_visibility(draws.state, features)
             labels = labels.with_visibility(fraction, scene.config.labels.min_visible_fraction)
         label_rel = layout.label_rel(job.split, job.shard, i)
@@ -121,32 +122,31 @@ class ShardWriter:
             render_seed=draws.render_seed, spp=scene.config.render.spp if self.renderer is not None else None,
             denoise=scene.config.render.denoise if self.renderer is not None else None,
             features=feature_records(labels, features.class_id, fraction, center_visible), n_labeled=len(lines),
-            render_s=render_s, denoise_s=denoise_s, frame_s=time.perf_counter() - started,
+            rendered=rendered, render_s=render_s, denoise_s=denoise_s, frame_s=time.perf_counter() - started,
             worker=f"{platform.node()}:{os.getpid()}", worker_rss_mib=_rss_mib())
 
-    def _render(self, draws: FrameDraws, image: Path, exr: Path | None) -> tuple[float | None, float | None]:
-        """Render and write the frame's image (and EXR); a frame whose files an earlier,
-        interrupted run left complete is only posed. Returns seconds in mi.render and in
-        the denoiser (None for a frame not rendered, or not denoised)."""
-        from datagen.render.tonemap import to_srgb8
-
+    def _render(self, draws: FrameDraws, image: Path, exr: Path | None
+                ) -> tuple[float | None, float | None, dict]:
+        """Render and write the frame's image (and EXR). Returns seconds in mi.render and
+        in the denoiser (None when not denoised) and what the render measured
+        (:data:`datagen.dataset.schema.MEASURED_COLUMNS`). A frame whose files an earlier,
+        interrupted run left is rendered again: its measurements live only in the manifest
+        that run did not write, and a shard holds few frames."""
         renderer = self.renderer
-        if image.is_file() and (exr is None or exr.is_file()):
-            renderer.pose(draws.state, draws.look)
-            return None, None
         result = renderer.render(draws.state, draws.look, draws.render_seed, geometry=exr is not None)
         if self._stop():
             raise KeyboardInterrupt
         quality = self.scene.config.render.jpeg_quality
+        srgb, measured = training_image(result, draws.look)
 
         def write() -> None:  # the image first: a frame is complete once its last file exists
-            write_image(image, to_srgb8(result.rgb)[..., ::-1], jpeg_quality=quality)
+            write_image(image, srgb[..., ::-1], jpeg_quality=quality)
             if exr is not None:
                 write_exr(exr, result.rgb, result.depth, result.object_id)
 
         self._writes.append(self._io.submit(write))
         self._wait_for_writes(MAX_PENDING_WRITES)
-        return result.render_s, result.denoise_s
+        return result.render_s, result.denoise_s, measured
 
     def _wait_for_writes(self, keep: int) -> None:
         """Wait until at most ``keep`` image writes are pending; re-raise their errors."""

@@ -26,13 +26,10 @@ __all__ = [
 ]
 
 
-
-
-
-
-
-def mitsuba_mesh(name: str, vertices: ArrayLike, faces: ArrayLike, bsdf=None):
-    """A ``mi.Mesh`` from ``(V, 3)`` vertices and ``(F, 3)`` faces (current variant)."""
+def mitsuba_mesh(name: str, vertices: ArrayLike, faces: ArrayLike, bsdf=None, texcoords: ArrayLike | None = None,
+                 emitter=None):
+    """A ``mi.Mesh`` from ``(V, 3)`` vertices and ``(F, 3)`` faces (current variant), with
+    ``(V, 2)`` texture coordinates and an area ``emitter`` when given."""
     import mitsuba as mi
 
     v = np.ascontiguousarray(vertices, dtype=np.float32)
@@ -41,10 +38,15 @@ def mitsuba_mesh(name: str, vertices: ArrayLike, faces: ArrayLike, bsdf=None):
     props.set_id(name)
     if bsdf is not None:
         props["bsdf"] = bsdf
-    mesh = mi.Mesh(name, len(v), len(f), props=props, has_vertex_normals=False)
+    if emitter is not None:
+        props["emitter"] = emitter
+    mesh = mi.Mesh(name, len(v), len(f), props=props, has_vertex_normals=False,
+                   has_vertex_texcoords=texcoords is not None)
     params = mi.traverse(mesh)
     set_buffer(params, "vertex_positions", v)
     set_buffer(params, "faces", f)
+    if texcoords is not None:
+        set_buffer(params, "vertex_texcoords", np.asarray(texcoords, dtype=np.float32))
     params.update()
     return mesh
 

@@ -44,6 +44,7 @@ from datagen.render.mitsuba import (
 )
 from datagen.render.runtime import use_variant
 from datagen.render.tonemap import exposure_scale, haze
+from datagen.render.world import CLOUD_LAYERS, SEA_COLOUR, SURFACES, World
 from datagen.scene.look import FrameLook, Material, neutral_look, sun_direction_world
 
 if TYPE_CHECKING:
@@ -56,6 +57,8 @@ __all__ = ["RenderResult", "Renderer", "visibility_tolerance_m"]
 #: Sea level is world z = 0; the sea plane is a square this many metres across (its edge
 #: then lies under 0.04 degrees below the horizon, where sunsky is black, seen from 8 km).
 SEA_SIZE_M: Final = 2.0e7
+#: With clouds, the render frame's origin is at a multiple of this altitude (see Renderer._render_origin).
+CLOUD_REFERENCE_STEP_M: Final = 50.0
 
 
 def visibility_tolerance_m(distance_m: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -73,6 +76,8 @@ class RenderResult:
     object_id: NDArray[np.uint32] | None  # (H, W); both None unless the geometry pass ran
     render_s: float  # seconds inside mi.render
     denoise_s: float | None = None  # seconds in the denoiser (None: not denoised)
+    surface: NDArray[np.uint8] | None = None  # (H, W) datagen.render.world.SURFACES codes (geometry pass)
+    measured: dict | None = None  # what the camera model measured (datagen.render.sensor.apply_sensor)
 
 
 def _principled(m: Material) -> dict:
@@ -97,8 +102,21 @@ class Renderer:
         self.variant = use_variant(variant or config.render.variant)
         self.config = config
         cam = config.camera
-        self.intrinsics = scene.intrinsics if width is None and height is None else \
+        self.world = World(config, SEA_SIZE_M)
+        #: The image the renderer returns; with lens distortion, the pinhole render has a margin.
+        self.output_intrinsics = scene.intrinsics if width is None and height is None else \
             Intrinsics.from_hfov_deg(width or cam.width, height or cam.height, cam.hfov_deg)
+        sensor = config.randomization.sensor
+        self.sensor = sensor if sensor.enabled else None
+        self.margin_px = 0
+        if self.sensor is not None and sensor.distortion:
+            from datagen.render.sensor import distortion_margin_px
+
+            self.margin_px = distortion_margin_px(self.output_intrinsics, sensor.k1, sensor.k2, sensor.tangential)
+        #: The pinhole render's grid (the output image grown by the margin).
+        self.intrinsics = self.output_intrinsics.with_margin(self.margin_px)
+        #: Run the geometry pass on every frame: the camera model and the image statistics need it.
+        self.always_geometry = self.sensor is not None or self.world.any
         self.spp = spp or config.render.spp
         self.denoise = config.render.denoise
         self.guides = self.denoise != "off" and config.render.denoise_guides
@@ -107,6 +125,7 @@ class Renderer:
 
             oidn_version()  # one line saying how to install it, before any rendering
         first = neutral_look(config)
+        sea_bsdf, self._sea_prefix = self.world.sea_bsdf(_principled(Material(SEA_COLOUR, 0.1, 0.0, 0.5)))
         integrator: dict = {"type": "path", "max_depth": config.render.max_depth}
         if self.guides:  # the beauty channels are the path tracer's own (same samples, same bytes)
             from datagen.render.denoise import guided_integrator
@@ -118,7 +137,8 @@ class Renderer:
             "sensor": sensor_dict(self.intrinsics, np.eye(4), self.spp),
             # Mitsuba 3.9's sunsky is z-up, like our world frame (measured: black below z = 0).
             "sky": {"type": "sunsky", "sun_direction": [0.0, 0.5, 0.866]},
-            "sea": {"type": "rectangle", "bsdf": _principled(Material((0.01, 0.03, 0.05), 0.1, 0.0, 0.5))},
+            "sea": {"type": "rectangle", "bsdf": sea_bsdf},
+            **self.world.cloud_shapes(),
         }
         self._parts: dict[str, list[tuple[str, str]]] = {}  # object -> [(param key prefix, material class)]
         meshes = {}
@@ -128,15 +148,24 @@ class Renderer:
             self._parts[obj] = []
             for i, (part, tm) in enumerate(mesh.parts.items()):
                 cls = material_class(part)
-                bsdf = mi.load_dict(_principled(first.materials[obj][cls]))
                 key = f"{obj}_p{i}"  # unique: scalar variants tell objects apart by shape id
-                shape = mitsuba_mesh(f"{obj}.{part}", tm.vertices, tm.faces, bsdf)
+                if self.world.wears_livery(obj, cls):
+                    vertices, faces, uv = self.world.livery_part(obj, mesh, tm)
+                    bsdf = mi.load_dict(dict(_principled(first.materials[obj][cls]),
+                                             base_color=self.world.livery_base_color()))
+                    shape = mitsuba_mesh(f"{obj}.{part}", vertices, faces, bsdf, texcoords=uv)
+                    cls = "livery"
+                else:
+                    bsdf = mi.load_dict(_principled(first.materials[obj][cls]))
+                    shape = mitsuba_mesh(f"{obj}.{part}", tm.vertices, tm.faces, bsdf)
                 group[key] = shape
                 meshes[(obj, key)] = shape
                 self._parts[obj].append((f"{obj}_group.{key}", cls))
             description[f"{obj}_group"] = group
             description[obj] = {"type": "instance", "shapegroup": {"type": "ref", "id": f"{obj}_group"}}
         self._hose_points = None
+        self._sky_probe = None
+        self._camera_render = np.zeros(3)
         self.scene = None
         self._scene_dict = description
         self._meshes = meshes
@@ -154,6 +183,7 @@ class Renderer:
         self._hose_points = hose_points
         # Map every shape's registry id to its object id (scalar variants name shapes instead).
         self._id_table = np.zeros(1, dtype=np.uint32)
+        self._background: dict[int, str] = {}
         if self.variant.startswith("scalar"):
             return
         lookup = {}
@@ -163,6 +193,10 @@ class Renderer:
         self._id_table = np.zeros(max(lookup) + 1, dtype=np.uint32)
         for k, v in lookup.items():
             self._id_table[k] = v
+        # The background shapes by registry id: the sea and the cloud layers.
+        sea = next(shape for shape in self.scene.shapes() if str(shape.id()) == "sea")
+        for name, shape in (("sea", sea), *self.world.cloud_meshes.items()):
+            self._background[int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0])] = name
 
     # -- per frame ----------------------------------------------------------------------------
     def pose(self, state: FrameState, look: FrameLook) -> None:
@@ -184,25 +218,90 @@ class Renderer:
         mi = self._mi
         p = self.params
         cam_pos = state.world_from_cam[:3, 3]
-        render_from_world = make_transform(np.eye(3), -cam_pos)
+        origin = self._render_origin(cam_pos)
+        render_from_world = make_transform(np.eye(3), -origin)
         self._world_from_cam = state.world_from_cam
+        self._camera_render = cam_pos - origin
+        liveries = self.world.livery_textures(look)
         for obj in RIGID_OBJECTS:
             p[f"{obj}.to_world"] = mi.Transform4f((render_from_world @ state.world_from(obj)).tolist())
             for key, cls in self._parts[obj]:
-                self._set_material(f"{key}.bsdf", look.materials[obj][cls])
+                if cls == "livery":
+                    self._set_livery(f"{key}.bsdf", look, obj, liveries.get(obj))
+                else:
+                    self._set_material(f"{key}.bsdf", look.materials[obj][cls])
         self._set_material("hose.bsdf", look.materials["hose"]["rubber"])
-        hose = hose_vertices(state.hose_points_world - cam_pos)
+        hose = hose_vertices(state.hose_points_world - origin)
         set_buffer(p, "hose.vertex_positions", hose.astype(np.float32))
         sensor = world_from_micam(render_from_world @ state.world_from_cam)
         p["sensor.to_world"] = mi.Transform4f(sensor.tolist())
-        sea = make_transform(np.eye(3), [0.0, 0.0, -cam_pos[2]]) @ np.diag([SEA_SIZE_M / 2, SEA_SIZE_M / 2, 1.0, 1.0])
+        sea = make_transform(np.eye(3), [0.0, 0.0, -origin[2]]) @ np.diag([SEA_SIZE_M / 2, SEA_SIZE_M / 2, 1.0, 1.0])
         p["sea.to_world"] = mi.Transform4f(sea.tolist())
-        p["sea.bsdf.roughness.value"] = look.sea_roughness
+        p[f"{self._sea_prefix}.roughness.value"] = look.sea_roughness_applied
         p["sky.sun_direction"] = mi.Vector3f(*(float(v) for v in sun_direction_world(state, look)))
         p["sky.turbidity"] = look.turbidity
         p["sky.sun_scale"] = look.sun_scale
         p["sky.sky_scale"] = look.sky_scale
+        self.world.apply(p, look, float(origin[2]), self._sea_prefix,
+                         self._sky_irradiance(p) if self.world.clouds else None)
         p.update()
+
+    @property
+    def camera_render(self) -> NDArray[np.float64]:
+        """The posed camera's position in the render frame (the origin, or with clouds a
+        point at most :data:`CLOUD_REFERENCE_STEP_M` / 2 from it: :meth:`_render_origin`)."""
+        return self._camera_render.copy()
+
+    def _render_origin(self, cam_pos: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Where the render frame's origin is in the world: the camera, or with clouds the
+        point above it at a multiple of :data:`CLOUD_REFERENCE_STEP_M` metres altitude, so
+        that the cloud layers' meshes stay where they are while the camera climbs or sinks
+        a few metres (Mitsuba rebuilds a mesh's acceleration structure when it moves)."""
+        if not self.world.clouds:
+            return np.asarray(cam_pos, dtype=np.float64)
+        z = round(float(cam_pos[2]) / CLOUD_REFERENCE_STEP_M) * CLOUD_REFERENCE_STEP_M
+        return np.array([cam_pos[0], cam_pos[1], z])
+
+    def _sky_irradiance(self, p) -> NDArray[np.float64]:
+        """RGB irradiance of the frame's sun and sky (as set in ``p``) on a horizontal
+        surface, no occluders, from a fixed stratified set of a probe emitter's own
+        importance samples (deterministic; the scene itself is not updated for it)."""
+        mi, dr = self._mi, self._dr
+        if self._sky_probe is None:
+            self._sky_probe = mi.load_dict({"type": "sunsky", "sun_direction": [0.0, 0.5, 0.866]})
+            self._sky_probe_params = mi.traverse(self._sky_probe)
+        q = self._sky_probe_params
+        for key in ("sun_direction", "turbidity", "sun_scale", "sky_scale"):
+            q[key] = p[f"sky.{key}"]
+        q.update()
+        sky = self._sky_probe
+        scalar = self.variant.startswith("scalar")
+        n = 16 if scalar else 64  # the scalar fallback samples one direction per call
+        grid = ((np.stack(np.meshgrid(np.arange(n), np.arange(n)), -1).reshape(-1, 2) + 0.5) / n).astype(np.float32)
+        if scalar:
+            total = np.zeros(3)
+            for u, v in grid:
+                ds, weight = sky.sample_direction(dr.zeros(mi.Interaction3f), mi.Point2f(float(u), float(v)))
+                total += np.array([weight[c] for c in range(3)], dtype=np.float64) * max(float(ds.d.z), 0.0)
+            return total / len(grid)
+        it = dr.zeros(mi.Interaction3f, n * n)
+        ds, weight = sky.sample_direction(it, mi.Point2f(mi.Float(grid[:, 0]), mi.Float(grid[:, 1])))
+        cos = dr.maximum(ds.d.z, 0.0)
+        e = [dr.mean(weight[c] * cos) for c in range(3)]
+        dr.eval(e)
+        return np.array([float(v[0]) if hasattr(v, "__len__") else float(v) for v in e])
+
+    def _set_livery(self, prefix: str, look: FrameLook, obj: str, texture) -> None:
+        """A painted part under its object's livery: the texture is the base colour; the
+        paint's draws (or, for bare metal, the metal's) give the rest."""
+        p = self.params
+        bare = getattr(look, f"{obj}_livery", None) == "bare_metal"
+        m = look.materials[obj]["metal" if bare else "paint"]
+        if texture is not None:
+            p[f"{prefix}.base_color.data"] = texture
+        p[f"{prefix}.roughness.value"] = m.roughness
+        p[f"{prefix}.metallic.value"] = m.metallic
+        p[f"{prefix}.specular"] = m.specular
 
     def _set_material(self, prefix: str, m: Material) -> None:
         p = self.params
@@ -230,13 +329,28 @@ class Renderer:
             start = time.perf_counter()
             rgb = self._denoised(image)
             denoise_s = time.perf_counter() - start
-        depth = ids = None
+        depth = ids = surface = None
         if geometry or look.haze_visibility_m is not None:
-            depth, ids = self.geometry_pass()
-        rgb *= exposure_scale(look.exposure_ev)
-        if look.haze_visibility_m is not None:
+            depth, ids, surface = self.geometry_pass()
+        elif self.always_geometry:  # the camera model and the statistics: half resolution will do
+            depth, ids, surface = self.geometry_pass(2)
+        if self.sensor is None:
+            rgb *= exposure_scale(look.exposure_ev)
+            if look.haze_visibility_m is not None:
+                rgb = haze(rgb, depth, ids, look.haze_visibility_m)
+            return RenderResult(rgb, depth, ids, render_s, denoise_s, surface)
+        from datagen.render.sensor import apply_sensor
+
+        if look.haze_visibility_m is not None:  # the atmosphere comes before the lens
             rgb = haze(rgb, depth, ids, look.haze_visibility_m)
-        return RenderResult(rgb, depth, ids, render_s, denoise_s)
+        sun_world = sun_direction_world(state, look)
+        t_sun, _, _ = self.cast(self._camera_render, sun_world[None, :].astype(np.float32))
+        out = apply_sensor(rgb, look, state, render=self.intrinsics, output=self.output_intrinsics,
+                           margin_px=self.margin_px, depth=depth, ids=ids, surface=surface,
+                           sun_cam=state.cam_from_world[:3, :3] @ sun_world,
+                           sun_transmittance=float(not np.isfinite(t_sun[0])),
+                           auto_exposure=self.sensor.auto_exposure)
+        return RenderResult(out.rgb, out.depth, out.object_id, render_s, denoise_s, out.surface, out.measured)
 
     def _denoised(self, image) -> NDArray[np.float32]:
         """OIDN on the render's linear RGB, guided by its albedo and normal channels when
@@ -247,56 +361,108 @@ class Renderer:
         out = denoise_render(image, guides=self.guides, quality=self.config.render.denoise_quality)
         return np.maximum(np.array(out, dtype=np.float32), np.float32(0.0))
 
-    @functools.cached_property
-    def _pixel_rays(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-        """Unit directions (camera frame) through every pixel centre, and their z
-        components (z-depth per unit of ray length); computed once."""
+    @functools.cache  # noqa: B019 (one renderer per process; two strides at most)
+    def _pixel_rays(self, stride: int = 1) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        """Unit directions (camera frame) through every pixel centre (``stride`` 1) or
+        through the centre of every ``stride`` x ``stride`` block, and their z components
+        (z-depth per unit of ray length); computed once."""
         k = self.intrinsics
-        uu, vv = np.meshgrid(np.arange(k.width) + 0.5, np.arange(k.height) + 0.5)
+        w, h = -(-k.width // stride), -(-k.height // stride)
+        uu, vv = np.meshgrid(np.arange(w) * stride + stride / 2, np.arange(h) * stride + stride / 2)
         d_cam = np.stack([(uu - k.cx) / k.fx, (vv - k.cy) / k.fy, np.ones_like(uu)], axis=-1).reshape(-1, 3)
         norm = np.linalg.norm(d_cam, axis=1)
         return (d_cam / norm[:, None]).astype(np.float32), (1.0 / norm).astype(np.float32)
 
     def cast(self, origin_render: NDArray, directions_render: NDArray):
-        """Intersect rays (render frame); returns (t, object id) as numpy arrays."""
-        mi, dr = self._mi, self._dr
+        """Intersect rays (render frame); returns (t, object id, surface) as numpy arrays,
+        ``surface`` indexing :data:`datagen.render.world.SURFACES`. A ray passes through a
+        cloud layer where the layer's opacity is below one half (Mitsuba's intersection
+        sees the layer's cells; the mask is a texture)."""
         n = len(directions_render)
-        if self.variant.startswith("scalar"):
-            return self._cast_scalar(origin_render, directions_render)
-        o = np.broadcast_to(np.asarray(origin_render, dtype=np.float32), (n, 3))
-        ray = mi.Ray3f(jit_vectors(mi.Point3f, o), jit_vectors(mi.Vector3f, directions_render))
-        si = self.scene.ray_intersect(ray, ray_flags=mi.RayFlags.Minimal, coherent=True)
+        directions = np.asarray(directions_render, dtype=np.float32)
+        origins = np.broadcast_to(np.asarray(origin_render, dtype=np.float32), (n, 3)).copy()
+        t = np.full(n, np.inf)
+        ids = np.zeros(n, dtype=np.uint32)
+        surface = np.zeros(n, dtype=np.uint8)
+        travelled = np.zeros(n)
+        todo = np.arange(n)
+        backgrounds = ("sea", *CLOUD_LAYERS)
+        for _ in range(len(CLOUD_LAYERS) + 1):
+            valid, hit_t, hit_ids, background, uv = self._intersect(origins[todo], directions[todo])
+            surface_now = np.where(valid, SURFACES.index("object"), SURFACES.index("sky")).astype(np.uint8)
+            surface_now[background == 0] = SURFACES.index("sea")
+            passing = np.zeros(len(todo), dtype=bool)
+            for code, name in enumerate(backgrounds[1:], start=1):
+                on = background == code
+                if on.any():
+                    surface_now[on] = SURFACES.index("cloud")
+                    passing[np.flatnonzero(on)[self.world.cloud_opacity_at(name, uv[on]) < 0.5]] = True
+            done = ~passing
+            idx = todo[done]
+            t[idx] = travelled[idx] + hit_t[done]
+            ids[idx] = hit_ids[done]
+            surface[idx] = surface_now[done]
+            if not passing.any():
+                break
+            go = todo[passing]
+            step = hit_t[passing] + 1e-3 * np.maximum(hit_t[passing], 1.0)
+            travelled[go] += step
+            origins[go] += directions[go] * step[:, None].astype(np.float32)
+            todo = go
+        return t, ids, surface
+
+    def _intersect(self, origins: NDArray[np.float32], directions: NDArray[np.float32]):
+        """First hits of rays: (valid, t (inf on a miss), object id, background code
+        (index into ``("sea", *CLOUD_LAYERS)``, -1 for none), surface uv (N, 2))."""
+        mi, dr = self._mi, self._dr
+        n = len(origins)
+        if self.variant.startswith("scalar"):  # one ray at a time (slow): shapes go by their names
+            valid, hit_t = np.zeros(n, dtype=bool), np.full(n, np.inf)
+            ids, background, uv = np.zeros(n, np.uint32), np.full(n, -1), np.zeros((n, 2))
+            codes = {name: c for c, name in enumerate(("sea", *CLOUD_LAYERS))}
+            for i in range(n):
+                ray = mi.Ray3f(mi.Point3f(*(float(v) for v in origins[i])),
+                               mi.Vector3f(*(float(v) for v in directions[i])))
+                si = self.scene.ray_intersect(ray)
+                if si.is_valid():
+                    valid[i], hit_t[i], uv[i] = True, si.t, (si.uv.x, si.uv.y)
+                    shape = str(si.shape.id())
+                    name = shape.split("_")[0]  # shape ids are object_pN or hose
+                    ids[i] = object_id(name) if name in OBJECT_NAMES else 0
+                    background[i] = codes.get(shape, -1)
+            return valid, hit_t, ids, background, uv
+        ray = mi.Ray3f(jit_vectors(mi.Point3f, origins), jit_vectors(mi.Vector3f, directions))
+        si = self.scene.ray_intersect(ray, ray_flags=mi.RayFlags.Minimal | mi.RayFlags.UV, coherent=True)
         valid_dr, shape_dr = si.is_valid(), dr.reinterpret_array(mi.UInt32, si.shape)
-        dr.eval(valid_dr, si.t, shape_dr)
+        dr.eval(valid_dr, si.t, shape_dr, si.uv)
         valid = np.asarray(valid_dr, dtype=bool)
-        t = np.where(valid, np.asarray(si.t, dtype=np.float64), np.inf)
-        shape_ids = np.asarray(shape_dr, dtype=np.int64)
-        shape_ids = np.where(valid & (shape_ids < len(self._id_table)), shape_ids, 0)
-        return t, self._id_table[shape_ids]
+        hit_t = np.where(valid, np.asarray(si.t, dtype=np.float64), np.inf)
+        shape_ids = np.where(valid, np.asarray(shape_dr, dtype=np.int64), -1)
+        in_table = (shape_ids >= 0) & (shape_ids < len(self._id_table))
+        ids = self._id_table[np.where(in_table, shape_ids, 0)]
+        background = np.full(n, -1)
+        for code, name in enumerate(("sea", *CLOUD_LAYERS)):
+            key = next((k for k, v in self._background.items() if v == name), None)
+            if key is not None:
+                background[shape_ids == key] = code
+        uv = np.stack([np.asarray(si.uv.x), np.asarray(si.uv.y)], axis=1) if (background > 0).any() \
+            else np.zeros((n, 2))
+        return valid, hit_t, ids, background, uv
 
-    def _cast_scalar(self, origin, directions):
-        """:meth:`cast` one ray at a time, for the scalar_rgb fallback (slow)."""
-        mi = self._mi
-        o = mi.Point3f(*(float(v) for v in origin))
-        t = np.full(len(directions), np.inf)
-        ids = np.zeros(len(directions), dtype=np.uint32)
-        for i, d in enumerate(directions):
-            ray = mi.Ray3f(o, mi.Vector3f(*(float(v) for v in d)))
-            si = self.scene.ray_intersect(ray)
-            if si.is_valid():
-                t[i] = si.t
-                name = str(si.shape.id()).split("_")[0]  # shape ids are object_pN or hose
-                ids[i] = object_id(name) if name in OBJECT_NAMES else 0
-        return t, ids
-
-    def geometry_pass(self) -> tuple[NDArray[np.float32], NDArray[np.uint32]]:
-        """Camera z-depth and object id at every pixel centre."""
+    def geometry_pass(self, stride: int = 1) -> tuple[NDArray[np.float32], NDArray[np.uint32], NDArray[np.uint8]]:
+        """Camera z-depth, object id and surface (:data:`~datagen.render.world.SURFACES`)
+        at every pixel centre; with ``stride`` 2, one ray per 2 x 2 block (at its centre),
+        repeated over the block (what the camera model and the image statistics need)."""
         k = self.intrinsics
-        d_cam, z_per_t = self._pixel_rays
+        d_cam, z_per_t = self._pixel_rays(stride)
+        w, h = -(-k.width // stride), -(-k.height // stride)
         r = self._world_from_cam[:3, :3].astype(np.float32)  # the render frame shares the world's axes
-        t, ids = self.cast(np.zeros(3), d_cam @ r.T)
-        depth = (t * z_per_t).reshape(k.height, k.width).astype(np.float32)
-        return depth, ids.reshape(k.height, k.width).astype(np.uint32)
+        t, ids, surface = self.cast(self._camera_render, d_cam @ r.T)
+        out = ((t * z_per_t).reshape(h, w).astype(np.float32), ids.reshape(h, w).astype(np.uint32),
+               surface.reshape(h, w).astype(np.uint8))
+        if stride == 1:
+            return out
+        return tuple(np.repeat(np.repeat(a, stride, axis=0), stride, axis=1)[:k.height, :k.width] for a in out)
 
     def feature_visibility(self, state: FrameState, features: FeatureTable
                            ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
@@ -306,10 +472,11 @@ class Renderer:
         world_from_obj = np.stack([state.world_from(o) for o in features.objects])[features.object_index]
         pts = np.concatenate([features.points_model, features.center_model[:, None]], axis=1)  # (F, P+1, 3)
         world = np.einsum("fij,fpj->fpi", world_from_obj[:, :3, :3], pts) + world_from_obj[:, None, :3, 3]
-        rel = world.reshape(-1, 3) - cam_pos  # the render frame: camera at the origin
+        rel = world.reshape(-1, 3) - cam_pos  # from the camera
         tolerance = visibility_tolerance_m(np.linalg.norm(rel, axis=1))
         in_front = rel @ state.world_from_cam[:3, 2] > 0
-        seen = (visible(self.scene, np.zeros(3), rel, tolerance) & in_front).reshape(world.shape[:2])
+        origin = self._camera_render  # the camera in the render frame
+        seen = (visible(self.scene, origin, rel + origin, tolerance) & in_front).reshape(world.shape[:2])
         p = features.points_model.shape[1]
         mask = np.arange(p)[None, :] < features.n_points[:, None]
         fraction = (seen[:, :p] & mask).sum(axis=1) / features.n_points

@@ -11,7 +11,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["WHITE_RADIANCE", "exposure_scale", "haze", "to_srgb8"]
+__all__ = ["IMAGE_STATISTICS", "WHITE_RADIANCE", "exposure_scale", "haze", "image_statistics", "to_srgb8"]
 
 #: Linear radiance that maps to sRGB white at 0 EV (sunsky radiance is in W/(m^2 sr nm)-like units).
 WHITE_RADIANCE: Final = 0.7
@@ -48,3 +48,22 @@ def haze(rgb: NDArray[np.float32], depth: NDArray[np.float32], ids: NDArray[np.u
     airlight = rgb[sky].mean(axis=0) if sky.any() else rgb.reshape(-1, 3).mean(axis=0)
     transmittance = np.exp(-np.where(np.isfinite(depth), depth, np.inf) / visibility_m)[..., None]
     return (rgb * transmittance + airlight * (1 - transmittance)).astype(np.float32)
+
+
+#: The image statistics a manifest records per rendered frame (:func:`image_statistics`).
+IMAGE_STATISTICS: Final = ("image_mean_luminance", "image_rms_contrast", "share_sky", "share_sea", "share_cloud",
+                           "share_object")
+
+
+def image_statistics(srgb8: NDArray[np.uint8], surface: NDArray[np.uint8] | None,
+                     surfaces: tuple[str, ...] = ("sky", "sea", "cloud", "object")) -> dict[str, float | None]:
+    """What the final training image shows: its mean Rec. 709 luma (sRGB-encoded, 0-1),
+    RMS contrast (the luma's standard deviation), and the share of pixels whose first hit
+    is each of ``surfaces`` (indexed by the codes of ``surface``; None without one)."""
+    luma = (srgb8.astype(np.float32) @ np.array([0.2126, 0.7152, 0.0722], np.float32)) / np.float32(255.0)
+    stats: dict[str, float | None] = {"image_mean_luminance": float(luma.mean()),
+                                      "image_rms_contrast": float(luma.std())}
+    counts = None if surface is None else np.bincount(surface.ravel(), minlength=len(surfaces)) / surface.size
+    for code, name in enumerate(surfaces):
+        stats[f"share_{name}"] = None if counts is None else float(counts[code])
+    return stats

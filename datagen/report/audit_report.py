@@ -88,6 +88,7 @@ def write_report(result: AuditResult, view: DatasetView, out: Path, *, overlays:
 body {{ font: 14px/1.4 system-ui, sans-serif; margin: 2em; max-width: 1300px; }}
 table {{ border-collapse: collapse; margin: 1em 0; }} td, th {{ border: 1px solid #ccc; padding: 3px 8px; }}
 tr.fail td {{ background: #fdd; }} tr.pass td:nth-child(2) {{ color: #080; }} code {{ font-size: 12px; }}
+td.hist {{ font-family: monospace; letter-spacing: 1px; }}
 figure {{ display: inline-block; margin: 0.5em; }} img {{ max-width: 100%; border: 1px solid #ddd; }}
 .verdict {{ font-weight: bold; color: {'#080' if result.passed else '#c00'}; }}
 </style></head>
@@ -100,6 +101,7 @@ Verdict: <span class="verdict">{verdict}</span></p>
 <table><tr><th>check</th><th>result</th><th>checked</th><th>failures</th><th>worst</th><th>what (worst offenders)</th></tr>
 {''.join(rows)}</table>
 {_learnable_html(result.stats["learnable"], esc)}
+{_appearance_html(result.stats.get("appearance", {}), result.frames, esc)}
 <h2>Parallax: tight-box centre drift from the true centre projection</h2>
 <p>{drift['features']} features in view; median {_fmt(drift['median'])} px, 95th percentile {_fmt(drift['p95'])} px,
 max {_fmt(drift['max'])} px. Corrected boxes are centred on the true centre; a detector trained on tight
@@ -128,6 +130,36 @@ window.addEventListener("load", () => {{
     doc["files"] = ["report.html", *(str(p.relative_to(out)) for p in plots.values())]
     write_text(out / "report.json", json.dumps(doc, indent=2, allow_nan=False, default=_json_default) + "\n")
     return {"json": out / "report.json", "html": out / "report.html", **plots}
+
+
+def _appearance_html(stats: dict, frames: int, esc) -> str:
+    """The appearance section: one row per drawn column, its histogram as a bar strip."""
+    bars = "\u2581\u2582\u2583\u2584\u2585\u2586\u2587\u2588"
+    rows = []
+    for dimension, columns in stats.items():
+        for name, entry in columns.items():
+            if not entry["frames"]:
+                shown = "<td colspan='3'>not drawn (randomizer off)</td>"
+            elif "values" in entry:
+                shown = "<td colspan='3'>" + ", ".join(f"{esc(str(v))}: {n}" for v, n in entry["values"].items()) \
+                    + "</td>"
+            elif "histogram" in entry:
+                top = max(entry["histogram"]) or 1
+                strip = "".join(bars[min(len(bars) - 1, round(c / top * (len(bars) - 1)))] if c else "\u2007"
+                                for c in entry["histogram"])
+                shown = (f"<td>{entry['min']:.4g} to {entry['max']:.4g}</td><td>{entry['mean']:.4g}</td>"
+                         f"<td class='hist' title='{entry['histogram']}'>{strip}</td>")
+            else:
+                shown = "<td colspan='3'></td>"
+            rows.append(f"<tr><td>{esc(dimension)}</td><td><code>{esc(name)}</code></td>"
+                        f"<td>{entry['frames']} of {frames}</td>{shown}</tr>")
+    if not rows:
+        return ""
+    return ("<h2>Appearance: what the dataset's frames drew</h2><p>Per randomization dimension, the frames "
+            "that drew each manifest column and the distribution of the draws (10 bins over the range "
+            "drawn); the image statistics come from the render and its geometry pass.</p>"
+            "<table><tr><th>dimension</th><th>column</th><th>frames</th><th>range</th><th>mean</th>"
+            f"<th>histogram</th></tr>{''.join(rows)}</table>")
 
 
 def _learnable_html(stats: dict, esc) -> str:

@@ -1,4 +1,7 @@
-"""Frames rendered for looking at, not for datasets: ``datagen render`` and the gallery sheet."""
+"""Frames rendered for looking at, not for datasets: ``datagen render`` and the gallery sheet.
+
+Both render a frame as a build does (its whole look, world included, through the camera
+model), so that what a user looks at is what a dataset holds."""
 
 from __future__ import annotations
 
@@ -7,26 +10,31 @@ from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
-from datagen.core.conventions import frame_rng, render_seed
+from datagen.config import override_config
+from datagen.config.schema import WORLD_RANDOMIZERS, world_off
+from datagen.core.conventions import render_seed
 from datagen.files import write_exr, write_image
+from datagen.pipeline.frame import training_image
 from datagen.render.renderer import Renderer
-from datagen.render.tonemap import to_srgb8
 from datagen.scene.approach import FrameStates
-from datagen.scene.look import draw_look
+from datagen.scene.look import frame_look
 from datagen.scene.resolved import Scene
 
 if TYPE_CHECKING:
     from datagen.config.schema import Config
 
-__all__ = ["GALLERY_FRAMES", "GALLERY_SCENES", "render_frames", "write_gallery"]
+__all__ = ["GALLERY_FRAMES", "GALLERY_SCENES", "WORLD_FRAME", "render_frames", "world_tiles", "write_gallery"]
 
 #: The shipped scenes of the gallery, a row each.
 GALLERY_SCENES: Final = ("wingcam55", "podcam15", "dashcam75")
 
+
 def render_frames(config: Config, frames, out: Path, *, spp: int | None = None, scale: float = 1.0,
                   exr: bool = False, seed: int | None = None) -> list[Path]:
     """Render frames of a config into ``out`` as ``{name}-{frame:06d}.png`` (and ``.exr``)."""
-    seed = config.dataset.seed if seed is None else seed
+    if seed is not None:
+        config = override_config(config, {"dataset.seed": seed})
+    seed = config.dataset.seed
     cam = config.camera
     renderer = Renderer(Scene.resolve(config), spp=spp, width=max(1, round(cam.width * scale)),
                         height=max(1, round(cam.height * scale)))
@@ -34,11 +42,12 @@ def render_frames(config: Config, frames, out: Path, *, spp: int | None = None, 
     states = FrameStates(config, seed)
     for i in frames:
         state = states(i)
-        result = renderer.render(state, draw_look(config, frame_rng(seed, i)), render_seed(seed, i),
-                                 geometry=exr or config.render.exr)
+        look = frame_look(config, state)
+        result = renderer.render(state, look, render_seed(seed, i), geometry=exr or config.render.exr)
         stem = Path(out) / f"{config.name}-{i:06d}"
         ext = config.render.image_suffix
-        write_image(stem.with_suffix(ext), to_srgb8(result.rgb)[..., ::-1], jpeg_quality=config.render.jpeg_quality)
+        srgb, _ = training_image(result, look)
+        write_image(stem.with_suffix(ext), srgb[..., ::-1], jpeg_quality=config.render.jpeg_quality)
         written.append(stem.with_suffix(ext))
         if exr or config.render.exr:
             write_exr(stem.with_suffix(".exr"), result.rgb, result.depth, result.object_id)
@@ -48,25 +57,52 @@ def render_frames(config: Config, frames, out: Path, *, spp: int | None = None, 
 
 #: Frames of the gallery: spread over each config's approach chains and distances.
 GALLERY_FRAMES: Final = (0, 7, 21, 45)
+#: The wingcam55 frame of the gallery's world rows: the same frame with each world randomizer
+#: alone, every one off, every one on, and with lens distortion.
+WORLD_FRAME: Final = 25
+
+
+def world_tiles(config: Config) -> dict[str, dict]:
+    """The world rows' tiles: caption -> config overrides of ``config``."""
+    tiles = {"all world randomizers off": world_off()}
+    for name in WORLD_RANDOMIZERS:
+        others = world_off(*(n for n in WORLD_RANDOMIZERS if n != name))
+        tiles[f"{name} only"] = {**others, "randomization.sky.backlit_fraction": 1.0} if name == "backlit sun" \
+            else others
+    tiles["all on, lens distortion"] = {"randomization.sensor.distortion": True}
+    tiles["all on"] = {}
+    return tiles
+
+
+def _tile(config: Config, renderer: Renderer, i: int, tile, caption: str) -> np.ndarray:
+    import cv2
+
+    state = FrameStates(config, config.dataset.seed)(i)
+    look = frame_look(config, state)
+    srgb, _ = training_image(renderer.render(state, look, render_seed(config.dataset.seed, i)), look)
+    image = cv2.resize(srgb[..., ::-1], tile, interpolation=cv2.INTER_AREA)
+    for colour, width in (((0, 0, 0), 3), ((255, 255, 255), 1)):  # legible on sky, cloud and sea
+        cv2.putText(image, caption, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, colour, width, cv2.LINE_AA)
+    return image
 
 
 def write_gallery(configs, out: Path, *, spp: int | None = None, tile=(512, 270)) -> Path:
-    """Render :data:`GALLERY_FRAMES` of each config at twice the tile size, scale
-    them down and write one sheet (a row per config) with captions."""
-    import cv2
-
+    """Render :data:`GALLERY_FRAMES` of each config at twice the tile size, scale them down
+    and write one sheet (a row per config) with captions; then two rows of the world's
+    randomizers on :data:`WORLD_FRAME` of the first config (:func:`world_tiles`)."""
     rows = []
+    size = {"width": 2 * tile[0], "height": 2 * tile[1]}
     for config in configs:
-        seed = config.dataset.seed
-        renderer = Renderer(Scene.resolve(config), spp=spp, width=2 * tile[0], height=2 * tile[1])
-        tiles = []
-        states = FrameStates(config, seed)
-        for i in GALLERY_FRAMES:
-            state = states(i)
-            result = renderer.render(state, draw_look(config, frame_rng(seed, i)), render_seed(seed, i))
-            image = cv2.resize(to_srgb8(result.rgb)[..., ::-1], tile, interpolation=cv2.INTER_AREA)
-            caption = f"{config.name} #{i}  PtD {state.distance_m:.1f} m"
-            cv2.putText(image, caption, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
-            tiles.append(image)
-        rows.append(np.concatenate(tiles, axis=1))
+        renderer = Renderer(Scene.resolve(config), spp=spp, **size)
+        states = FrameStates(config, config.dataset.seed)
+        rows.append(np.concatenate([_tile(config, renderer, i, tile, f"{config.name} #{i}  PtD "
+                                          f"{states(i).distance_m:.1f} m") for i in GALLERY_FRAMES], axis=1))
+    world = []
+    for caption, overrides in world_tiles(configs[0]).items():
+        config = override_config(configs[0], overrides)
+        world.append(_tile(config, Renderer(Scene.resolve(config), spp=spp, **size), WORLD_FRAME, tile,
+                           f"#{WORLD_FRAME}: {caption}"))
+    per_row = len(GALLERY_FRAMES)
+    world += [np.zeros_like(world[0])] * (-len(world) % per_row)
+    rows += [np.concatenate(world[j:j + per_row], axis=1) for j in range(0, len(world), per_row)]
     return write_image(out, np.concatenate(rows, axis=0), jpeg_quality=90)

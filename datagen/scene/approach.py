@@ -35,8 +35,9 @@ regenerated alone on any worker.
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -68,6 +69,8 @@ __all__ = [
 GRAVITY_MPS2 = 9.80665
 #: Turbulence runs this long before an approach starts, so the drogue starts in its stationary motion.
 TURBULENCE_WARMUP_S = 10.0
+#: How much earlier :attr:`FrameState.earlier` is, seconds (image motion by finite differences).
+MOTION_DT_S = 1.0e-3
 #: Points along the hose polyline.
 HOSE_POINTS = 48
 
@@ -105,6 +108,7 @@ class FrameState:
     mount: str
     turbulence_intensity: float
     bank_deg: float
+    earlier: FrameState | None = None  # this state MOTION_DT_S earlier (relative motion: motion blur)
 
     @property
     def cam_from_world(self) -> FloatArray:
@@ -236,6 +240,18 @@ class _Snapshot:
     body_from_cam: FloatArray
     tanker: TankerFlight
     intensity: float
+    # Rates at this instant (tanker frame), for the state MOTION_DT_S earlier (motion blur).
+    probe_velocity: FloatArray = field(default_factory=lambda: np.zeros(3))
+    rotvec_rate: FloatArray = field(default_factory=lambda: np.zeros(3))
+    drogue_velocity: FloatArray = field(default_factory=lambda: np.zeros(3))
+
+    def earlier(self, dt: float) -> _Snapshot:
+        """This snapshot ``dt`` seconds earlier, moved back along its rates (the chain's
+        motion is smooth on that scale: the simulation step is 1/30 s)."""
+        return dataclasses.replace(
+            self, time_s=self.time_s - dt, probe_tanker=self.probe_tanker - dt * self.probe_velocity,
+            attitude_rotvec=self.attitude_rotvec - dt * self.rotvec_rate,
+            drogue_offset=self.drogue_offset - dt * self.drogue_velocity)
 
 
 class _Chain:
@@ -293,9 +309,15 @@ class _Chain:
         self.steps_this_approach += 1
 
     def snap(self) -> _Snapshot:
+        rotation = rotation_from_rotvec(self.rotvec)
+        ptd_receiver = rotation.T @ (self.turbulence.position - self.probe)
+        closing = rotation @ np.clip(self.gains * ptd_receiver, -self.limits, self.limits)
         return _Snapshot(self.approach_number, self.time_s, self.probe.copy(), self.rotvec.copy(),
                          self.turbulence.position.copy(), self.body_from_cam, self.tanker,
-                         self.turbulence.intensity)
+                         self.turbulence.intensity,
+                         probe_velocity=self.turbulence.velocity + closing,
+                         rotvec_rate=self.rotvec * (self.attitude_decay - 1.0) / self.dt,
+                         drogue_velocity=self.turbulence.velocity.copy())
 
 
 def _start_chain(config: Config, seed: int, approach_index: int) -> tuple[_Chain, FloatArray | None]:
@@ -372,7 +394,8 @@ def _read_only(array: FloatArray) -> FloatArray:
     return array
 
 
-def _state(config: Config, frame_index: int, approach_index: int, snap: _Snapshot) -> FrameState:
+def _state(config: Config, frame_index: int, approach_index: int, snap: _Snapshot,
+           earlier: bool = True) -> FrameState:
     world_from_tanker = snap.tanker.world_from_tanker(snap.time_s)
     tanker_from_receiver = make_transform(rotation_from_rotvec(snap.attitude_rotvec), snap.probe_tanker)
     tanker_from_drogue = make_transform(tanker_drogue_rotation(snap.drogue_offset), snap.drogue_offset)
@@ -400,6 +423,7 @@ def _state(config: Config, frame_index: int, approach_index: int, snap: _Snapsho
         mount=config.camera.mount,
         turbulence_intensity=snap.intensity,
         bank_deg=math.degrees(snap.tanker.bank),
+        earlier=_state(config, frame_index, approach_index, snap.earlier(MOTION_DT_S), False) if earlier else None,
     )
 
 

@@ -10,6 +10,7 @@ depend on rendering: labels-only builds record the same draws.
 from __future__ import annotations
 
 import colorsys
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final
@@ -30,7 +31,11 @@ __all__ = [
     "FrameLook",
     "Material",
     "cox_munk_roughness",
+    "cox_munk_slope_variance",
     "draw_look",
+    "draw_world",
+    "frame_look",
+    "monahan_whitecap_fraction",
     "neutral_look",
     "sun_direction_world",
 ]
@@ -43,7 +48,13 @@ SKY_SCALE_LEVELS: Final = 5
 HAZE_VISIBILITY_M: Final = (15_000.0, 60_000.0)
 
 
-def cox_munk_roughness(wind_speed_mps: float) -> float:
+def cox_munk_slope_variance(wind_speed_mps: float) -> float:
+    """Cox and Munk's (1954) mean square slope of a clean sea under a wind of W m/s:
+    0.003 + 5.12e-3 W (both axes together)."""
+    return 0.003 + 5.12e-3 * float(wind_speed_mps)
+
+
+def cox_munk_roughness(wind_speed_mps: float, resolved: float = 0.0) -> float:
     """The principled-BSDF roughness of a sea under a wind of ``wind_speed_mps``.
 
     Cox and Munk (1954) measured the mean square slope of the open sea from sun
@@ -78,6 +89,39 @@ class FrameLook:
     sea_wind_speed_mps: float | None  # the wind the roughness follows (None: drawn uniformly)
     haze_visibility_m: float | None
     materials: dict[str, dict[str, Material]] = field(default_factory=dict)  # object -> class -> material
+    # The world (each None where its randomizer is off; see draw_world).
+    sun_backlit: bool | None = None  # the sun was put near the camera's forward azimuth
+    cloud_deck_coverage: float | None = None
+    cloud_deck_altitude_m: float | None = None  # above sea level
+    cloud_layer_coverage: float | None = None
+    cloud_layer_altitude_m: float | None = None
+    cloud_opacity: float | None = None
+    cloud_albedo: float | None = None
+    cloud_seed: int | None = None  # seeds the layers' noise fields
+    sea_wind_direction_deg: float | None = None  # the wind blows towards (waves)
+    sea_wave_slope_variance: float | None = None  # mean square slope the wave normal map resolves
+    sea_whitecap_fraction: float | None = None
+    sea_colour: tuple[float, float, float] | None = None  # linear RGB body colour
+    sea_seed: int | None = None  # seeds the wave phases and whitecaps
+    receiver_livery: str | None = None
+    tanker_livery: str | None = None
+    livery_weathering: float | None = None
+    livery_seed: int | None = None
+    sensor_iso: float | None = None
+    sensor_exposure_time_s: float | None = None
+    sensor_vignetting: float | None = None
+    sensor_glare: float | None = None
+    sensor_distortion: tuple[float, float, float, float, float] | None = None  # OpenCV k1, k2, p1, p2, k3
+    sensor_jpeg_quality: int | None = None
+    sensor_seed: int | None = None  # seeds the sensor noise
+
+    @property
+    def sea_roughness_applied(self) -> float:
+        """The sea's microfacet roughness the renderer uses: with waves, the slope variance
+        the normal map resolves is taken out of Cox and Munk's total (one sea, not two)."""
+        if self.sea_wave_slope_variance is None or self.sea_wind_speed_mps is None:
+            return self.sea_roughness
+        return cox_munk_roughness(self.sea_wind_speed_mps, resolved=self.sea_wave_slope_variance)
 
 
 def _uniform(rng: np.random.Generator, bounds) -> float:
@@ -132,6 +176,115 @@ def draw_look(config: Config, rng: np.random.Generator) -> FrameLook:
             "rubber": Material(_hsv(rng, (0.0, 0.1), (0.02, 0.06)), _uniform(rng, (0.5, 0.8))),
         }
     return FrameLook(**look, haze_visibility_m=haze, materials=materials)
+
+
+def _log_uniform(rng: np.random.Generator, bounds) -> float:
+    lo, hi = bounds
+    return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
+
+
+def _seed(rng: np.random.Generator) -> int:
+    return int(rng.integers(2**31))
+
+
+def monahan_whitecap_fraction(wind_speed_mps: float) -> float:
+    """Share of the sea covered by whitecaps at a 10 m wind of W m/s: Monahan and
+    O'Muircheartaigh (1980), 3.84e-6 W^3.41 (0.1% at 5 m/s, 1.9% at 12 m/s)."""
+    return float(min(3.84e-6 * max(float(wind_speed_mps), 0.0) ** 3.41, 1.0))
+
+
+def frame_look(config: Config, state: FrameState) -> FrameLook:
+    """The whole look of the frame ``state`` poses: :func:`draw_look` from the frame's own
+    stream, then :func:`draw_world` (what a build renders it with)."""
+    from datagen.core.conventions import frame_rng
+
+    seed = config.dataset.seed
+    return draw_world(config, draw_look(config, frame_rng(seed, state.frame_index)), seed, state)
+
+
+def draw_world(config: Config, look: FrameLook, seed: int, state: FrameState) -> FrameLook:
+    """``look`` with the frame's world drawn onto it: a backlit sun, clouds, sea state,
+    liveries and the sensor, each from its own stream (:func:`datagen.core.conventions.world_rng`)
+    and only where its randomizer is on, so that one switch changes no other draw.
+
+    The weather (clouds, sea) and the aircraft's liveries belong to the approach chain
+    (streams keyed by ``state.approach_index``): the frames of one approach see the same
+    clouds, sea and aircraft, as a camera flying it would. The sun's backlit draw and the
+    sensor's are the frame's own. Cloud altitudes are relative to the tanker's, which is
+    constant over an approach, so that the clouds stay where they are as the camera moves."""
+    from datagen.assets.rig import MOUNTS
+    from datagen.assets.textures import wave_slope_variance
+    from datagen.core.conventions import world_rng
+
+    r = config.randomization
+    world: dict = {}
+    sky = r.sky
+    frame_index, approach_index = state.frame_index, state.approach_index
+    if sky.backlit_fraction > 0.0:
+        rng = world_rng(seed, frame_index, "sun")
+        backlit = bool(rng.random() < sky.backlit_fraction)
+        offset = float(rng.uniform(-sky.backlit_azimuth_deg, sky.backlit_azimuth_deg))
+        world["sun_backlit"] = backlit
+        if backlit:
+            d = MOUNTS[config.camera.mount].direction
+            world["sun_azimuth_deg"] = math.degrees(math.atan2(d[1], d[0])) % 360.0 + offset
+    c = r.clouds
+    if c.enabled:
+        rng = world_rng(seed, approach_index, "clouds")
+        base = float(state.world_from_tanker[2, 3])  # the tanker flies level: one weather per approach
+        side = 1.0 if rng.random() < 0.5 else -1.0
+        world.update(
+            cloud_deck_coverage=_uniform(rng, c.deck_coverage),
+            cloud_deck_altitude_m=base - _uniform(rng, c.deck_below_m),
+            cloud_layer_coverage=_uniform(rng, c.layer_coverage),
+            cloud_layer_altitude_m=base + side * _uniform(rng, c.layer_offset_m),
+            cloud_opacity=_uniform(rng, c.opacity),
+            cloud_albedo=_uniform(rng, c.albedo),
+            cloud_seed=_seed(rng),
+        )
+    sea = r.sea
+    if sea.waves or sea.whitecaps or sea.colour:
+        rng = world_rng(seed, approach_index, "sea")
+        wind = _uniform(rng, sea.wind_speed_mps)  # the approach's wind: waves, whitecaps and glint agree
+        direction = _uniform(rng, sea.wind_direction_deg)
+        colour = colorsys.hsv_to_rgb(float(rng.uniform(0.48, 0.62)), float(rng.uniform(0.55, 0.9)),
+                                     float(rng.uniform(0.025, 0.09)))
+        if sea.model == "cox_munk":
+            world.update(sea_wind_speed_mps=wind, sea_roughness=cox_munk_roughness(wind))
+        if sea.waves:
+            world.update(sea_wind_direction_deg=direction, sea_wave_slope_variance=wave_slope_variance(wind),
+                         sea_wind_speed_mps=wind)
+        if sea.whitecaps:
+            world["sea_whitecap_fraction"] = monahan_whitecap_fraction(wind)
+        if sea.colour:
+            world["sea_colour"] = tuple(float(v) for v in colour)
+        world["sea_seed"] = _seed(rng)
+    lv = r.livery
+    if lv.enabled:
+        rng = world_rng(seed, approach_index, "livery")
+        world.update(
+            receiver_livery=str(lv.schemes[int(rng.integers(len(lv.schemes)))]),
+            tanker_livery=str(lv.schemes[int(rng.integers(len(lv.schemes)))]),
+            livery_weathering=_uniform(rng, lv.weathering),
+            livery_seed=_seed(rng),
+        )
+    s = r.sensor
+    if s.enabled:
+        rng = world_rng(seed, frame_index, "sensor")
+        k1, k2 = _uniform(rng, s.k1), _uniform(rng, s.k2)
+        p1, p2 = _uniform(rng, s.tangential), _uniform(rng, s.tangential)
+        quality = int(rng.integers(s.jpeg_quality[0], s.jpeg_quality[1] + 1))
+        iso, exposure = _log_uniform(rng, s.iso), _log_uniform(rng, s.exposure_time_s)
+        world.update(
+            sensor_iso=iso if s.noise else None,
+            sensor_exposure_time_s=exposure if s.motion_blur else None,
+            sensor_vignetting=_uniform(rng, s.vignetting),
+            sensor_glare=_uniform(rng, s.glare),
+            sensor_distortion=(k1, k2, p1, p2, 0.0) if s.distortion else None,
+            sensor_jpeg_quality=quality if s.jpeg else None,
+            sensor_seed=_seed(rng),
+        )
+    return dataclasses.replace(look, **world) if world else look
 
 
 def neutral_look(config: Config) -> FrameLook:

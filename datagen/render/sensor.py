@@ -1,0 +1,306 @@
+"""The camera after the render: what a real camera does to the light the path tracer
+computed, in the light's order (image arithmetic on numpy arrays, no Mitsuba).
+
+1. motion blur: each pixel averaged along its true image motion over the exposure,
+   centred on the frame's time (:func:`image_motion`, :func:`motion_blur`);
+2. lens distortion: the pinhole render, made with a margin, resampled through OpenCV's
+   Brown-Conrady model (:func:`distort_image`), the model the labels are projected with;
+3. vignetting: ``1 - v r^2`` falloff, ``r`` = 1 at the corners;
+4. veiling glare and ghosts from the sun when it is in or near the view (:func:`sun_glare`);
+5. exposure: fixed (``exposure_ev``) or metered (:func:`auto_exposure_scale`);
+6. photon shot noise and read noise at the drawn ISO (:func:`sensor_noise`);
+7. after the sRGB encoding: a JPEG round trip (:func:`jpeg_round_trip`).
+
+Each step is skipped where its draw is None (its switch off).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from datagen.core.camera import Intrinsics, undistort_px
+from datagen.core.conventions import OBJECT_NAMES, object_id, texture_rng
+from datagen.core.transforms import invert_rigid
+from datagen.render.tonemap import WHITE_RADIANCE, exposure_scale
+
+if TYPE_CHECKING:
+    from datagen.scene.approach import FrameState
+    from datagen.scene.look import FrameLook
+
+__all__ = [
+    "AUTO_EXPOSURE_KEY",
+    "FULL_WELL_E",
+    "READ_NOISE_E",
+    "SensorResult",
+    "apply_sensor",
+    "auto_exposure_scale",
+    "distort_image",
+    "distortion_margin_px",
+    "image_motion",
+    "jpeg_round_trip",
+    "motion_blur",
+    "sensor_noise",
+    "sun_glare",
+]
+
+#: Electrons a pixel holds at ISO 100 (a 4-5 um industrial sensor); ISO S holds 100/S of it.
+FULL_WELL_E: Final = 15_000.0
+#: Read noise, electrons RMS.
+READ_NOISE_E: Final = 3.0
+#: Auto-exposure maps the centre-weighted log-average luminance to this display value.
+AUTO_EXPOSURE_KEY: Final = 0.18
+#: Auto-exposure stays within this many stops of the fixed exposure.
+AUTO_EXPOSURE_STOPS: Final = 2.0
+#: Glare is applied when the sun is within this many degrees outside the field of view.
+GLARE_REACH_DEG: Final = 25.0
+#: Most samples along a pixel's motion.
+MAX_BLUR_SAMPLES: Final = 24
+
+_REC709: Final = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+
+
+@dataclass
+class SensorResult:
+    """The sensor's output and what it measured on the way."""
+
+    rgb: NDArray[np.float32]  # display-linear RGB (1 = white), noise included
+    depth: NDArray[np.float32] | None
+    object_id: NDArray[np.uint32] | None
+    surface: NDArray[np.uint8] | None
+    measured: dict = field(default_factory=dict)  # auto_exposure_ev, motion_blur_px, sun_in_view, sun_glare
+
+
+# --- motion -----------------------------------------------------------------------
+def image_motion(state: FrameState, depth: NDArray[np.float32], ids: NDArray[np.uint32],
+                 intrinsics: Intrinsics, stride: int = 1) -> NDArray[np.float32]:
+    """Image velocity ``(H, W, 2)`` in pixels per second of what each pixel sees: its
+    point (from the z-depth) carried by its object's motion relative to the camera
+    (background: the world's; the sky: the camera's rotation alone), by finite
+    difference against ``state.earlier``. With ``stride`` 2, computed at the top-left
+    pixel of every 2 x 2 block and repeated over it (the motion field is smooth: a
+    quarter of the work)."""
+    full = depth.shape
+    if stride > 1:
+        out = image_motion(state, depth[::stride, ::stride], ids[::stride, ::stride],
+                           Intrinsics(-(-full[1] // stride), -(-full[0] // stride), intrinsics.fx / stride,
+                                      intrinsics.fy / stride, (intrinsics.cx - 0.5) / stride + 0.5,
+                                      (intrinsics.cy - 0.5) / stride + 0.5))
+        return np.repeat(np.repeat(out * np.float32(stride), stride, axis=0), stride, axis=1)[:full[0], :full[1]]
+    before = state.earlier
+    h, w = depth.shape
+    out = np.zeros((h, w, 2), np.float32)
+    if before is None:
+        return out
+    dt = state.time_s - before.time_s
+    k = intrinsics
+    u = (np.arange(w, dtype=np.float32) + 0.5 - k.cx) / k.fx
+    v = (np.arange(h, dtype=np.float32) + 0.5 - k.cy) / k.fy
+    x_n, y_n = np.meshgrid(u, v)
+    finite = np.isfinite(depth)
+    earlier_from_now = {0: before.cam_from_world @ state.world_from_cam}  # the world (sea, clouds, sky)
+    for name in OBJECT_NAMES:
+        body = "drogue" if name == "hose" else name  # the hose moves with its drogue
+        earlier_from_now[object_id(name)] = (before.cam_from_world @ before.world_from(body)
+                                             @ invert_rigid(state.world_from(body)) @ state.world_from_cam)
+    for oid, m in earlier_from_now.items():
+        sel = ids == oid
+        if not sel.any():
+            continue
+        m = m.astype(np.float32)
+        z = np.where(finite[sel], depth[sel], np.float32(1.0))
+        p = np.stack([x_n[sel] * z, y_n[sel] * z, z], axis=-1)
+        at_infinity = ~finite[sel]
+        q = p @ m[:3, :3].T + np.where(at_infinity[:, None], np.float32(0.0), m[:3, 3])
+        qz = np.maximum(q[:, 2], np.float32(1e-6))
+        du = (x_n[sel] - q[:, 0] / qz) * k.fx / dt
+        dv = (y_n[sel] - q[:, 1] / qz) * k.fy / dt
+        out[sel] = np.stack([du, dv], axis=-1)
+    return out
+
+
+def motion_blur(rgb: NDArray[np.float32], displacement_px: NDArray[np.float32]) -> NDArray[np.float32]:
+    """Average each pixel over its displacement during the exposure, centred on the
+    pixel (the frame's time is the middle of the exposure, where the labels are)."""
+    import cv2
+
+    length = float(np.sqrt((displacement_px**2).sum(axis=-1)).max(initial=0.0))
+    if length < 0.25:
+        return rgb
+    n = int(min(MAX_BLUR_SAMPLES, max(2, math.ceil(2.0 * length))))
+    h, w = rgb.shape[:2]
+    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    out = np.zeros_like(rgb)
+    for s in (np.arange(n, dtype=np.float32) + 0.5) / n - 0.5:
+        out += cv2.remap(rgb, gx + s * displacement_px[..., 0], gy + s * displacement_px[..., 1],
+                         cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    return out / np.float32(n)
+
+
+# --- distortion --------------------------------------------------------------------
+def distortion_margin_px(intrinsics: Intrinsics, k1, k2, tangential) -> int:
+    """Pixels the pinhole render must extend beyond the image on every side so that
+    every distorted pixel finds its source, for every lens the ranges allow."""
+    k = intrinsics
+    edge = np.linspace(0.0, 1.0, 33)
+    border = np.concatenate([np.stack([edge * k.width, np.zeros_like(edge)], 1),
+                             np.stack([edge * k.width, np.full_like(edge, k.height)], 1),
+                             np.stack([np.zeros_like(edge), edge * k.height], 1),
+                             np.stack([np.full_like(edge, k.width), edge * k.height], 1)])
+    worst = 0.0
+    for a in k1:
+        for b in k2:
+            for p1 in tangential:
+                for p2 in tangential:
+                    src = undistort_px(border, k, np.array([a, b, p1, p2, 0.0]))
+                    over = np.maximum(np.maximum(-src, src - [k.width, k.height]), 0.0)
+                    worst = max(worst, float(np.nan_to_num(over, nan=1e6).max()))
+    return math.ceil(worst) + 2
+
+
+def distort_image(images: dict[str, NDArray], output: Intrinsics, margin_px: int,
+                  distortion) -> dict[str, NDArray]:
+    """Resample pinhole renders (``output`` grown by ``margin_px`` on every side) into the
+    distorted ``output`` image: each output pixel centre takes the pinhole pixel the lens
+    maps onto it (bilinear for ``rgb``, nearest for the geometry pass)."""
+    import cv2
+
+    w, h = output.width, output.height
+    uu, vv = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    src = undistort_px(np.stack([uu, vv], axis=-1), output, distortion)
+    # Continuous pinhole pixels -> the render's OpenCV grid (integers at pixel centres).
+    map_x = (src[..., 0] + margin_px - 0.5).astype(np.float32)
+    map_y = (src[..., 1] + margin_px - 0.5).astype(np.float32)
+    out = {}
+    for name, img in images.items():
+        if img is None:
+            out[name] = None
+            continue
+        interp = cv2.INTER_LINEAR if name == "rgb" else cv2.INTER_NEAREST
+        src_img = img if img.dtype != np.uint32 else img.astype(np.float32)
+        warped = cv2.remap(src_img, map_x, map_y, interp, borderMode=cv2.BORDER_REPLICATE)
+        out[name] = warped.astype(img.dtype) if img.dtype == np.uint32 else warped
+    return out
+
+
+# --- lens -----------------------------------------------------------------------------
+def vignette(rgb: NDArray[np.float32], strength: float) -> NDArray[np.float32]:
+    """``1 - strength r^2`` with ``r`` the distance from the centre, 1 at the corners."""
+    h, w = rgb.shape[:2]
+    x = (np.arange(w, dtype=np.float32) + 0.5) / w * 2 - 1
+    y = (np.arange(h, dtype=np.float32) + 0.5) / h * 2 - 1
+    r2 = (x[None, :] ** 2 * w * w + y[:, None] ** 2 * h * h) / np.float32(w * w + h * h)
+    return rgb * (1.0 - np.float32(strength) * r2)[..., None]
+
+
+def sun_glare(shape: tuple[int, int], intrinsics: Intrinsics, sun_cam: NDArray, strength: float,
+              radiance: float) -> tuple[NDArray[np.float32] | None, bool]:
+    """Veiling glare (a ``theta0^2 / (theta^2 + theta0^2)`` halo around the sun, theta0 = 2
+    degrees) and three ghosts on the line from the sun through the image centre, in linear
+    radiance, or None when the sun is more than :data:`GLARE_REACH_DEG` outside the view.
+    Also returns whether the sun is inside the image."""
+    import cv2
+
+    h, w = shape
+    k = intrinsics
+    d = np.asarray(sun_cam, dtype=np.float64)
+    d = d / np.linalg.norm(d)
+    corner = np.array([k.cx / k.fx, k.cy / k.fy, 1.0])
+    half_diagonal = math.degrees(math.acos(1.0 / np.linalg.norm(corner)))
+    off_axis = math.degrees(math.acos(np.clip(d[2], -1.0, 1.0)))
+    if strength <= 0.0 or off_axis > half_diagonal + GLARE_REACH_DEG:
+        return None, False
+    x = (np.arange(w, dtype=np.float32) + 0.5 - k.cx) / k.fx
+    y = (np.arange(h, dtype=np.float32) + 0.5 - k.cy) / k.fy
+    rays = np.stack(np.broadcast_arrays(x[None, :], y[:, None], np.float32(1.0)), axis=-1)
+    cos = (rays @ d.astype(np.float32)) / np.linalg.norm(rays, axis=-1)
+    theta = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    halo = np.float32(4.0) / (theta * theta + np.float32(4.0))
+    glare = np.repeat(halo[..., None], 3, axis=-1) * np.float32(strength * radiance)
+    inside = False
+    if d[2] > 0:
+        su, sv = k.fx * d[0] / d[2] + k.cx, k.fy * d[1] / d[2] + k.cy
+        inside = bool(0 <= su < w and 0 <= sv < h)
+        ghosts = np.zeros((h, w, 3), np.float32)
+        for t, radius, tint in ((-0.4, 0.05, (0.6, 0.8, 1.0)), (-0.9, 0.09, (0.7, 1.0, 0.6)),
+                                (0.5, 0.03, (1.0, 0.7, 0.5))):
+            gu, gv = k.cx + t * (su - k.cx), k.cy + t * (sv - k.cy)
+            if not (-w < gu < 2 * w and -h < gv < 2 * h):
+                continue
+            cv2.circle(ghosts, (int(gu - 0.5), int(gv - 0.5)), max(2, int(radius * w)), tint, -1, cv2.LINE_AA)
+        ghosts = cv2.GaussianBlur(ghosts, (0, 0), max(1.0, 0.004 * w))
+        glare += ghosts * np.float32(0.04 * strength * radiance)
+    return glare, inside
+
+
+# --- exposure and noise ------------------------------------------------------------------
+def auto_exposure_scale(rgb: NDArray[np.float32]) -> float:
+    """The factor that maps the centre-weighted log-average luminance of linear ``rgb``
+    to :data:`AUTO_EXPOSURE_KEY`, within :data:`AUTO_EXPOSURE_STOPS` of the fixed
+    exposure's (``1 / WHITE_RADIANCE``)."""
+    h, w = rgb.shape[:2]
+    step = max(1, min(h, w) // 128)  # metering needs no more than ~128 x 240 samples
+    sub = rgb[::step, ::step]
+    lum = sub @ _REC709
+    y = (np.arange(sub.shape[0]) + 0.5) / sub.shape[0] - 0.5
+    x = (np.arange(sub.shape[1]) + 0.5) / sub.shape[1] - 0.5
+    weight = np.exp(-(x[None, :] ** 2 + y[:, None] ** 2) / (2 * 0.25**2))
+    log_mean = float((weight * np.log(np.maximum(lum, 1e-6))).sum() / weight.sum())
+    fixed = 1.0 / WHITE_RADIANCE
+    metered = AUTO_EXPOSURE_KEY / math.exp(log_mean)
+    return float(np.clip(metered, fixed * 2**-AUTO_EXPOSURE_STOPS, fixed * 2**AUTO_EXPOSURE_STOPS))
+
+
+def sensor_noise(rgb: NDArray[np.float32], iso: float, rng: np.random.Generator) -> NDArray[np.float32]:
+    """Photon shot noise (Poisson, as its Gaussian limit) and read noise on display-linear
+    ``rgb`` (1 = a full pixel): a full pixel holds ``FULL_WELL_E * 100 / iso`` electrons."""
+    electrons = FULL_WELL_E * 100.0 / float(iso)
+    signal = np.clip(rgb, 0.0, 1.0)
+    sigma = np.sqrt(signal * np.float32(electrons) + np.float32(READ_NOISE_E**2)) / np.float32(electrons)
+    return rgb + sigma * rng.standard_normal(rgb.shape, dtype=np.float32)
+
+
+def jpeg_round_trip(srgb8: NDArray[np.uint8], quality: int) -> NDArray[np.uint8]:
+    """An 8-bit RGB image through a JPEG encoder and decoder at ``quality``."""
+    import cv2
+
+    ok, data = cv2.imencode(".jpg", np.ascontiguousarray(srgb8[..., ::-1]), [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    if not ok:
+        raise RuntimeError("OpenCV could not encode a JPEG")
+    return cv2.imdecode(data, cv2.IMREAD_COLOR)[..., ::-1]
+
+
+# --- the whole camera --------------------------------------------------------------------
+def apply_sensor(rgb: NDArray[np.float32], look: FrameLook, state: FrameState, *, render: Intrinsics,
+                 output: Intrinsics, margin_px: int, depth, ids, surface, sun_cam: NDArray,
+                 sun_transmittance: float, auto_exposure: bool) -> SensorResult:
+    """Linear radiance (the render grid, ``margin_px`` wider than ``output`` on every side)
+    to display-linear RGB on the output grid, through the frame's drawn camera."""
+    measured: dict = {"motion_blur_px": None, "auto_exposure_ev": None, "sun_in_view": None}
+    if look.sensor_exposure_time_s is not None and depth is not None:
+        displacement = image_motion(state, depth, ids, render, stride=2) * np.float32(look.sensor_exposure_time_s)
+        measured["motion_blur_px"] = float(np.sqrt((displacement**2).sum(axis=-1)).max(initial=0.0))
+        rgb = motion_blur(rgb, displacement)
+    if look.sensor_distortion is not None:
+        warped = distort_image({"rgb": rgb, "depth": depth, "ids": ids, "surface": surface}, output, margin_px,
+                               np.asarray(look.sensor_distortion))
+        rgb, depth, ids, surface = warped["rgb"], warped["depth"], warped["ids"], warped["surface"]
+    if look.sensor_vignetting:
+        rgb = vignette(rgb, look.sensor_vignetting)
+    if look.sensor_glare is not None:
+        sun_radiance = 2.0 * WHITE_RADIANCE * look.sun_scale * sun_transmittance
+        glare, inside = sun_glare(rgb.shape[:2], output, sun_cam, look.sensor_glare, sun_radiance)
+        measured["sun_in_view"] = inside
+        if glare is not None:
+            rgb = rgb + glare
+    fixed = float(exposure_scale(0.0))
+    scale = auto_exposure_scale(rgb) if auto_exposure else fixed
+    measured["auto_exposure_ev"] = math.log2(scale / fixed) if auto_exposure else None
+    rgb = rgb * np.float32(scale * 2.0**look.exposure_ev)
+    if look.sensor_iso is not None:
+        rgb = sensor_noise(rgb, look.sensor_iso, texture_rng(look.sensor_seed))
+    return SensorResult(np.maximum(rgb, np.float32(0.0)).astype(np.float32), depth, ids, surface, measured)
