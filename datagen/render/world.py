@@ -7,8 +7,9 @@ off renders the scene it rendered before, bit for bit. Texture contents change p
 (data updates, no new kernel); texture tilings are fixed per build (Mitsuba bakes
 ``to_uv`` into its kernels).
 
-- Clouds: two horizontal rectangles (deck and scattered layer) whose ``mask`` opacity is
-  :func:`datagen.assets.textures.cloud_opacity`, over a two-sided white diffuse BSDF.
+- Clouds: two horizontal sheets of cells (deck and scattered layer) whose ``mask`` opacity
+  is :func:`datagen.assets.textures.cloud_opacity` (bilinear), each emitting the light its
+  tops or bases send back (:meth:`World.cloud_shapes`).
 - Sea: the principled BSDF under a ``normalmap`` of :func:`~datagen.assets.textures.wave_field`;
   its base colour is the drawn body colour lifted by the whitecaps: at 4-8 km a whitecap
   (metres across) is smaller than a pixel, so what a camera sees of them is the sea's
@@ -55,11 +56,13 @@ FOAM_ALBEDO: Final = 0.22
 SEA_COLOUR: Final = (0.01, 0.03, 0.05)
 
 
-def _bitmap(data: NDArray, repeats: float) -> dict:
+def _bitmap(data: NDArray, repeats: float, filter_type: str = "nearest") -> dict:
+    """A repeating raw bitmap; the clouds filter bilinearly (a 47 m texel seen from a few
+    hundred metres would show as a block), the wave normals by nearest texel."""
     import mitsuba as mi
 
     return {"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(data, dtype=np.float32)), "raw": True,
-            "wrap_mode": "repeat", "filter_type": "nearest",
+            "wrap_mode": "repeat", "filter_type": filter_type,
             "to_uv": mi.ScalarTransform4f().scale([repeats, repeats, 1.0])}
 
 
@@ -121,10 +124,10 @@ class World:
         for name in CLOUD_LAYERS:
             # Behind the mask, a black mirror: a delta lobe, so that the path tracer spends no
             # shadow ray on a surface that reflects nothing (a black diffuse one would).
-            bsdf = mi.load_dict({"type": "mask", "opacity": _bitmap(empty, 1.0), "bsdf": {
+            bsdf = mi.load_dict({"type": "mask", "opacity": _bitmap(empty, 1.0, "bilinear"), "bsdf": {
                 "type": "conductor", "specular_reflectance": {"type": "rgb", "value": 0.0}}})
             emitter = mi.load_dict({"type": "area", "sampling_weight": 0.0,  # found by paths, never sampled
-                                    "radiance": _bitmap(np.zeros(empty.shape[:2] + (3,)), 1.0)})
+                                    "radiance": _bitmap(np.zeros(empty.shape[:2] + (3,)), 1.0, "bilinear")})
             # Built with every cell in place: the acceleration structure then follows the
             # grid, which later frames only collapse cells of (mirroring it measured 2x slower).
             self.cloud_meshes[name] = mitsuba_mesh(name, verts, faces, bsdf, texcoords=uv, emitter=emitter)
@@ -227,8 +230,15 @@ class World:
         if tex is None:
             return np.zeros(len(uv), np.float32)
         n = tex.shape[0]
-        ij = np.floor(np.mod(np.asarray(uv, dtype=np.float64), 1.0) * n).astype(np.int64) % n
-        return tex[ij[:, 1], ij[:, 0]]
+        # Mitsuba's bilinear filter with repeat: texel centres at (i + 0.5) / n.
+        xy = np.mod(np.asarray(uv, dtype=np.float64), 1.0) * n - 0.5
+        i0 = np.floor(xy).astype(np.int64)
+        f = (xy - i0).astype(np.float32)
+        x0, y0 = i0[:, 0] % n, i0[:, 1] % n
+        x1, y1 = (x0 + 1) % n, (y0 + 1) % n
+        top = tex[y0, x0] * (1 - f[:, 0]) + tex[y0, x1] * f[:, 0]
+        bottom = tex[y1, x0] * (1 - f[:, 0]) + tex[y1, x1] * f[:, 0]
+        return top * (1 - f[:, 1]) + bottom * f[:, 1]
 
 
 @functools.cache
@@ -262,7 +272,11 @@ def _cloud_cells(opacity: NDArray[np.float32], height: float) -> NDArray[np.floa
     verts = _cloud_grid()[0]
     n = opacity.shape[0]
     per_cell = n // CLOUD_CELLS
-    cloudy = opacity.reshape(CLOUD_CELLS, per_cell, CLOUD_CELLS, per_cell).max(axis=(1, 3)) > 0.0
+    # A texel's cloud reaches half a texel into its neighbours through the bilinear filter.
+    grown = opacity
+    for axis in (0, 1):
+        grown = np.maximum(grown, np.maximum(np.roll(grown, 1, axis), np.roll(grown, -1, axis)))
+    cloudy = grown.reshape(CLOUD_CELLS, per_cell, CLOUD_CELLS, per_cell).max(axis=(1, 3)) > 0.0
     cloudy = np.tile(cloudy, (CLOUD_TILES, CLOUD_TILES)).reshape(-1)
     out = verts.reshape(-1, 4, 3).copy()
     out[~cloudy] = out[~cloudy].mean(axis=1, keepdims=True)
