@@ -301,8 +301,9 @@ def evaluate(
     noise_px: Annotated[str, typer.Option("--noise-px", help="Truth runs: pixel noise radii, e.g. 0,0.5,1,2.5.")]
     = "0,0.5,1,2.5",
     predictions: Annotated[Path | None, typer.Option("--predictions", help="Folder of Ultralytics save_txt "
-                                                     "detections (cls cx cy w h conf), by image stem; replaces "
-                                                     "the truth runs.")] = None,
+                                                     "detections (cls cx cy w h conf) or, for a dataset with pose "
+                                                     "labels, pose predictions (keypoints with confidences), by "
+                                                     "image stem; replaces the truth runs.")] = None,
     conf: Annotated[float, typer.Option("--conf", min=0.0, max=1.0, help="Minimum detection confidence.")] = 0.25,
     split: Annotated[str | None, typer.Option("--split", help="Frames to attempt: all, train or val (default: "
                                               "all for truth runs; with --predictions, the splits the "
@@ -314,6 +315,7 @@ def evaluate(
     accuracy and reliability against distance (paper 3.3-3.6)."""
     from datagen.analysis.evaluate import covered_splits, parse_predictions, summarize
     from datagen.analysis.evaluate import evaluate as run_evaluate
+    from datagen.core.keypoints import PoseLayout
     from datagen.dataset.reader import load_dataset
     from datagen.report.evaluation_report import write_evaluation
 
@@ -323,7 +325,8 @@ def evaluate(
     runs = []
     if predictions is not None:
         k = view.intrinsics
-        found = parse_predictions(predictions, k.width, k.height, len(view.features), min_conf=conf)
+        pose = PoseLayout.from_features(view.features) if view.pose_yaml is not None else None
+        found = parse_predictions(predictions, k.width, k.height, len(view.features), min_conf=conf, pose=pose)
         if split is None:
             covered = covered_splits(view, found)
             if not found:  # yolo predict writes no file for an image without detections
@@ -381,6 +384,26 @@ _REASON_TEXT = {
     "no_detections": "with no prediction file (nothing detected, or not predicted)",
     "below_conf": "with all detections below --conf {conf:g}",
 }
+
+
+@app.command()
+@user_errors
+def export(
+    dataset: Annotated[Path, typer.Argument(help="Dataset folder.", show_default=False)],
+    format: Annotated[str, typer.Option("--format", help="coco (keypoints per object) or bop (6D poses, "
+                                        "models, masks; needs a build with --exr).", show_default=False)],
+    out: Annotated[Path, typer.Option("--out", help="New folder for the export.", show_default=False)],
+) -> None:
+    """Write a built dataset as COCO keypoints or in the BOP format (poses, models, masks)."""
+    from datagen.dataset.export import EXPORT_FORMATS, export_dataset
+    from datagen.dataset.reader import load_dataset
+
+    if format not in EXPORT_FORMATS:
+        raise DatagenError(f"--format: {format!r}: choose {' or '.join(EXPORT_FORMATS)}")
+    folder = output_path(out, "--out")
+    view = load_dataset(dataset)
+    written = export_dataset(view, folder, format)
+    typer.echo(f"wrote {format.upper()} export of {len(view)} frames: {written}")
 
 
 def _m(value: float | None) -> str:

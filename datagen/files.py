@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import shutil
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Final
@@ -132,3 +133,24 @@ def write_exr(path: str | Path, rgb, depth, object_id) -> Path:
     with atomic_path(path) as tmp, OpenEXR.File(header, channels) as exr:
         exr.write(str(tmp))
     return path
+
+
+def link_or_copy(source: str | Path, target: str | Path) -> Path:
+    """``target`` as a hard link to ``source`` (no bytes copied), or an atomic copy where the
+    file system refuses the link (another device)."""
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        os.link(source, target)
+    except OSError:
+        with atomic_path(target) as tmp:
+            shutil.copy2(source, tmp)
+    return target
+
+
+def symlink_folder(link: str | Path, target: str) -> Path:
+    """A symbolic link ``link`` to the folder ``target`` (relative to the link's folder)."""
+    link = Path(link)
+    link.parent.mkdir(parents=True, exist_ok=True)
+    link.symlink_to(target, target_is_directory=True)
+    return link

@@ -66,8 +66,9 @@ def test_a_built_dataset_passes_every_check(dataset) -> None:
     result = audit(load_dataset(dataset))
     assert result.passed, [(c.name, c.offenders[:3]) for c in result.checks if not c.passed]
     by_name = {c.name: c for c in result.checks}
-    assert set(by_name) == {"manifest_boxes", "label_lines", "centre_drift", "edge_margin_and_front",
-                            "ultralytics_rules", "learnable", "files", "images", "class_names"}
+    assert set(by_name) == {"manifest_boxes", "manifest_objects", "label_lines", "centre_drift",
+                            "edge_margin_and_front", "ultralytics_rules", "learnable", "files", "images",
+                            "class_names"}
     assert by_name["label_lines"].checked > 100
     assert by_name["centre_drift"].worst < 1e-3  # seven decimals: under 1.2e-4 px at most
     stats = result.stats
@@ -85,7 +86,7 @@ def test_audit_command_writes_the_report(copy) -> None:
     assert out.returncode == 0, out.stdout + out.stderr
     assert out.stdout.strip().splitlines()[-1] == f"PASSED: {copy / 'audit' / 'report.html'}"
     doc = json.loads((copy / "audit" / "report.json").read_text())
-    assert doc["passed"] is True and doc["frames"] == 8 and len(doc["checks"]) == 9
+    assert doc["passed"] is True and doc["frames"] == 8 and len(doc["checks"]) == 10
     assert len(list((copy / "audit" / "plots").glob("*.png"))) == 5
     # The report is not a dataset file: a second audit still finds no orphan.
     assert checks(copy)["files"].passed

@@ -29,22 +29,23 @@ from datagen.pipeline.run import build_dataset
 pytestmark = pytest.mark.train
 pytest.importorskip("ultralytics", reason="needs the train extra: pip install -e '.[train]'")
 
-from datagen.analysis.ultralytics import dataloader_learnability  # noqa: E402  (imports Ultralytics lazily)
+from datagen.analysis.ultralytics import dataloader_learnability, pose_items  # noqa: E402  (imports Ultralytics lazily)
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Not a seed any shipped config uses: the labels are checked on frames nobody tuned on.
 HELD_OUT_SEED = 2024
 
 
-def labels_with_blank_images(root: Path, frames: int, **overrides) -> Path:
-    """A labels-only wingcam55 build whose images are one grey 2048x1080 PNG, hard-linked
-    at every frame's image path: Ultralytics' dataloader needs images, but not rendered ones."""
-    config = override_config(load_config(ROOT / "scenes" / "wingcam55.yaml"),
+def labels_with_blank_images(root: Path, frames: int, scene: str = "wingcam55", **overrides) -> Path:
+    """A labels-only build whose images are one grey PNG, hard-linked at every frame's image
+    path: Ultralytics' dataloader needs images, but not rendered ones."""
+    config = override_config(load_config(ROOT / "scenes" / f"{scene}.yaml"),
                              {"dataset.frames": frames, "dataset.seed": HELD_OUT_SEED, **overrides})
     build_dataset(config, root, render=False)
-    layout, jobs = Layout(root), plan_shards(config)
+    layout, jobs = Layout.of(root, config), plan_shards(config)
     grey = root / ".grey.png"
-    grey.write_bytes(cv2.imencode(".png", np.full((1080, 2048, 3), 90, np.uint8))[1].tobytes())
+    grey.write_bytes(cv2.imencode(".png", np.full((config.camera.height, config.camera.width, 3), 90,
+                                                  np.uint8))[1].tobytes())
     for job in jobs:
         for i in job.frames:
             path = root / layout.image_rel(job.split, job.shard, i)
@@ -148,3 +149,89 @@ def test_documented_train_predict_evaluate_commands_run_offline_from_another_fol
     assert doc["runs"][0]["source"] == "predictions" and doc["runs"][0]["split"] == "val"
     assert doc["runs"][0]["overall"]["attempts"] == load_dataset(root).split.count("val")
     assert not list(elsewhere.iterdir())  # nothing written where the commands ran
+
+
+# --- pose labels ---------------------------------------------------------------------------------
+def _fit_axis(src: np.ndarray, dst: np.ndarray) -> tuple[float, float, float]:
+    """``dst = a * src + t`` by least squares: ``(a, t, largest residual)``."""
+    a, t = np.polyfit(src, dst, 1)
+    return float(a), float(t), float(np.abs(a * src + t - dst).max())
+
+
+def _source_instances(root: Path, layout) -> list[tuple[int, np.ndarray]]:
+    """Every pose instance in the label files: (class, keypoints (K, 3) in continuous pixels)."""
+    view = load_dataset(root)
+    k = view.intrinsics
+    out = []
+    for rel in view.pose_label_path:
+        for line in (root / rel).read_text().splitlines():
+            v = np.array(line.split(), dtype=float)
+            kp = v[5:].reshape(-1, 3) * [k.width, k.height, 1.0]
+            out.append((int(v[0]), kp))
+    return out
+
+
+def test_pose_keypoints_stay_on_the_true_centres_through_mosaic_scale_translate_and_flip(tmp_path) -> None:
+    """Ultralytics' own pose dataloader with the pose hyp.yaml (mosaic, scale, translate and, as
+    the drogue's features mirror, fliplr on): every keypoint that comes out is the exact image
+    of a true centre under one per-axis scale-and-shift (with flip_idx applied when flipped)."""
+    root = labels_with_blank_images(tmp_path / "ds", 48, scene="podcam15",
+                                    **{"labels.format": "pose", "features.objects": ["drogue"]})
+    hyp = yaml.safe_load((root / "hyp.yaml").read_text())
+    assert hyp["mosaic"] == 1.0 and hyp["fliplr"] == 0.5 and hyp["scale"] > 0 and hyp["translate"] > 0
+    flip = np.array(yaml.safe_load((root / "data.yaml").read_text())["flip_idx"])
+    from datagen.core.keypoints import PoseLayout
+
+    layout = PoseLayout.from_features(load_dataset(root).features)
+    sources = _source_instances(root, layout)
+    seen = pose_items(root, "train")
+    listed = (root / "train.txt").read_text().splitlines()
+    assert len(seen["im_files"]) == len(listed)  # no image dropped as corrupt
+    matched = flipped = 0
+    worst = 0.0
+    for item in seen["items"]:
+        for c, kp in zip(item["classes"], item["keypoints"], strict=True):
+            on = kp[:, 2] > 0
+            if on.sum() < 3:
+                continue
+            best = None  # (largest residual, flipped) of the source instance it came from
+            for cls, src in sources:
+                if cls != c:
+                    continue
+                for mirrored in (False, True):
+                    s = src[flip] if mirrored else src
+                    if not (s[on, 2] > 0).all():
+                        continue
+                    ax, _, rx = _fit_axis(s[on, 0], kp[on, 0])
+                    ay, _, ry = _fit_axis(s[on, 1], kp[on, 1])
+                    if (ax < 0) != mirrored or ay <= 0:
+                        continue
+                    if best is None or max(rx, ry) < best[0]:
+                        best = (max(rx, ry), mirrored)
+            assert best is not None and best[0] < 5e-3, best
+            worst = max(worst, best[0])
+            matched += 1
+            flipped += best[1]
+    assert matched > 40 and 0 < flipped < matched, (matched, flipped)
+    assert max(len(item["classes"]) for item in seen["items"]) > 1  # mosaic put several images together
+
+
+def test_ultralytics_pose_verifier_accepts_every_pose_label_file(tmp_path) -> None:
+    from ultralytics.data.utils import verify_image_label
+
+    root = labels_with_blank_images(tmp_path / "ds", 40, **{"labels.format": "both",
+                                                            "labels.truncated_objects": "clip"})
+    doc = yaml.safe_load((root / "pose" / "data.yaml").read_text())
+    nkpt, ndim = doc["kpt_shape"]
+    view = load_dataset(root)
+    instances = 0
+    for b in range(len(view)):
+        # The label's path with /labels/ turned back into /images/: the file Ultralytics pairs with it.
+        image = (root / view.pose_label_path[b].replace("/labels/", "/images/")).with_suffix(".png")
+        result = verify_image_label((str(image), str(root / view.pose_label_path[b]), "", True, doc["nc"], nkpt,
+                                     ndim, False))
+        _, lb, _, _, keypoints, missing, _, _, corrupt, msg = result
+        assert (missing, corrupt) == (0, 0) and msg == "", msg
+        assert keypoints.shape == (len(lb), nkpt, ndim)
+        instances += len(lb)
+    assert instances > 40

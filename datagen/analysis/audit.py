@@ -22,6 +22,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from datagen.core.keypoints import KEYPOINT_RANGE, PoseLayout, keypoint_flags, mirror_name
 from datagen.core.labels import Exclusion, FrameLabels
 from datagen.dataset.layout import MANIFEST_NAME
 from datagen.dataset.reader import DatasetView, image_size
@@ -45,6 +46,8 @@ MANIFEST_TOLERANCE_PX: Final = 1e-6
 #: A label line's values may differ from the manifest box by the rounding of
 #: :data:`datagen.core.labels.YOLO_DECIMALS` decimals (normalized units).
 LINE_TOLERANCE: Final = 0.5 * 10.0 ** -YOLO_DECIMALS + 1e-12
+#: A pose keypoint may differ from its true centre projection by this much (normalized units).
+POSE_TOLERANCE: Final = 1e-6
 #: Offenders listed per check (the worst first).
 MAX_OFFENDERS: Final = 20
 #: PnP needs at least this many labeled features of an object in a frame.
@@ -181,18 +184,18 @@ def audit(view: DatasetView, *, min_learnable: float = MIN_LEARNABLE_SHARE) -> A
     ``min_learnable``: the share of label lines that must be learnable by Ultralytics'
     trainer at ``labels.train_imgsz`` (:mod:`datagen.core.training`)."""
     labels = view.recompute()
-    line_checks, lines = _check_label_files(view, labels)
-    learnable, learnable_stats = _check_learnable(view, lines, min_learnable)
-    checks = [
-        _check_manifest(view, labels),
-        *line_checks,
-        learnable,
-        _check_files(view),
-        _check_images(view),
-        _check_names(view),
-    ]
+    objects = view.recompute_objects()
+    checks = [_check_manifest(view, labels), _check_objects(view, objects)]
     stats = _statistics(view, labels)
-    stats["learnable"] = learnable_stats
+    if view.label_format != "pose":
+        line_checks, lines = _check_label_files(view, labels)
+        learnable, stats["learnable"] = _check_learnable(view, lines, min_learnable)
+        checks += [*line_checks, learnable, _check_names(view)]
+    if view.pose_yaml is not None:
+        pose_checks, instances = _check_pose_files(view, labels, objects)
+        checks += [*pose_checks, _check_pose_names(view)]
+        stats["learnable_pose"] = _pose_learnable(view, instances)
+    checks += [_check_files(view), _check_images(view)]
     stats["appearance"] = appearance(view.appearance)
     return AuditResult(view.root, str(view.doc.get("name", view.root.name)), len(view), [c.finish() for c in checks],
                        stats, labels)
@@ -373,16 +376,186 @@ def _check_learnable(view: DatasetView, lines: NDArray[np.float64], min_share: f
 
 
 
+def _nan_error(stored: NDArray[np.float64], fresh: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(...)`` the largest absolute difference over the last axis; 0 where both are NaN (a
+    missing value on both sides), inf where only one is."""
+    both_nan = np.isnan(stored) & np.isnan(fresh)
+    err = np.where(both_nan, 0.0, np.abs(stored - fresh))
+    return np.where(np.isnan(err), np.inf, err).max(axis=-1)
+
+
+def _check_objects(view: DatasetView, objects: FrameLabels) -> Check:
+    """The manifests' pose boxes against a recomputation from the poses and objects.parquet."""
+    check = Check("manifest_objects", "manifest object boxes (projected hull box, pose label box) and exclusions "
+                  f"equal a recomputation from the poses and objects.parquet (to {MANIFEST_TOLERANCE_PX:g} px)")
+    label = np.where(objects.labeled[..., None], objects.label_xyxy, np.nan)
+    err = np.maximum(_nan_error(view.object_tight_xyxy, objects.tight_xyxy), _nan_error(view.object_label_xyxy, label))
+    reasons = np.vectorize(lambda e: Exclusion(int(e)).reason, otypes=[object])(objects.exclusion)
+    check.checked = int(err.size)
+    check.worst = float(err[np.isfinite(err)].max(initial=0.0))
+    for b, c in zip(*np.nonzero((err > MANIFEST_TOLERANCE_PX) | (reasons != view.object_exclusion)), strict=True):
+        where = f"{view.manifest_file[b]} frame {view.frame_id[b]}"
+        name = view.features.objects[c]
+        if reasons[b, c] != view.object_exclusion[b, c]:
+            check.fail(where, f"{name}: stored exclusion {view.object_exclusion[b, c]!r}, recomputed {reasons[b, c]!r}")
+        else:
+            check.fail(where, f"{name}: box off by {err[b, c]:.3g} px", float(err[b, c]))
+    return check
+
+
+def _check_pose_files(view: DatasetView, labels: FrameLabels, objects: FrameLabels
+                      ) -> tuple[list[Check], NDArray[np.float64]]:
+    """The pose label files line by line, and every well-formed instance as a row
+    ``(frame row, class, cx, cy, w, h)``."""
+    layout = PoseLayout.from_features(view.features)
+    k = view.intrinsics
+    w, h, n_obj, kpts = k.width, k.height, len(layout.objects), layout.kpt_count
+    lo, hi = KEYPOINT_RANGE
+    lines = Check("pose_lines", "every pose line equals its manifest instance: class, object box (to the file's "
+                  f"rounding), keypoints on the true centre projections (to {POSE_TOLERANCE:g} normalized), flags "
+                  "equal the manifest's, 0 0 0 for flag 0 and padding; every labeled object has exactly one line")
+    flags = Check("keypoint_flags", "manifest keypoint flags equal the rule: 0 excluded, 1 labeled with its centre "
+                  "hidden, 2 labeled and visible (or not rendered)")
+    rules = Check("ultralytics_pose_rules", f"pose files follow Ultralytics' rules: {layout.columns} columns "
+                  f"(5 + 3 x {kpts}), integer class < {n_obj}, box values in [0, 1], positive size, keypoints in "
+                  f"[{lo}, {hi}], flags 0, 1 or 2, no duplicate rows")
+    expected_flags = keypoint_flags(labels.exclusion, view.center_visible)
+    bad = np.nonzero(expected_flags != view.keypoint_flag)
+    flags.checked = int(expected_flags.size)
+    for b, f in zip(*bad, strict=True):
+        flags.fail(f"{view.manifest_file[b]} frame {view.frame_id[b]}",
+                   f"class {f}: stored flag {view.keypoint_flag[b, f]}, the rule gives {expected_flags[b, f]}")
+    centre, box = objects.label_center_px, objects.label_xyxy
+    slots = np.arange(kpts)
+    parsed: list[tuple[float, ...]] = []
+    worst = 0.0
+    for b in range(len(view)):
+        rel = view.pose_label_path[b]
+        if rel is None:
+            lines.fail(f"{view.manifest_file[b]} frame {view.frame_id[b]}", "no pose label file named")
+            continue
+        rows, problem = _read_label_file(view.root / rel)
+        if problem:
+            lines.fail(rel, problem)
+            continue
+        seen: set = set()
+        classes: Counter = Counter()
+        for n, line in enumerate(rows, start=1):
+            where = f"{rel}:{n}"
+            rules.checked += 1
+            lines.checked += 1
+            values, problem = parse_line(line, n_obj, columns=(layout.columns,))
+            if problem:
+                rules.fail(where, problem)
+                continue
+            v = np.asarray(values)
+            kp = v[5:].reshape(kpts, 3)
+            if min(v[1:5]) < 0 or max(v[1:5]) > 1 or v[3] <= 0 or v[4] <= 0:
+                rules.fail(where, f"box {line.split()[1:5]} outside [0, 1] or a size not positive")
+            if kp[:, :2].min() < lo or kp[:, :2].max() > hi or not np.isin(kp[:, 2], (0, 1, 2)).all():
+                rules.fail(where, f"a keypoint outside [{lo}, {hi}] or a flag not 0, 1 or 2")
+            if line in seen:
+                rules.fail(where, "duplicate row")
+            seen.add(line)
+            c = int(v[0])
+            classes[c] += 1
+            parsed.append((b, *v[:5]))
+            if classes[c] == 2:
+                lines.fail(where, f"class {c} ({layout.objects[c]}) has more than one line")
+            if not objects.labeled[b, c]:
+                reason = Exclusion(int(objects.exclusion[b, c])).reason
+                lines.fail(where, f"class {c} ({layout.objects[c]}) has a line but the object is excluded ({reason})")
+                continue
+            want_box = np.array([centre[b, c, 0] / w, centre[b, c, 1] / h,
+                                 (box[b, c, 2] - box[b, c, 0]) / w, (box[b, c, 3] - box[b, c, 1]) / h])
+            members = layout.feature_at[c]
+            real = members >= 0
+            f = np.where(real, members, 0)
+            want_flag = np.where(real, view.keypoint_flag[b, f], 0)
+            want_xy = labels.center_px[b, f] / [w, h]
+            want_xy = np.where((want_flag > 0)[:, None], want_xy, 0.0)
+            box_err = np.abs(v[1:5] - want_box)
+            kp_err = np.abs(kp[:, :2] - want_xy).max(axis=1)
+            kp_err = np.where(np.isnan(kp_err), np.inf, kp_err)
+            worst = max(worst, float(kp_err.max(initial=0.0)) * max(w, h))
+            if not np.all(box_err <= LINE_TOLERANCE):
+                lines.fail(where, f"class {c} box differs from the manifest's by {(box_err * [w, h, w, h]).max():.3g} px",
+                           float((box_err * [w, h, w, h]).max()))
+            wrong_flag = slots[kp[:, 2] != want_flag]
+            if len(wrong_flag):
+                s0 = int(wrong_flag[0])
+                lines.fail(where, f"class {c} keypoint {s0}: flag {kp[s0, 2]:g}, the manifest says {want_flag[s0]}")
+            off = slots[kp_err > POSE_TOLERANCE]
+            if len(off):
+                s0 = int(off[np.argmax(kp_err[off])])
+                lines.fail(where, f"class {c} keypoint {s0} is {kp_err[s0] * max(w, h):.3g} px from its true centre "
+                           "projection", float(kp_err[s0] * max(w, h)))
+        for c in sorted(set(np.flatnonzero(objects.labeled[b]).tolist()) - set(classes)):
+            lines.fail(rel, f"class {c} ({layout.objects[c]}) is labeled in the manifest but has no line")
+    lines.worst = worst
+    return [lines, flags, rules], np.array(parsed, dtype=np.float64).reshape(-1, 6)
+
+
+def _check_pose_names(view: DatasetView) -> Check:
+    """The pose set's data.yaml: names, nc, kpt_shape and flip_idx."""
+    layout = PoseLayout.from_features(view.features)
+    where = "pose/data.yaml" if view.label_format == "both" else "data.yaml"
+    doc = view.pose_yaml or {}
+    check = Check("pose_names", "the pose data.yaml names the objects, its kpt_shape is [K, 3] (K the largest feature "
+                  "count) and its flip_idx, an involution, swaps exactly the left/right pairs of feature names")
+    check.checked = 4
+    names = doc.get("names")
+    names = dict(enumerate(names)) if isinstance(names, list) else names
+    if names != dict(enumerate(layout.objects)) or doc.get("nc") != len(layout.objects):
+        check.fail(where, f"names {names!r} or nc {doc.get('nc')!r}: expected the objects {list(layout.objects)}")
+    if doc.get("kpt_shape") != [layout.kpt_count, 3]:
+        check.fail(where, f"kpt_shape {doc.get('kpt_shape')!r}: expected [{layout.kpt_count}, 3]")
+    flip = doc.get("flip_idx")
+    if flip is not None:
+        valid = (isinstance(flip, list) and len(flip) == layout.kpt_count
+                 and all(isinstance(i, int) and 0 <= i < layout.kpt_count for i in flip))
+        if not valid or any(flip[flip[i]] != i for i in range(len(flip))):
+            check.fail(where, f"flip_idx {str(flip)[:60]}: not an involution on {layout.kpt_count} slots")
+            return check
+        for o, members in enumerate(layout.feature_at):
+            for s, f in enumerate(members):
+                if f < 0:
+                    continue
+                t = members[flip[s]]
+                twin = mirror_name(view.features.name[f]) or view.features.name[f]
+                if t < 0 or (mirror_name(view.features.name[f]) and view.features.name[t] != twin):
+                    check.fail(where, f"flip_idx[{s}] = {flip[s]}: {layout.objects[o]} {view.features.name[f]} would "
+                               f"become {view.features.name[t] if t >= 0 else 'padding'}")
+    if (flip is None) != (layout.flip_idx is None) or (flip is not None and tuple(flip) != layout.flip_idx):
+        check.fail(where, f"flip_idx {str(flip)[:60]}: the features give "
+                   f"{list(layout.flip_idx) if layout.flip_idx else 'none'} ({layout.flip_problem or 'mirror pairs'})")
+    return check
+
+
+def _pose_learnable(view: DatasetView, instances: NDArray[np.float64]) -> dict:
+    """The share of pose instances Ultralytics' trainer keeps at ``labels.train_imgsz`` and can
+    assign to an anchor, without mosaic (as for boxes: :mod:`datagen.core.training`)."""
+    k = view.intrinsics
+    cx, cy = instances[:, 2] * k.width, instances[:, 3] * k.height
+    bw, bh = instances[:, 4] * k.width, instances[:, 5] * k.height
+    xyxy = np.stack([cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2], axis=-1)
+    learnable = view.train_view.learnable(xyxy)
+    return {"instances": len(instances), "learnable": int(learnable.sum()),
+            "share": float(learnable.mean()) if len(instances) else None,
+            "imgsz": view.train_view.imgsz}
+
+
 def _check_files(view: DatasetView) -> Check:
     check = Check("files", "every image, label and EXR a manifest names exists, no file in images/, labels/ "
                   "or exr/ is unnamed, no temporary file is left, and every planned shard is finished")
     root = view.root
-    referenced = {p for paths in (view.image_path, view.label_path, view.exr_path) for p in paths if p}
+    referenced = {p for paths in (view.image_path, view.label_path, view.pose_label_path, view.exr_path)
+                  for p in paths if p}
     for rel in sorted(referenced):
         check.checked += 1
         if not (root / rel).is_file():
             check.fail(rel, "named in a manifest but missing")
-    for tree in ("images", "labels", "exr"):
+    for tree in ("images", "labels", "exr", *(("pose/labels",) if view.label_format == "both" else ())):
         for dirpath, _, files in os.walk(root / tree):
             for name in files:
                 rel = str((Path(dirpath) / name).relative_to(root))
@@ -397,22 +570,24 @@ def _check_files(view: DatasetView) -> Check:
         elif not MANIFEST_NAME.fullmatch(name):
             check.fail(f"manifests/{name}", "not a shard manifest ({split}-{shard:05d}.parquet): an orphan")
     rows = sorted(zip(view.frame_id.tolist(), view.split, view.image_path, strict=True))
-    for split in ("train", "val"):  # the image lists Ultralytics trains on: every image, in frame order
+    prefixes = ("", "pose/") if view.label_format == "both" else ("",)
+    for split, prefix in ((s, p) for s in ("train", "val") for p in prefixes):  # what Ultralytics trains on
         want = [f"./{rel}" for _, s, rel in rows if s == split and rel]
         if not want:
             continue
-        listed = root / f"{split}.txt"
+        name = f"{prefix}{split}.txt"
+        listed = root / name
         check.checked += 1
         try:
             have = listed.read_text().splitlines() if listed.is_file() else None
         except (OSError, UnicodeDecodeError):
             have = None
         if have is None:
-            check.fail(f"{split}.txt", f"missing or unreadable; it lists the {split} images for Ultralytics")
+            check.fail(name, f"missing or unreadable; it lists the {split} images for Ultralytics")
         elif have != want:
             extra = sorted(set(have) - set(want))[:1]
             what = f"names {extra[0]!r}, which no manifest does" if extra else "misses images or lists them out of order"
-            check.fail(f"{split}.txt", f"{what} ({len(have)} lines, {len(want)} {split} images)")
+            check.fail(name, f"{what} ({len(have)} lines, {len(want)} {split} images)")
     ids, counts = np.unique(view.frame_id, return_counts=True)
     for frame in ids[counts > 1][:MAX_OFFENDERS]:
         rows = [view.manifest_file[b] for b in np.flatnonzero(view.frame_id == frame)]

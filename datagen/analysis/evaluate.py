@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 from datagen.core.camera import Intrinsics
 from datagen.core.conventions import evaluation_rng
 from datagen.core.errors import DatagenError
+from datagen.core.keypoints import PoseLayout
 from datagen.core.transforms import invert_rigid
 from datagen.dataset.reader import DatasetView
 from datagen.dataset.yolo import parse_line
@@ -176,16 +177,33 @@ class Predictions(Mapping):
         return self.detections.get(stem, 0) > 0 and self.below_conf.get(stem, 0) == self.detections[stem]
 
 
-def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_conf: float = 0.25) -> Predictions:
-    """Ultralytics ``save_txt`` files (``cls cx cy w h conf``, normalized) by image stem:
-    per class the highest-confidence box at or above ``min_conf``, as (u_px, v_px, conf)
-    of its centre (paper 3.3). Lines without a confidence count as confidence 1."""
+def _keep(best: dict, feature: int, u: float, v: float, conf: float) -> None:
+    """Keep ``(u, v, conf)`` as the feature's point unless a more confident one is there."""
+    if feature not in best or conf > best[feature][2]:
+        best[feature] = (u, v, conf)
+
+
+def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_conf: float = 0.25,
+                      pose: PoseLayout | None = None) -> Predictions:
+    """Ultralytics ``save_txt`` files by image stem: per feature class the highest-confidence
+    point at or above ``min_conf``, as ``(u_px, v_px, conf)`` (paper 3.3). Lines without a
+    confidence count as confidence 1.
+
+    - a detection line ``cls cx cy w h [conf]`` (normalized) is its feature's box centre;
+    - with ``pose`` (the dataset's :class:`~datagen.core.keypoints.PoseLayout`), a pose line
+      ``cls cx cy w h (x y kconf) * K [conf]`` (``yolo pose predict``) is an object instance:
+      each of its keypoints whose own confidence is at or above ``min_conf`` is its slot's
+      feature, with the instance's confidence (an instance below ``min_conf`` gives nothing)."""
     folder = Path(folder)
     if not folder.is_dir():
         raise DatagenError(f"--predictions: {folder}: no such folder")
     out: dict[str, dict[int, tuple[float, float, float]]] = {}
     detections: dict[str, int] = {}
     below: dict[str, int] = {}
+    pose_columns = () if pose is None else (pose.columns, pose.columns + 1)
+    wanted = ("a detection line 'class cx cy w h [conf]'" if pose is None else
+              f"a detection line 'class cx cy w h [conf]' or a pose line of {pose.columns} or {pose.columns + 1} "
+              "columns")
     for path in sorted(folder.rglob("*.txt")):
         if not path.is_file():  # a folder or a FIFO named *.txt is not a prediction file
             continue
@@ -194,20 +212,33 @@ def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_con
             text = path.read_text()
         except (OSError, UnicodeDecodeError) as exc:
             raise DatagenError(f"{path}: unreadable prediction file ({exc})") from None
+
         n_detections = n_below = 0
         for n, line in enumerate(text.splitlines(), start=1):
             if not line.split():
                 continue
-            values, problem = parse_line(line, nc, columns=(5, 6))
+            is_pose = len(line.split()) in pose_columns
+            values, problem = parse_line(line, len(pose.objects) if is_pose else nc,
+                                         columns=pose_columns if is_pose else (5, 6))
             if problem:
-                raise DatagenError(f"{path}:{n}: not a detection line 'class cx cy w h [conf]': {problem}")
+                raise DatagenError(f"{path}:{n}: not {wanted}: {problem}")
+            n_detections += 1
+            if is_pose:
+                conf = values[-1] if len(values) == pose.columns + 1 else 1.0
+                if conf < min_conf:
+                    n_below += 1
+                    continue
+                points = np.asarray(values[5:5 + 3 * pose.kpt_count]).reshape(-1, 3)
+                for feature, (x, y, kconf) in zip(pose.feature_at[int(values[0])], points, strict=True):
+                    if feature >= 0 and kconf >= min_conf:
+                        _keep(best, int(feature), x * width, y * height, conf)
+                continue
             cls, cx, cy = int(values[0]), values[1], values[2]
             conf = values[5] if len(values) == 6 else 1.0
-            n_detections += 1
             if conf < min_conf:
                 n_below += 1
-            elif cls not in best or conf > best[cls][2]:
-                best[cls] = (cx * width, cy * height, conf)
+            else:
+                _keep(best, cls, cx * width, cy * height, conf)
         out[path.stem] = best
         detections[path.stem], below[path.stem] = n_detections, n_below
     return Predictions(out, min_conf, detections, below)
@@ -215,8 +246,7 @@ def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_con
 
 def covered_splits(view: DatasetView, predictions: Mapping) -> list[str]:
     """The splits of the frames that have a prediction file, in dataset order."""
-    stems = [Path(p).stem if p else Path(lp).stem for p, lp in zip(view.image_path, view.label_path, strict=True)]
-    return [s for s in dict.fromkeys(view.split[i] for i, stem in enumerate(stems) if stem in predictions)]
+    return [s for s in dict.fromkeys(view.split[i] for i, stem in enumerate(view.stems) if stem in predictions)]
 
 
 # --- a whole dataset -------------------------------------------------------------------------------
@@ -262,8 +292,7 @@ def evaluate(view: DatasetView, *, noise_px: float = 0.0, run: int = 0, seed: in
     receiver_from_world = invert_rigid(view.world_from["receiver"])
     out["truth_m"] = np.einsum("bij,bj->bi", receiver_from_world[:, :3, :3], view.world_from[target][:, :3, 3]) \
         + receiver_from_world[:, :3, 3]
-    stems = [Path(p).stem if p else None for p in view.image_path]
-    label_stems = [Path(p).stem for p in view.label_path]
+    stems = view.stems
     guesses: dict[str, tuple] = {}
     chain = None
     history: deque = deque(maxlen=settings.rolling_window)
@@ -281,7 +310,7 @@ def evaluate(view: DatasetView, *, noise_px: float = 0.0, run: int = 0, seed: in
                 uv = uv + noise_offsets(evaluation_rng(seed, int(view.frame_id[i]), run), len(uv), noise_px)
             have = labeled
         else:
-            found = predictions.get(stems[i] or label_stems[i], {})
+            found = predictions.get(stems[i], {})
             uv = np.full((len(features), 2), np.nan)
             for cls, (u, v, _) in found.items():
                 uv[cls] = (u, v)
@@ -300,7 +329,7 @@ def evaluate(view: DatasetView, *, noise_px: float = 0.0, run: int = 0, seed: in
         if "few" in poses.values():
             reason = "too_few_matches"
             if predictions is not None:
-                stem = stems[i] or label_stems[i]
+                stem = stems[i]
                 if stem not in predictions:
                     reason = "no_detections"
                 elif isinstance(predictions, Predictions) and predictions.all_below_conf(stem):
@@ -329,7 +358,7 @@ def evaluate(view: DatasetView, *, noise_px: float = 0.0, run: int = 0, seed: in
     out["error_m"] = np.linalg.norm(out["ptd_m"] - out["truth_m"], axis=1)
     out["error_to_drogue_m"] = np.linalg.norm(out["ptd_m"] - view.ptd_receiver_m[attempted], axis=1)
     out["missing_predictions"] = 0 if predictions is None else int(sum(
-        1 for i in np.flatnonzero(attempted) if (stems[i] or label_stems[i]) not in predictions))
+        1 for i in np.flatnonzero(attempted) if (stems[i]) not in predictions))
     out["target"] = target
     return out
 

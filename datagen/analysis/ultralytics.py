@@ -19,7 +19,7 @@ import yaml
 from datagen.core.errors import DatagenError
 from datagen.core.training import ANCHOR_STRIDES
 
-__all__ = ["assigner_positives", "dataloader_learnability", "require_ultralytics"]
+__all__ = ["assigner_positives", "dataloader_learnability", "pose_items", "require_ultralytics"]
 
 
 def require_ultralytics():
@@ -31,7 +31,7 @@ def require_ultralytics():
     return ultralytics
 
 
-def _training_dataset(root: Path, split: str):
+def _training_dataset(root: Path, split: str, task: str = "detect"):
     """Ultralytics' training ``YOLODataset`` of ``root`` (its data.yaml, its hyp.yaml)."""
     require_ultralytics()
     from ultralytics.cfg import get_cfg
@@ -40,7 +40,7 @@ def _training_dataset(root: Path, split: str):
 
     data = check_det_dataset(str(root / "data.yaml"))
     hyp = yaml.safe_load((root / "hyp.yaml").read_text())
-    cfg = get_cfg(overrides={**hyp, "task": "detect", "mode": "train", "cache": False, "workers": 0})
+    cfg = get_cfg(overrides={**hyp, "task": task, "mode": "train", "cache": False, "workers": 0})
     return build_yolo_dataset(cfg, data[split], batch=1, data=data, mode="train", stride=max(ANCHOR_STRIDES)), cfg
 
 
@@ -98,6 +98,34 @@ def dataloader_learnability(root: str | Path, split: str = "train") -> dict:
         "xyxy_train": xyxy,
         "anchored_mask": inside.any(dim=1).numpy(),
     }
+
+
+def pose_items(root: str | Path, split: str = "train") -> dict:
+    """Every image of a pose set's ``split`` through Ultralytics' own pose training dataset
+    and transforms (its ``hyp.yaml``: mosaic, scale, translate and, with a ``flip_idx``,
+    fliplr; Ultralytics draws them from the global RNGs, which datagen leaves alone).
+
+    Returns ``im_files`` (the images Ultralytics kept: one it found corrupt is missing),
+    ``imgsz``, ``lines`` (pose instances in the label files), and per image what came out:
+    ``items``, each with ``classes`` ``(n,)``, ``xyxy`` ``(n, 4)`` and ``keypoints``
+    ``(n, K, 3)``, in pixels of the square training input."""
+    import torch
+
+    dataset, cfg = _training_dataset(Path(root), split, task="pose")
+    items = []
+    for i in range(len(dataset)):
+        item = dataset[i]
+        h, w = item["img"].shape[1:]
+        scale = torch.tensor([w, h, w, h], dtype=torch.float64)
+        xywh = item["bboxes"].double() * scale
+        xyxy = torch.cat([xywh[:, :2] - xywh[:, 2:] / 2, xywh[:, :2] + xywh[:, 2:] / 2], dim=1)
+        kp = item["keypoints"].double().clone()
+        kp[..., 0] *= w
+        kp[..., 1] *= h
+        items.append({"classes": item["cls"].view(-1).numpy().astype(np.int64), "xyxy": xyxy.numpy(),
+                      "keypoints": kp.numpy()})
+    return {"im_files": list(dataset.im_files), "imgsz": int(cfg.imgsz), "items": items,
+            "lines": sum(len(label["cls"]) for label in dataset.labels)}
 
 
 def assigner_positives(root: str | Path, split: str = "train", *, images: int | None = None, batch: int = 8,

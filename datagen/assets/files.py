@@ -162,6 +162,16 @@ def load_mesh(path: Path, object_name: str) -> ObjectMesh:
     return ObjectMesh(object_name, path, merged)
 
 
+def mesh_hull(path: Path, object_name: str) -> NDArray[np.float64]:
+    """The vertices of the convex hull of an object's mesh, ``(H, 3)`` in its body frame: the
+    points whose projection bounds the projected mesh (:mod:`datagen.core.keypoints`)."""
+    mesh = load_mesh(path, object_name).combined
+    try:
+        return np.asarray(mesh.convex_hull.vertices, dtype=np.float64)
+    except Exception:  # noqa: BLE001 (qhull refuses flat or degenerate meshes: every vertex then)
+        return np.unique(np.asarray(mesh.vertices, dtype=np.float64), axis=0)
+
+
 # --- feature files --------------------------------------------------------------------
 def load_features(path: Path, object_name: str, variant: str) -> list[Feature]:
     """Read and validate one variant of an object's feature file.

@@ -660,6 +660,18 @@ class LabelsConfig(_Section):
     """A label box with a side under min_box_px: 'grow' widens it symmetrically about its
     centre (the true centre stays exact); 'exclude' drops the feature as too_small."""
 
+    format: Literal["detect", "pose", "both"] = "detect"
+    """Label files: 'detect' (one box per feature, centred on its true centre), 'pose' (one
+    instance per object whose keypoints are its features' true centres, Ultralytics' pose
+    format: datagen.core.keypoints) or 'both' (detect in labels/, the pose set beside it in
+    pose/ with its own data.yaml and hyp.yaml)."""
+
+    truncated_objects: Literal["exclude", "clip"] = "exclude"
+    """A pose instance whose full-object box is not inside the image's edge margin (or whose
+    mesh reaches behind the camera): 'exclude' it, or 'clip' it to the box of its in-view
+    part. A camera on the receiver never sees the whole receiver: only 'clip' gives the
+    probe's keypoints an instance there."""
+
     @field_validator("train_imgsz")
     @classmethod
     def _stride_multiple(cls, imgsz: int) -> int:

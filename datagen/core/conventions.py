@@ -154,11 +154,24 @@ for _a in (BODY_FORWARD, BODY_LEFT, BODY_UP, CV_RIGHT, CV_DOWN, CV_FORWARD, CVCA
 PIXEL_CONVENTION: Final[str] = "continuous"
 
 
-def drawing_px(uv_px):
-    """Where OpenCV draws a mark at continuous pixel coordinates ``uv_px`` (``(..., 2)``):
-    half a pixel up and left, because its drawing grid has integer coordinates at
-    pixel centres."""
+def index_px(uv_px):
+    """Continuous pixel coordinates ``uv_px`` (``(..., 2)``, or any array of u or v values)
+    in the pixel-index convention, where integer coordinates are pixel centres: half a
+    pixel up and left. OpenCV's drawing grid, COCO keypoints and the camera matrices of the
+    BOP format use it."""
     return np.asarray(uv_px, dtype=np.float64) - 0.5
+
+
+def drawing_px(uv_px):
+    """Where OpenCV draws a mark at continuous pixel coordinates ``uv_px`` (``(..., 2)``)."""
+    return index_px(uv_px)
+
+
+def pixel_centres(width: int, height: int, stride: int = 1):
+    """``(u, v)`` grids ``(h, w)`` of the continuous coordinates of every pixel centre
+    (``stride`` 1) or of the centre of every ``stride`` x ``stride`` block."""
+    w, h = -(-width // stride), -(-height // stride)
+    return np.meshgrid(np.arange(w) * stride + stride / 2, np.arange(h) * stride + stride / 2)
 
 
 # --- randomness --------------------------------------------------------------

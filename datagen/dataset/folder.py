@@ -19,8 +19,9 @@ from typing import Final
 
 from datagen.config.schema import Config
 from datagen.core.errors import DatagenError
-from datagen.dataset.layout import LOCK_NAME, MANIFEST_NAME, Layout, plan_shards
+from datagen.dataset.layout import LOCK_NAME, MANIFEST_NAME, POSE_IMAGES_LINK, Layout, plan_shards
 from datagen.dataset.metadata import is_dataset_card
+from datagen.dataset.schema import FILE_COLUMNS
 from datagen.files import is_temporary
 from datagen.scene.resolved import Scene
 
@@ -155,7 +156,8 @@ REPORT_RECORDS: Final = {"audit": "report.json", "evaluation": "evaluation.json"
 
 
 #: Metadata files at the top of a dataset, in the order ``--overwrite`` removes them (dataset.json last).
-METADATA: Final = ("data.yaml", "hyp.yaml", "train.txt", "val.txt", "features.parquet", "dataset.json")
+METADATA: Final = ("pose/data.yaml", "pose/hyp.yaml", "pose/train.txt", "pose/val.txt", "data.yaml", "hyp.yaml",
+                   "train.txt", "val.txt", "features.parquet", "objects.parquet", "dataset.json")
 
 
 def _inside(root: Path, rel: object) -> Path | None:
@@ -187,19 +189,20 @@ def owned_files(layout: Layout, doc: dict) -> list[Path]:
     except (ValueError, TypeError):
         config = None
     if config is not None:
-        old = Layout(root, config.render.image_suffix)
+        old = Layout.of(root, config)
         for job in plan_shards(config):
             manifests.append(old.manifest(job))
             for i in job.frames:
-                frames += [old.image_rel(job.split, job.shard, i), old.label_rel(job.split, job.shard, i),
-                           old.exr_rel(job.split, job.shard, i)]
+                frames += [p for p in (old.image_rel(job.split, job.shard, i), old.label_rel(job.split, job.shard, i),
+                                       old.pose_label_rel(job.split, job.shard, i),
+                                       old.exr_rel(job.split, job.shard, i)) if p]
     named = sorted((root / "manifests").glob("*.parquet")) if (root / "manifests").is_dir() else []
     for path in named:
         if not MANIFEST_NAME.fullmatch(path.name):
             continue
         manifests.append(path)
         try:
-            table = pq.read_table(path, columns=["image_path", "label_path", "exr_path"])
+            table = pq.read_table(path, columns=[c for c in FILE_COLUMNS if c in pq.read_schema(path).names])
         except Exception:  # noqa: BLE001 (an unreadable manifest names nothing)
             continue
         for column in table.columns:
@@ -250,6 +253,10 @@ def remove_owned(layout: Layout, doc: dict) -> int:
             path.unlink()
             removed += 1
     removed += sweep_temporaries(list(folders))
+    link, target = root / POSE_IMAGES_LINK[0], POSE_IMAGES_LINK[1]
+    if link.is_symlink() and os.readlink(link) == target:  # the pose set's link, never what it points to
+        link.unlink()
+        folders.setdefault(link.parent)
     for folder in sorted(folders, key=lambda p: len(p.parts), reverse=True):
         while folder != root and folder.is_relative_to(root):
             try:

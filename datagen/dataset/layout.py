@@ -3,9 +3,13 @@
 Layout (Ultralytics reads it as it is: a label's path is its image's path with
 the last ``/images/`` replaced by ``/labels/`` and the extension by ``.txt``)::
 
-    data.yaml  hyp.yaml  dataset.json  features.parquet  train.txt  val.txt
+    data.yaml  hyp.yaml  dataset.json  features.parquet  objects.parquet  train.txt  val.txt
     images/{split}/{shard:05d}/{frame:08d}.png     8-bit sRGB training images
-    labels/{split}/{shard:05d}/{frame:08d}.txt     YOLO lines (empty: no labeled feature)
+    labels/{split}/{shard:05d}/{frame:08d}.txt     YOLO lines (empty: no labeled feature), detect
+                                                   or pose as labels.format says
+    pose/data.yaml  pose/hyp.yaml  pose/train.txt  pose/val.txt
+    pose/images -> ../images                       with labels.format 'both': the pose set beside
+    pose/labels/{split}/{shard:05d}/{frame:08d}.txt  the detect set (a relative link to the images)
     exr/{split}/{shard:05d}/{frame:08d}.exr        linear R, G, B, Z, object_id (with --exr)
     manifests/{split}-{shard:05d}.parquet          one row per frame (datagen.dataset.schema)
     .datagen.lock                                  held by the build that writes the folder
@@ -30,6 +34,7 @@ from datagen.core.conventions import split_uniform
 __all__ = [
     "LOCK_NAME",
     "MANIFEST_NAME",
+    "POSE_IMAGES_LINK",
     "SPLITS",
     "Layout",
     "ShardJob",
@@ -41,6 +46,9 @@ SPLITS: Final = ("train", "val")
 
 
 LOCK_NAME: Final = ".datagen.lock"
+#: With labels.format 'both', the pose set reaches the images through this relative link
+#: (Ultralytics finds a label by replacing the last /images/ of the image's path).
+POSE_IMAGES_LINK: Final = ("pose/images", "../images")
 
 
 #: The name of a shard's manifest, ``{split}-{shard:05d}.parquet``; nothing else in manifests/ is one.
@@ -88,6 +96,27 @@ class Layout:
 
     root: Path
     image_suffix: str = ".png"
+    label_format: str = "detect"  # labels.format: detect, pose or both
+
+    @classmethod
+    def of(cls, root: Path, config: Config) -> Layout:
+        """The layout a config gives a dataset at ``root``."""
+        return cls(Path(root), config.render.image_suffix, config.labels.format)
+
+    @property
+    def detect(self) -> bool:
+        """Whether the dataset has detection labels (in ``labels/``)."""
+        return self.label_format in ("detect", "both")
+
+    @property
+    def pose(self) -> bool:
+        """Whether the dataset has pose labels."""
+        return self.label_format in ("pose", "both")
+
+    @property
+    def pose_root(self) -> Path:
+        """The folder of the pose set's data.yaml: the root, or ``pose/`` beside the detect set."""
+        return self.root / "pose" if self.label_format == "both" else self.root
 
     def _rel(self, tree: str, split: str, shard: int, frame: int, ext: str) -> str:
         return f"{tree}/{split}/{shard:05d}/{frame:08d}{ext}"
@@ -95,8 +124,16 @@ class Layout:
     def image_rel(self, split: str, shard: int, frame: int) -> str:
         return self._rel("images", split, shard, frame, self.image_suffix)
 
-    def label_rel(self, split: str, shard: int, frame: int) -> str:
-        return self._rel("labels", split, shard, frame, ".txt")
+    def label_rel(self, split: str, shard: int, frame: int) -> str | None:
+        """The detection label file, None without detection labels."""
+        return self._rel("labels", split, shard, frame, ".txt") if self.detect else None
+
+    def pose_label_rel(self, split: str, shard: int, frame: int) -> str | None:
+        """The pose label file, None without pose labels."""
+        if not self.pose:
+            return None
+        tree = "pose/labels" if self.label_format == "both" else "labels"
+        return self._rel(tree, split, shard, frame, ".txt")
 
     def exr_rel(self, split: str, shard: int, frame: int) -> str:
         return self._rel("exr", split, shard, frame, ".exr")
@@ -109,7 +146,8 @@ class Layout:
         return self.root / f"{split}.txt"
 
     def shard_dirs(self, job: ShardJob) -> list[Path]:
-        return [self.root / tree / job.split / f"{job.shard:05d}" for tree in ("images", "labels", "exr")]
+        trees = ("images", "labels", "exr", *(("pose/labels",) if self.label_format == "both" else ()))
+        return [self.root / tree / job.split / f"{job.shard:05d}" for tree in trees]
 
     @property
     def dataset_json(self) -> Path:

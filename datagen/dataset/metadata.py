@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import os
 import platform
 from importlib import metadata
 from pathlib import Path
@@ -19,9 +20,11 @@ from typing import Final
 import yaml
 
 from datagen.core.conventions import OBJECT_NAMES, PIXEL_CONVENTION
-from datagen.dataset.layout import SPLITS, Layout, ShardJob
-from datagen.dataset.schema import MANIFEST_VERSION, write_features
-from datagen.files import write_text
+from datagen.core.errors import DatagenError
+from datagen.core.keypoints import PoseLayout
+from datagen.dataset.layout import POSE_IMAGES_LINK, SPLITS, Layout, ShardJob
+from datagen.dataset.schema import MANIFEST_VERSION, write_features, write_objects
+from datagen.files import symlink_folder, write_text
 from datagen.scene.resolved import Scene
 
 __all__ = [
@@ -34,6 +37,7 @@ __all__ = [
     "dataset_document",
     "hyp_yaml",
     "is_dataset_card",
+    "pose_hyp_yaml",
     "write_dataset_card",
     "write_dataset_files",
     "write_image_lists",
@@ -124,31 +128,47 @@ def dataset_document(scene: Scene, jobs: list[ShardJob], fingerprint: str, *, re
     }
 
 
-def _commands(root: Path, imgsz: int) -> str:
-    """Train, predict and evaluate commands that work offline from any folder."""
+def _commands(root: Path, imgsz: int, task: str = "detect", dataset: Path | None = None) -> str:
+    """Train, predict and evaluate commands that work offline from any folder. ``root``: the
+    folder of the set's data.yaml; ``dataset``: the dataset's root, when that is another."""
+    model = "yolo11s.yaml" if task == "detect" else "yolo11s-pose.yaml"
+    dataset = dataset or root
+    runs = dataset.parent / "runs"
+    name = dataset.name if dataset == root else f"{dataset.name}-{task}"
     return f"""\
-# Train (offline, from any folder; yolo11s.yaml builds the network from scratch, a local .pt file works too):
-#   yolo detect train data={root / 'data.yaml'} cfg={root / 'hyp.yaml'} model=yolo11s.yaml project={root.parent / 'runs'} name={root.name}
+# Train (offline, from any folder; {model} builds the network from scratch, a local .pt file works too):
+#   yolo {task} train data={root / 'data.yaml'} cfg={root / 'hyp.yaml'} model={model} project={runs} name={name}
 # Predict the validation frames (keeping low-confidence detections) and score the PtD vectors
-# that PnP makes of the detections at or above --conf:
-#   yolo detect predict model={root.parent / 'runs' / root.name / 'weights' / 'best.pt'} source={root / 'val.txt'} imgsz={imgsz} conf=0.001 save_txt=True save_conf=True project={root.parent / 'runs'} name={root.name}-predict
-#   datagen evaluate {root} --predictions {root.parent / 'runs' / (root.name + '-predict') / 'labels'} --conf 0.25
+# that PnP makes of the {'detections' if task == 'detect' else 'keypoints'} at or above --conf:
+#   yolo {task} predict model={runs / name / 'weights' / 'best.pt'} source={root / 'val.txt'} imgsz={imgsz} conf=0.001 save_txt=True save_conf=True project={runs} name={name}-predict
+#   datagen evaluate {dataset} --predictions {runs / (name + '-predict') / 'labels'} --conf 0.25
 """
 
 
-def data_yaml(root: Path, class_names: list[str], splits: tuple[str, ...] = SPLITS, *, imgsz: int = 864) -> str:
+def data_yaml(root: Path, class_names: list[str], splits: tuple[str, ...] = SPLITS, *, imgsz: int = 864,
+              pose: PoseLayout | None = None, dataset: Path | None = None) -> str:
     """Ultralytics' dataset file. ``train`` and ``val`` are the image lists ``train.txt``
     and ``val.txt`` (written when the build finishes). No ``path:``: Ultralytics then
     resolves them against the folder of data.yaml itself, so the dataset can move.
     ``splits`` are the splits that have frames: Ultralytics needs both, so a split
-    without frames (``val_fraction: 0``, or a tiny build) borrows the other's."""
+    without frames (``val_fraction: 0``, or a tiny build) borrows the other's.
+    With ``pose`` (then ``class_names`` are the objects) it is the pose set's file:
+    ``kpt_shape`` and, where one exists, ``flip_idx``."""
     have = [s for s in SPLITS if s in splits] or ["train"]
     lists = {s: f"{s if s in have else have[0]}.txt" for s in SPLITS}
     note = "".join(f"# no {s} frames in this build: {s} uses {lists[s]}\n" for s in SPLITS if s not in have)
     doc = {"train": lists["train"], "val": lists["val"],
            "nc": len(class_names), "names": dict(enumerate(class_names))}
-    return ("# Ultralytics dataset (datagen); train.txt and val.txt list the images of each split.\n"
-            + _commands(root, imgsz) + note + yaml.safe_dump(doc, sort_keys=False))
+    task = "detect"
+    if pose is not None:
+        task = "pose"
+        doc["kpt_shape"] = [pose.kpt_count, 3]
+        if pose.flip_idx is not None:
+            doc["flip_idx"] = list(pose.flip_idx)
+        else:
+            note += f"# no flip_idx: {pose.flip_problem} (hyp.yaml keeps fliplr off)\n"
+    return (f"# Ultralytics {task} dataset (datagen); train.txt and val.txt list the images of each split.\n"
+            + _commands(root, imgsz, task, dataset) + note + yaml.safe_dump(doc, sort_keys=False))
 
 
 def hyp_yaml(scene: Scene, root: Path) -> str:
@@ -185,17 +205,53 @@ hsv_v: 0.4
 """
 
 
+def pose_hyp_yaml(scene: Scene, root: Path, dataset: Path | None = None) -> str:
+    """The pose set's training recipe: keypoints move exactly with every geometric
+    augmentation, so mosaic, translate and scale are on, and fliplr where a flip_idx exists."""
+    config = scene.config
+    imgsz = config.labels.train_imgsz
+    layout = scene.pose_layout
+    if layout.flip_idx is not None:
+        flip = ("# flip_idx (data.yaml) swaps every left/right pair of keypoints, so a horizontal flip\n"
+                "# keeps each keypoint on its feature.\nfliplr: 0.5\n")
+    else:
+        flip = f"# No flip_idx: {layout.flip_problem}; a flip would move keypoints onto the wrong features.\nfliplr: 0.0\n"
+    return f"""\
+# Ultralytics pose training recipe for a datagen dataset ({config.name}).
+{_commands(root, imgsz, "pose", dataset)}# Each object is an instance whose keypoints are its features' true centre projections
+# (datagen.core.keypoints). Ultralytics moves keypoints exactly with mosaic, translation and
+# scaling (a keypoint leaving the crop becomes invisible), so these stay on. Rotation, shear
+# and perspective also move keypoints exactly but loosen the object boxes: off.
+imgsz: {imgsz}  # labels.train_imgsz
+mosaic: 1.0
+close_mosaic: 10
+translate: 0.1
+scale: 0.5
+{flip}flipud: 0.0
+degrees: 0.0
+shear: 0.0
+perspective: 0.0
+mixup: 0.0
+cutmix: 0.0
+copy_paste: 0.0
+hsv_h: 0.015
+hsv_s: 0.7
+hsv_v: 0.4
+"""
+
+
 def write_image_lists(layout: Layout, jobs: list[ShardJob]) -> list[Path]:
     """``train.txt`` and ``val.txt``: every image of each split in frame order, one
     ``./images/...`` path per line (Ultralytics resolves ``./`` against the list's
     folder, for training and for ``yolo predict source=``). Written when every shard
     is done, so that a list never names a missing image."""
     written = []
+    roots = [layout.root] + ([layout.pose_root] if layout.pose_root != layout.root else [])
     for split in SPLITS:
         lines = [f"./{layout.image_rel(job.split, job.shard, i)}\n"
                  for job in jobs if job.split == split for i in job.frames]
         if lines:
-            written.append(write_text(layout.image_list(split), "".join(lines)))
+            written += [write_text(root / layout.image_list(split).name, "".join(lines)) for root in roots]
     return written
 
 
@@ -219,6 +275,8 @@ def dataset_card(scene: Scene, jobs: list[ShardJob], *, render: bool, labels: in
     lo, hi = config.approach.range_m
     rules = scene.label_options
     reasons = ", ".join(f"{n:,} {r}" for r, n in excluded.items() if n) or "none"
+    boxes = ("YOLO boxes in `labels/`" if config.labels.format != "pose"
+             else "labeled features (no detection label files: the pose keypoints below)")
     return f"""---
 {yaml.safe_dump(front, sort_keys=False).strip()}
 ---
@@ -232,17 +290,30 @@ cx = {k.cx:g}, cy = {k.cy:g}), {_rendered(config) if render else "labels only (n
 
 - **Frames**: {frames['train']:,} train, {frames['val']:,} val; {len(scene.features)} classes (the
   {config.features.variant} features of {' and '.join(config.features.objects)}).
-- **Labels**: {labels:,} YOLO boxes in `labels/`, each centred exactly on the projection of its feature's
+- **Labels**: {labels:,} {boxes}, each centred exactly on the projection of its feature's
   true 3D centre ({'corrected' if rules['corrected'] else 'tight (uncorrected)'} boxes, at least
   {config.labels.min_box_px:g} px at imgsz {config.labels.train_imgsz}, {rules['edge_margin_px']:g} px edge
   margin); excluded feature-frames: {reasons}.
-- **Tables**: `manifests/{{split}}-{{shard}}.parquet`, one row per frame (poses as 4x4 matrices, intrinsics,
+{_pose_card(scene)}- **Tables**: `manifests/{{split}}-{{shard}}.parquet`, one row per frame (poses as 4x4 matrices, intrinsics,
   seeds, every appearance draw, and per feature its true centre, boxes, exclusion and visibility; missing
   values are nulls), `features.parquet` (each class's 3D points and centre). The columns are documented in
   datagen's `manifests/README.md`; `datasets.load_dataset(this folder)` reads the manifests.
 - **Training**: `data.yaml` and `hyp.yaml` for Ultralytics YOLO; their comments give the train, predict and
   evaluate commands. `dataset.json` records the resolved config, the software versions and the asset hashes.
 """
+
+
+def _pose_card(scene: Scene) -> str:
+    """The card's line on pose labels (empty without them)."""
+    labels = scene.config.labels
+    if labels.format == "detect":
+        return ""
+    where = "`pose/` (its own data.yaml and hyp.yaml)" if labels.format == "both" else "`labels/`"
+    layout = scene.pose_layout
+    flip = "with a `flip_idx`" if layout.flip_idx is not None else f"without `flip_idx` ({layout.flip_problem})"
+    return (f"- **Pose labels** in {where}: one instance per object ({', '.join(layout.objects)}), its keypoints the "
+            f"true centre projections of its features, `kpt_shape: [{layout.kpt_count}, 3]`, {flip}; truncated "
+            f"objects: {labels.truncated_objects}.\n")
 
 
 def write_dataset_card(layout: Layout, scene: Scene, jobs: list[ShardJob], *, render: bool, labels: int,
@@ -275,6 +346,23 @@ def write_dataset_files(layout: Layout, scene: Scene, jobs: list[ShardJob], fing
         write_text(layout.dataset_json,
                    json.dumps(dataset_document(scene, jobs, fingerprint, render=render), indent=2) + "\n")
     splits = tuple(sorted({job.split for job in jobs}))
-    write_text(root / "data.yaml", data_yaml(root, names, splits, imgsz=scene.config.labels.train_imgsz))
-    write_text(root / "hyp.yaml", hyp_yaml(scene, root))
+    imgsz = scene.config.labels.train_imgsz
+    if layout.detect:
+        write_text(root / "data.yaml", data_yaml(root, names, splits, imgsz=imgsz))
+        write_text(root / "hyp.yaml", hyp_yaml(scene, root))
+    if layout.pose:
+        pose_root = layout.pose_root
+        if pose_root != root:
+            link, target = root / POSE_IMAGES_LINK[0], POSE_IMAGES_LINK[1]
+            if link.is_symlink() and os.readlink(link) == target:
+                pass
+            elif link.exists() or link.is_symlink():
+                raise DatagenError(f"{link}: exists and is not datagen's link to {target} (the pose set reaches the "
+                                   "images through it); move it away or choose another --out")
+            else:
+                symlink_folder(link, target)
+        write_text(pose_root / "data.yaml", data_yaml(pose_root, list(scene.features.objects), splits, imgsz=imgsz,
+                                                      pose=scene.pose_layout, dataset=root))
+        write_text(pose_root / "hyp.yaml", pose_hyp_yaml(scene, pose_root, root))
     write_features(root / "features.parquet", scene.features)
+    write_objects(root / "objects.parquet", scene.features.objects, scene.hulls)

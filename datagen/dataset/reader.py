@@ -26,10 +26,18 @@ from datagen.core.camera import Intrinsics
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import DatagenError
 from datagen.core.features import FeatureTable
+from datagen.core.keypoints import object_boxes, object_table
 from datagen.core.labels import FrameLabels, compute_labels
 from datagen.core.training import TrainView, label_options
 from datagen.dataset.layout import MANIFEST_NAME
-from datagen.dataset.schema import APPEARANCE, MANIFEST_VERSION, manifest_schema, read_features
+from datagen.dataset.schema import (
+    APPEARANCE,
+    FILE_COLUMNS,
+    MANIFEST_VERSION,
+    manifest_schema,
+    read_features,
+    read_objects,
+)
 
 __all__ = ["DatasetView", "image_size", "load_dataset"]
 
@@ -41,14 +49,16 @@ class DatasetView:
 
     root: Path
     doc: dict  # dataset.json
-    data_yaml: dict
+    data_yaml: dict  # the root's data.yaml: the detect set's, or the pose set's in a pose-only dataset
+    pose_yaml: dict | None  # the pose set's data.yaml (pose/data.yaml with labels.format 'both')
     features: FeatureTable
     intrinsics: Intrinsics
     manifest_file: list[str]  # per row: the manifest it came from (relative to root)
     frame_id: NDArray[np.int64]
     split: list[str]
     image_path: list[str | None]
-    label_path: list[str]
+    label_path: list[str | None]  # the detection label file, None in a pose-only dataset
+    pose_label_path: list[str | None]  # the pose label file, None without pose labels
     exr_path: list[str | None]
     row_intrinsics: NDArray[np.float64]  # (B, 6): width, height, fx, fy, cx, cy
     cam_from_world: NDArray[np.float64]  # (B, 4, 4)
@@ -66,6 +76,11 @@ class DatasetView:
     exclusion: NDArray[np.object_]  # (B, F) reason or None
     visible_fraction: NDArray[np.float64]  # (B, F), NaN where not rendered
     center_visible: NDArray[np.float64]  # (B, F) 1, 0 or NaN
+    keypoint_flag: NDArray[np.int8]  # (B, F) the pose visibility flag (datagen.core.keypoints)
+    hulls: dict[str, NDArray[np.float64]]  # objects.parquet: labeled object -> hull vertices (H, 3)
+    object_tight_xyxy: NDArray[np.float64]  # (B, O, 4) box of each object's projected hull, NaN if not finite
+    object_label_xyxy: NDArray[np.float64]  # (B, O, 4) its pose box, NaN where not labeled
+    object_exclusion: NDArray[np.object_]  # (B, O) reason or None
     distortion: NDArray[np.float64]  # (B, 5) the lens's OpenCV coefficients, zeros for a pinhole frame
     appearance: dict[str, list]  # column -> per-row value (None where not drawn), of schema.APPEARANCE
 
@@ -93,6 +108,30 @@ class DatasetView:
     def cam_from_objects(self) -> NDArray[np.float64]:
         """``(B, O, 4, 4)`` in the order of ``features.objects``."""
         return np.stack([self.cam_from_world @ self.world_from[o] for o in self.features.objects], axis=1)
+
+    @property
+    def label_format(self) -> str:
+        """``labels.format``: detect, pose or both."""
+        return self.label_rules.format
+
+    @property
+    def stems(self) -> list[str]:
+        """Each row's file stem (the frame's image, or label, file name without extension)."""
+        return [Path(next(p for p in paths if p)).stem
+                for paths in zip(self.image_path, self.label_path, self.pose_label_path, strict=True)]
+
+    @property
+    def object_table(self) -> FeatureTable:
+        """The hulls as the table :func:`recompute_objects` labels (:func:`datagen.core.keypoints.object_table`)."""
+        return object_table(self.features.objects, self.hulls)
+
+    def recompute_objects(self) -> FrameLabels:
+        """Every frame's pose boxes from the poses and objects.parquet alone."""
+        rules = self.label_rules
+        options = label_options(rules, self.intrinsics.width, self.intrinsics.height)
+        return object_boxes(self.object_table, self.cam_from_objects(), self.intrinsics, options=options,
+                            distortion=self.distortion if self.distortion.any() else None,
+                            truncated=rules.truncated_objects)
 
     def recompute(self) -> FrameLabels:
         """The labels of every frame from the poses and features.parquet alone (with the
@@ -189,6 +228,15 @@ def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> Dataset
     data_yaml = parse_yaml(read_text(root / "data.yaml", "data.yaml"), root / "data.yaml")
     if not isinstance(data_yaml, dict):
         raise DatagenError(f"{root / 'data.yaml'}: expected a mapping with train, val, nc and names")
+    label_format = doc["config"].get("labels", {}).get("format", "detect")
+    pose_yaml = None
+    if label_format == "both":
+        pose_yaml = parse_yaml(read_text(root / "pose" / "data.yaml", "data.yaml"), root / "pose" / "data.yaml")
+        if not isinstance(pose_yaml, dict):
+            raise DatagenError(f"{root / 'pose' / 'data.yaml'}: expected a mapping with train, val, nc, names and "
+                               "kpt_shape")
+    elif label_format == "pose":
+        pose_yaml = data_yaml
     if not (root / "features.parquet").is_file():
         raise DatagenError(f"{root / 'features.parquet'}: missing or not a regular file")
     try:
@@ -243,7 +291,7 @@ def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> Dataset
         bad = int(np.argmax(lengths != f))
         raise DatagenError(f"{root / names[bad]}: frame {table.column('frame_id')[bad]}: {lengths[bad]} feature "
                            f"records, features.parquet has {f} classes")
-    for column in ("image_path", "label_path", "exr_path"):
+    for column in FILE_COLUMNS:
         for i, rel in enumerate(table.column(column).to_pylist()):
             if rel is not None and not _relative_inside(rel):
                 raise DatagenError(f"{root / names[i]}: frame {table.column('frame_id')[i]}: {column} {rel[:80]!r} "
@@ -254,10 +302,20 @@ def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> Dataset
         return _floats(table.column(name).combine_chunks(), (b, 4, 4))
 
     exclusion = np.array(flat.field("exclusion").to_pylist(), dtype=object).reshape(b, f)
+    n_obj = len(features.objects)
+    object_lists = table.column("objects").combine_chunks()
+    counts = np.asarray(pc.list_value_length(object_lists))
+    if not np.all(counts == n_obj):
+        bad = int(np.argmax(counts != n_obj))
+        raise DatagenError(f"{root / names[bad]}: frame {table.column('frame_id')[bad]}: {counts[bad]} object "
+                           f"records, features.parquet has {n_obj} objects")
+    objects = object_lists.flatten()
+    hulls = _read_hulls(root / "objects.parquet", features.objects)
     return DatasetView(
         root=root,
         doc=doc,
         data_yaml=data_yaml,
+        pose_yaml=pose_yaml,
         features=features,
         intrinsics=intrinsics,
         manifest_file=names,
@@ -265,6 +323,7 @@ def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> Dataset
         split=table.column("split").to_pylist(),
         image_path=table.column("image_path").to_pylist(),
         label_path=table.column("label_path").to_pylist(),
+        pose_label_path=table.column("pose_label_path").to_pylist(),
         exr_path=table.column("exr_path").to_pylist(),
         row_intrinsics=np.stack([np.asarray(table.column(c), dtype=np.float64)
                                  for c in ("width", "height", "fx", "fy", "cx", "cy")], axis=1),
@@ -283,10 +342,29 @@ def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> Dataset
         exclusion=exclusion,
         visible_fraction=_floats(flat.field("visible_fraction"), (b, f)),
         center_visible=_floats(pc.cast(flat.field("center_visible"), pa.float64()), (b, f)),
+        keypoint_flag=np.asarray(flat.field("keypoint_flag").to_numpy(zero_copy_only=False), dtype=np.int8).reshape(b, f),
+        hulls=hulls,
+        object_tight_xyxy=_floats(objects.field("tight_xyxy"), (b, n_obj, 4)),
+        object_label_xyxy=_floats(objects.field("label_xyxy"), (b, n_obj, 4)),
+        object_exclusion=np.array(objects.field("exclusion").to_pylist(), dtype=object).reshape(b, n_obj),
         distortion=_distortion(table, b),
         appearance={c: table.column(c).to_pylist() for cols in APPEARANCE.values() for c in cols
                     if c in table.column_names},
     )
+
+
+def _read_hulls(path: Path, objects: tuple[str, ...]) -> dict[str, NDArray[np.float64]]:
+    """objects.parquet's hulls, one per labeled object (one line when it is missing or wrong)."""
+    if not path.is_file():
+        raise DatagenError(f"{path}: missing or not a regular file")
+    try:
+        hulls = read_objects(path)
+    except Exception as exc:  # noqa: BLE001 (pyarrow and numpy raise many kinds on a damaged table)
+        raise DatagenError(f"{path}: unreadable ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
+    if tuple(hulls) != tuple(objects) or any(len(h) == 0 or not np.isfinite(h).all() for h in hulls.values()):
+        raise DatagenError(f"{path}: objects {', '.join(hulls) or 'none'} with their hull points; features.parquet "
+                           f"labels {', '.join(objects)}")
+    return hulls
 
 
 def _distortion(table, b: int) -> NDArray[np.float64]:

@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from datagen.core.camera import Intrinsics
 from datagen.core.features import FeatureTable
+from datagen.core.keypoints import keypoint_flags
 from datagen.core.labels import Exclusion
 from datagen.files import write_parquet
 from datagen.render.tonemap import IMAGE_STATISTICS
@@ -42,6 +43,9 @@ __all__ = [
     "FeatureColumns",
     "RUN_COLUMNS",
     "feature_records",
+    "object_records",
+    "read_objects",
+    "write_objects",
     "features_schema",
     "manifest_row",
     "manifest_schema",
@@ -53,7 +57,9 @@ __all__ = [
 ]
 
 #: Version of the manifest and feature-table schemas (bumped on any incompatible change).
-MANIFEST_VERSION: Final = "5"
+MANIFEST_VERSION: Final = "6"
+#: Manifest columns that name a frame's files (relative to the dataset root; null when absent).
+FILE_COLUMNS: Final = ("image_path", "label_path", "pose_label_path", "exr_path")
 #: Manifest columns that describe the run rather than the frame: they differ between
 #: two builds of the same config; every other column is identical.
 RUN_COLUMNS: Final = ("render_s", "denoise_s", "frame_s", "worker", "worker_rss_mib")
@@ -96,6 +102,18 @@ FEATURE_RECORD: Final = pa.struct([
     ("exclusion", pa.string()),
     ("visible_fraction", _F64),
     ("center_visible", pa.bool_()),
+    ("keypoint_flag", pa.int8()),
+])
+
+#: One labeled object of a frame as a pose instance (datagen.core.keypoints): the box of its
+#: projected mesh (hull vertices), the label box after the size rule, and its exclusion.
+OBJECT_RECORD: Final = pa.struct([
+    ("object", pa.string()),
+    ("class_id", pa.int32()),
+    ("tight_xyxy", _vec(4)),
+    ("label_xyxy", _vec(4)),
+    ("labeled", pa.bool_()),
+    ("exclusion", pa.string()),
 ])
 
 MATERIAL_RECORD: Final = pa.struct([
@@ -115,7 +133,8 @@ def manifest_schema() -> pa.Schema:
         pa.field("split", pa.string(), nullable=False),
         pa.field("shard", pa.int32(), nullable=False),
         pa.field("image_path", pa.string()),
-        pa.field("label_path", pa.string(), nullable=False),
+        pa.field("label_path", pa.string()),
+        pa.field("pose_label_path", pa.string()),
         pa.field("exr_path", pa.string()),
         pa.field("width", pa.int32(), nullable=False),
         pa.field("height", pa.int32(), nullable=False),
@@ -180,6 +199,7 @@ def manifest_schema() -> pa.Schema:
         *(pa.field(name, _F64) for name in IMAGE_STATISTICS),
         pa.field("n_labeled", pa.int32(), nullable=False),
         pa.field("features", pa.list_(FEATURE_RECORD), nullable=False),
+        pa.field("objects", pa.list_(OBJECT_RECORD), nullable=False),
         pa.field("render_s", _F64),
         pa.field("denoise_s", _F64),
         pa.field("frame_s", _F64),
@@ -250,15 +270,38 @@ def read_features(path: Path) -> FeatureTable:
     )
 
 
+# --- objects.parquet ----------------------------------------------------------------
+def objects_schema() -> pa.Schema:
+    return pa.schema([
+        pa.field("class_id", pa.int32(), nullable=False),
+        pa.field("object", pa.string(), nullable=False),
+        pa.field("hull_points_m", pa.list_(_vec(3)), nullable=False),
+    ], metadata={"datagen.manifest_version": MANIFEST_VERSION})
+
+
+def write_objects(path: Path, objects: Sequence[str], hulls: dict[str, NDArray[np.float64]]) -> Path:
+    """One row per labeled object (its pose class): the convex-hull vertices of its mesh in
+    its body frame, which bound its projection (:mod:`datagen.core.keypoints`)."""
+    rows = [{"class_id": c, "object": name, "hull_points_m": np.asarray(hulls[name]).tolist()}
+            for c, name in enumerate(objects)]
+    return write_parquet(path, pa.Table.from_pylist(rows, schema=objects_schema()))
+
+
+def read_objects(path: Path) -> dict[str, NDArray[np.float64]]:
+    """Object name -> hull vertices ``(H, 3)``, in pose-class order, from ``objects.parquet``."""
+    rows = sorted(pq.read_table(path).to_pylist(), key=lambda r: r["class_id"])
+    return {r["object"]: np.asarray(r["hull_points_m"], dtype=np.float64).reshape(-1, 3) for r in rows}
+
+
 def matrix_field(m: np.ndarray) -> list[list[float]]:
     """A 4x4 transform as the four rows of a manifest column."""
     return np.asarray(m, dtype=np.float64).reshape(4, 4).tolist()
 
 
-def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, label_path: str,
-                 exr_path: str | None, intrinsics: Intrinsics, state: FrameState, look: FrameLook, seed: int,
+def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, label_path: str | None,
+                 pose_label_path: str | None, exr_path: str | None, intrinsics: Intrinsics, state: FrameState, look: FrameLook, seed: int,
                  render_seed: int, spp: int | None, denoise: str | None, features: FeatureColumns,
-                 n_labeled: int, render_s: float | None, denoise_s: float | None, frame_s: float, worker: str,
+                 objects: list[dict], n_labeled: int, render_s: float | None, denoise_s: float | None, frame_s: float, worker: str,
                  worker_rss_mib: float, rendered: dict | None = None) -> dict:
     """One frame's manifest row, column by column (:func:`manifest_schema`): the frame,
     its files, the camera, the poses, the approach, every appearance draw, the features,
@@ -272,6 +315,7 @@ def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, 
         "shard": shard,
         "image_path": image_path,
         "label_path": label_path,
+        "pose_label_path": pose_label_path,
         "exr_path": exr_path,
         "width": k.width,
         "height": k.height,
@@ -305,6 +349,7 @@ def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, 
         **{name: rendered.get(name) for name in MEASURED_COLUMNS},
         "n_labeled": n_labeled,
         "features": features,
+        "objects": objects,
         "render_s": render_s,
         "denoise_s": denoise_s,
         "frame_s": frame_s,
@@ -326,6 +371,7 @@ class FeatureColumns:
     exclusion: NDArray[np.int8]  # Exclusion codes
     visible_fraction: NDArray[np.float64] | None  # None: not rendered
     center_visible: NDArray[np.bool_] | None
+    keypoint_flag: NDArray[np.int8]  # Ultralytics' pose visibility (datagen.core.keypoints.keypoint_flags)
 
     @property
     def labeled(self) -> NDArray[np.bool_]:
@@ -347,7 +393,19 @@ def feature_records(labels, class_ids, visible_fraction=None, center_visible=Non
         exclusion=np.asarray(labels.exclusion, dtype=np.int8),
         visible_fraction=None if visible_fraction is None else np.asarray(visible_fraction, dtype=np.float64),
         center_visible=None if center_visible is None else np.asarray(center_visible, dtype=bool),
+        keypoint_flag=keypoint_flags(labels.exclusion, center_visible),
     )
+
+
+def object_records(labels, objects: Sequence[str]) -> list[dict]:
+    """The ``objects`` column of one frame: each labeled object's pose box
+    (:func:`datagen.core.keypoints.object_table` labels), null where not finite or not labeled."""
+    def box(values, keep: bool) -> list[float] | None:
+        return [float(v) for v in values] if keep and np.isfinite(values).all() else None
+
+    return [{"object": name, "class_id": c, "tight_xyxy": box(labels.tight_xyxy[c], True),
+             "label_xyxy": box(labels.label_xyxy[c], bool(labels.labeled[c])), "labeled": bool(labels.labeled[c]),
+             "exclusion": Exclusion(int(labels.exclusion[c])).reason} for c, name in enumerate(objects)]
 
 
 def _features_column(frames: Sequence[FeatureColumns]) -> pa.Array:
@@ -397,6 +455,7 @@ def _features_column(frames: Sequence[FeatureColumns]) -> pa.Array:
             pa.array(reasons[codes].tolist(), pa.string()),
             optional("visible_fraction", np.float64),
             optional("center_visible", bool),
+            pa.array(cat("keypoint_flag").astype(np.int8)),
         ],
         fields=list(FEATURE_RECORD),
     )

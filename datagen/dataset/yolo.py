@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike
 
 from datagen.core.labels import FrameLabels
 
-__all__ = ["YOLO_DECIMALS", "parse_line", "yolo_lines"]
+__all__ = ["YOLO_DECIMALS", "parse_line", "pose_lines", "yolo_lines"]
 
 #: Decimals of the normalized values in a label line. Seven keep the rounding under
 #: 1.2e-4 px at 2048x1080 (six would allow 1.02e-3 px, above the audit's drift bound).
@@ -68,3 +68,18 @@ def parse_line(line: str, nc: int, *, columns: tuple[int, ...] = (5,)) -> tuple[
     if cls != int(cls) or not 0 <= cls < nc:
         return None, f"class {tokens[0][:20]} is not an integer in [0, {nc})"
     return values, None
+
+
+def pose_lines(rows: ArrayLike) -> list[str]:
+    """YOLO pose lines ``class cx cy w h (x y v) * K`` from rows of
+    :func:`datagen.core.keypoints.pose_rows`: values with :data:`YOLO_DECIMALS` decimals,
+    flags as integers, and a keypoint of flag 0 as ``0 0 0``."""
+    rows = np.asarray(rows, dtype=np.float64)
+    out = []
+    value = f"%.{YOLO_DECIMALS}f"
+    for row in rows:
+        parts = [f"{int(row[0])}", *(value % v for v in row[1:5])]
+        for x, y, v in row[5:].reshape(-1, 3):
+            parts.append("0 0 0" if v == 0 else f"{value % x} {value % y} {int(v)}")
+        out.append(" ".join(parts))
+    return out

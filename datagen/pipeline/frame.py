@@ -18,12 +18,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from datagen.core.conventions import render_seed
+from datagen.core.keypoints import object_boxes
 from datagen.core.labels import FrameLabels, compute_labels
 from datagen.scene.approach import FrameState, FrameStates
 from datagen.scene.look import FrameLook, frame_look
 from datagen.scene.resolved import Scene
 
-__all__ = ["FrameDraws", "draw_frame", "frame_labels", "training_image"]
+__all__ = ["FrameDraws", "draw_frame", "frame_labels", "object_labels", "training_image"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,13 +46,27 @@ def draw_frame(scene: Scene, states: FrameStates, i: int) -> FrameDraws:
     return FrameDraws(i, seed, render_seed(seed, i), state, frame_look(scene.config, state))
 
 
+def _camera(scene: Scene, draws: FrameDraws) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(O, 4, 4)`` camera-from-object transforms (``features.objects`` order) and the lens."""
+    state, look = draws.state, draws.look
+    cam_from_objects = np.stack([state.cam_from_world @ state.world_from(o) for o in scene.features.objects])
+    return cam_from_objects, None if look.sensor_distortion is None else np.asarray(look.sensor_distortion)
+
+
 def frame_labels(scene: Scene, draws: FrameDraws) -> FrameLabels:
     """Every feature's labels in a frame's camera (before the occlusion rule), through the
     frame's lens distortion when its look has one."""
-    features, state, look = scene.features, draws.state, draws.look
-    cam_from_objects = np.stack([state.cam_from_world @ state.world_from(o) for o in features.objects])
-    distortion = None if look.sensor_distortion is None else np.asarray(look.sensor_distortion)
-    return compute_labels(features, cam_from_objects, scene.intrinsics, **scene.label_options, distortion=distortion)
+    cam_from_objects, distortion = _camera(scene, draws)
+    return compute_labels(scene.features, cam_from_objects, scene.intrinsics, **scene.label_options,
+                          distortion=distortion)
+
+
+def object_labels(scene: Scene, draws: FrameDraws) -> FrameLabels:
+    """Every labeled object's pose box in a frame's camera (:mod:`datagen.core.keypoints`):
+    the box of its projected convex hull under the feature boxes' size and edge rules."""
+    cam_from_objects, distortion = _camera(scene, draws)
+    return object_boxes(scene.object_table, cam_from_objects, scene.intrinsics, options=scene.label_options,
+                        distortion=distortion, truncated=scene.config.labels.truncated_objects)
 
 
 def training_image(result, look: FrameLook) -> tuple[np.ndarray, dict]:

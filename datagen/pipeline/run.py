@@ -60,7 +60,7 @@ def build_dataset(config: Config, out: Path, *, workers: int | None = None, exec
                            f"(at most {cpu_count()}; --executor ray for a cluster)")
     scene = Scene.resolve(config)
     root = Path(out).resolve()
-    layout = Layout(root, scene.image_suffix)
+    layout = Layout.of(root, scene.config)
     check_folder(layout)  # refuse someone else's folder before anything (the lock included) is created
     jobs = plan_shards(config)
     fingerprint = config_fingerprint(scene, render=render)

@@ -19,11 +19,12 @@ from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
+from datagen.core.keypoints import pose_rows
 from datagen.dataset.layout import Layout, ShardJob
-from datagen.dataset.schema import feature_records, manifest_row, write_manifest
-from datagen.dataset.yolo import yolo_lines
+from datagen.dataset.schema import feature_records, manifest_row, object_records, write_manifest
+from datagen.dataset.yolo import pose_lines, yolo_lines
 from datagen.files import write_exr, write_image, write_text
-from datagen.pipeline.frame import FrameDraws, draw_frame, frame_labels, training_image
+from datagen.pipeline.frame import FrameDraws, draw_frame, frame_labels, object_labels, training_image
 from datagen.pipeline.progress import ShardSummary
 from datagen.scene.approach import FrameStates
 from datagen.scene.resolved import Scene
@@ -51,7 +52,7 @@ class ShardWriter:
     def __init__(self, scene: Scene, root: Path, *, render: bool = True) -> None:
         self.scene = scene
         self.states = FrameStates(scene.config)  # each approach chain simulated once per process
-        self.layout = Layout(Path(root), scene.image_suffix)
+        self.layout = Layout.of(root, scene.config)
         self.renderer = None
         self._stop: Callable[[], bool] = lambda: False
         # Images are encoded and written by one background thread while the next frame
@@ -113,15 +114,22 @@ class ShardWriter:
                                                          layout.root / exr_rel if exr_rel else None)
             fraction, center_visible = self.renderer.feature_visibility(draws.state, features)
             labels = labels.with_visibility(fraction, scene.config.labels.min_visible_fraction)
+        records = feature_records(labels, features.class_id, fraction, center_visible)
+        objects = object_labels(scene, draws)
         label_rel = layout.label_rel(job.split, job.shard, i)
+        pose_rel = layout.pose_label_rel(job.split, job.shard, i)
         lines = yolo_lines(labels, features.class_id, k.width, k.height)
-        write_text(layout.root / label_rel, "".join(line + "\n" for line in lines))
+        if label_rel is not None:
+            write_text(layout.root / label_rel, "".join(line + "\n" for line in lines))
+        if pose_rel is not None:
+            rows = pose_rows(objects, labels.center_px, records.keypoint_flag, scene.pose_layout, k.width, k.height)
+            write_text(layout.root / pose_rel, "".join(line + "\n" for line in pose_lines(rows)))
         return manifest_row(
             frame=i, split=job.split, shard=job.shard, image_path=image_rel, label_path=label_rel,
-            exr_path=exr_rel, intrinsics=k, state=draws.state, look=draws.look, seed=draws.seed,
+            pose_label_path=pose_rel, exr_path=exr_rel, intrinsics=k, state=draws.state, look=draws.look, seed=draws.seed,
             render_seed=draws.render_seed, spp=scene.config.render.spp if self.renderer is not None else None,
             denoise=scene.config.render.denoise if self.renderer is not None else None,
-            features=feature_records(labels, features.class_id, fraction, center_visible), n_labeled=len(lines),
+            features=records, objects=object_records(objects, features.objects), n_labeled=len(lines),
             rendered=rendered, render_s=render_s, denoise_s=denoise_s, frame_s=time.perf_counter() - started,
             worker=f"{platform.node()}:{os.getpid()}", worker_rss_mib=_rss_mib())
 

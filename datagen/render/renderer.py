@@ -32,7 +32,7 @@ from datagen.assets.files import load_mesh
 from datagen.assets.models import material_class
 from datagen.assets.models.drogue import hose_faces, hose_placeholder, hose_vertices
 from datagen.core.camera import Intrinsics
-from datagen.core.conventions import OBJECT_NAMES, RIGID_OBJECTS, object_id
+from datagen.core.conventions import OBJECT_NAMES, RIGID_OBJECTS, object_id, pixel_centres
 from datagen.core.transforms import make_transform
 from datagen.render.mitsuba import (
     jit_vectors,
@@ -367,8 +367,7 @@ class Renderer:
         through the centre of every ``stride`` x ``stride`` block, and their z components
         (z-depth per unit of ray length); computed once."""
         k = self.intrinsics
-        w, h = -(-k.width // stride), -(-k.height // stride)
-        uu, vv = np.meshgrid(np.arange(w) * stride + stride / 2, np.arange(h) * stride + stride / 2)
+        uu, vv = pixel_centres(k.width, k.height, stride)
         d_cam = np.stack([(uu - k.cx) / k.fx, (vv - k.cy) / k.fy, np.ones_like(uu)], axis=-1).reshape(-1, 3)
         norm = np.linalg.norm(d_cam, axis=1)
         return (d_cam / norm[:, None]).astype(np.float32), (1.0 / norm).astype(np.float32)

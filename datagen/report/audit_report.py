@@ -100,7 +100,8 @@ Verdict: <span class="verdict">{verdict}</span></p>
 <h2>Checks</h2>
 <table><tr><th>check</th><th>result</th><th>checked</th><th>failures</th><th>worst</th><th>what (worst offenders)</th></tr>
 {''.join(rows)}</table>
-{_learnable_html(result.stats["learnable"], esc)}
+{_learnable_html(result.stats["learnable"], esc) if "learnable" in result.stats else ""}
+{_pose_html(result.stats["learnable_pose"]) if "learnable_pose" in result.stats else ""}
 {_appearance_html(result.stats.get("appearance", {}), result.frames, esc)}
 <h2>Parallax: tight-box centre drift from the true centre projection</h2>
 <p>{drift['features']} features in view; median {_fmt(drift['median'])} px, 95th percentile {_fmt(drift['p95'])} px,
@@ -182,6 +183,16 @@ def _learnable_html(stats: dict, esc) -> str:
 <table>{head.format('distance (m)')}{rows(distance)}</table>
 <table>{head.format('size')}{rows(stats['by_size'].items())}</table>
 <table>{head.format('worst classes')}{rows(worst) or '<tr><td colspan=3>every class fully learnable</td></tr>'}</table>
+"""
+
+
+def _pose_html(stats: dict) -> str:
+    """The report's line on the pose instances (one per labeled object)."""
+    share = "-" if stats["share"] is None else f"{100 * stats['share']:.1f}%"
+    return f"""<h2>Pose instances</h2>
+<p>{stats['instances']} pose instances (one per labeled object, its keypoints the true centre projections of its
+features); {share} survive Ultralytics' training transforms at imgsz {stats['imgsz']} without mosaic and hold an
+anchor centre.</p>
 """
 
 

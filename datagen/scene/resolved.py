@@ -2,22 +2,29 @@
 
 :meth:`Scene.resolve` checks the assets a config names and derives, in one place,
 the feature table, the camera intrinsics, the label rules at the training size,
-the asset files with their SHA-256 and the image format. Every stage (labels,
+the asset files with their SHA-256, the labeled objects' convex hulls (their pose
+boxes, :mod:`datagen.core.keypoints`) and the image format. Every stage (labels,
 rendering, the dataset writer, the executors' workers) receives this frozen
 object; none derives any of it again.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+from numpy.typing import NDArray
+
+from datagen.assets.files import mesh_hull
 from datagen.assets.table import check_assets, object_paths
 from datagen.config.schema import Config
 from datagen.core.camera import Intrinsics
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.features import FeatureTable
+from datagen.core.keypoints import PoseLayout, object_table
 from datagen.core.training import TrainView, label_options
 
 __all__ = ["Scene"]
@@ -41,6 +48,7 @@ class Scene:
     train_view: TrainView
     label_options: dict  # the keyword arguments of datagen.core.labels.compute_labels
     assets: dict[str, dict[str, str]]  # object -> mesh, mesh_sha256, features, features_sha256
+    hulls: dict[str, NDArray[np.float64]]  # labeled object -> its mesh's convex-hull vertices, body frame (m)
 
     @classmethod
     def resolve(cls, config: Config) -> Scene:
@@ -56,7 +64,18 @@ class Scene:
         return cls(config=config, features=features,
                    intrinsics=Intrinsics.from_hfov_deg(cam.width, cam.height, cam.hfov_deg),
                    train_view=TrainView(cam.width, cam.height, config.labels.train_imgsz),
-                   label_options=label_options(config.labels, cam.width, cam.height), assets=assets)
+                   label_options=label_options(config.labels, cam.width, cam.height), assets=assets,
+                   hulls={name: mesh_hull(object_paths(config, name)[0], name) for name in features.objects})
+
+    @functools.cached_property
+    def object_table(self) -> FeatureTable:
+        """The labeled objects' hulls as a feature table (:func:`datagen.core.keypoints.object_table`)."""
+        return object_table(self.features.objects, self.hulls)
+
+    @functools.cached_property
+    def pose_layout(self) -> PoseLayout:
+        """Where each feature goes in a pose instance (:class:`datagen.core.keypoints.PoseLayout`)."""
+        return PoseLayout.from_features(self.features)
 
     @property
     def name(self) -> str:
