@@ -112,7 +112,7 @@ def main() -> None:
                 both_s = build(scene, root, args.frames, args.seed, **{"labels.format": "both",
                                                                        "labels.truncated_objects": truncated})
                 view = load_dataset(root)
-                in_instance = view.labeled & (view.object_exclusion[:, view.features.object_index] == None)  # noqa: E711
+                in_instance = view.labeled & (view.object_exclusion[:, view.features.object_index] == None)
                 stats = audit(view).stats["learnable_pose"]
                 loader = "-"
                 if have_ultralytics:

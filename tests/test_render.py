@@ -6,6 +6,7 @@ Marked ``render``: small resolutions, still run in CI.
 from __future__ import annotations
 
 import dataclasses
+import gc
 from pathlib import Path
 
 import numpy as np
@@ -337,6 +338,11 @@ def test_frames_reuse_compiled_kernels(one_thread) -> None:
     renderer = Renderer(Scene.resolve(config))
     features = feature_table(config)
     sun, sky = next(iter(scales))
+    # Objects of earlier tests (scenes, renderers) must not be collected in the middle of the
+    # frames: what their destruction launches would count as this test's kernels.
+    gc.collect()
+    gc.disable()
+    dr.kernel_history()  # clears it
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
         seen: set[str] = set()
@@ -350,6 +356,7 @@ def test_frames_reuse_compiled_kernels(one_thread) -> None:
             seen |= hashes
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
+        gc.enable()
 
 
 def test_exr_has_linear_rgb_depth_and_object_ids(tmp_path: Path) -> None:
