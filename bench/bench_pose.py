@@ -29,15 +29,14 @@ import tempfile
 import time
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from datagen.analysis.audit import audit
 from datagen.config import load_config, override_config
 from datagen.config.schema import Config
-from datagen.core.training import ANCHOR_STRIDES
+from datagen.core.training import TrainView
 from datagen.dataset.layout import Layout, plan_shards
-from datagen.dataset.metadata import write_image_lists
+from datagen.dataset.metadata import write_placeholder_images
 from datagen.dataset.reader import load_dataset
 from datagen.pipeline.run import build_dataset
 
@@ -54,20 +53,10 @@ def build(scene: str, out: Path, frames: int, seed: int, **overrides) -> float:
 
 
 def blank_images(root: Path) -> None:
-    """One grey PNG hard-linked at every image path of a labels-only build (the dataloader reads images)."""
+    """Grey placeholder images for a labels-only build (the dataloader reads images)."""
     view = load_dataset(root)
     config = Config.model_validate(view.doc["config"])
-    layout, jobs = Layout.of(root, config), plan_shards(config)
-    grey = root / ".grey.png"
-    grey.write_bytes(cv2.imencode(".png", np.full((view.intrinsics.height, view.intrinsics.width, 3), 90,
-                                                  np.uint8))[1].tobytes())
-    for job in jobs:
-        for i in job.frames:
-            path = root / layout.image_rel(job.split, job.shard, i)
-            path.parent.mkdir(parents=True, exist_ok=True)
-            os.link(grey, path)
-    grey.unlink()
-    write_image_lists(layout, jobs)
+    write_placeholder_images(Layout.of(root, config), plan_shards(config), config.camera.width, config.camera.height)
 
 
 def dataloader_shares(pose_root: Path) -> dict:
@@ -76,12 +65,7 @@ def dataloader_shares(pose_root: Path) -> dict:
     seen = pose_items(pose_root, "train")
     imgsz = seen["imgsz"]
     boxes = np.concatenate([item["xyxy"] for item in seen["items"]]) if seen["items"] else np.zeros((0, 4))
-    anchored = np.zeros(len(boxes), dtype=bool)
-    for s in ANCHOR_STRIDES:
-        centres = (np.arange(imgsz // s) + 0.5) * s
-        hit_x = (centres[None, :] > boxes[:, :1]) & (centres[None, :] < boxes[:, 2:3])
-        hit_y = (centres[None, :] > boxes[:, 1:2]) & (centres[None, :] < boxes[:, 3:4])
-        anchored |= hit_x.any(axis=1) & hit_y.any(axis=1)
+    anchored = TrainView(imgsz, imgsz, imgsz).has_anchor(boxes)  # boxes already on the square input
     listed = len((pose_root / "train.txt").read_text().splitlines())
     return {"images_kept": f"{len(seen['im_files'])}/{listed}", "lines": seen["lines"], "instances_out": len(boxes),
             "anchored_share": float(anchored.mean()) if len(boxes) else None}

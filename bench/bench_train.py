@@ -86,26 +86,12 @@ def contested(view) -> tuple[int, int]:
 
 
 def blank_images(root: Path, config) -> None:
-    """One grey PNG hard-linked at every frame's image path, and the image lists: Ultralytics'
-    dataloader needs images to exist, not rendered ones (labels do not depend on pixels)."""
-    import os
-
-    import cv2
-
+    """Grey placeholder images and the image lists: Ultralytics' dataloader needs images to
+    exist, not rendered ones (labels do not depend on pixels)."""
     from datagen.dataset.layout import Layout, plan_shards
-    from datagen.dataset.metadata import write_image_lists
+    from datagen.dataset.metadata import write_placeholder_images
 
-    layout, jobs = Layout(root), plan_shards(config)
-    grey = root / ".grey.png"
-    grey.write_bytes(cv2.imencode(".png", np.full((config.camera.height, config.camera.width, 3), 90,
-                                                  np.uint8))[1].tobytes())
-    for job in jobs:
-        for i in job.frames:
-            path = root / layout.image_rel(job.split, job.shard, i)
-            path.parent.mkdir(parents=True, exist_ok=True)
-            os.link(grey, path)
-    grey.unlink()
-    write_image_lists(layout, jobs)
+    write_placeholder_images(Layout.of(root, config), plan_shards(config), config.camera.width, config.camera.height)
 
 
 def sweep(args) -> None:

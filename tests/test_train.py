@@ -14,7 +14,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
 import yaml
@@ -22,7 +21,7 @@ import yaml
 from datagen.analysis.audit import audit
 from datagen.config import load_config, override_config
 from datagen.dataset.layout import Layout, plan_shards
-from datagen.dataset.metadata import write_image_lists
+from datagen.dataset.metadata import write_placeholder_images
 from datagen.dataset.reader import load_dataset
 from datagen.pipeline.run import build_dataset
 
@@ -42,17 +41,7 @@ def labels_with_blank_images(root: Path, frames: int, scene: str = "wingcam55", 
     config = override_config(load_config(ROOT / "scenes" / f"{scene}.yaml"),
                              {"dataset.frames": frames, "dataset.seed": HELD_OUT_SEED, **overrides})
     build_dataset(config, root, render=False)
-    layout, jobs = Layout.of(root, config), plan_shards(config)
-    grey = root / ".grey.png"
-    grey.write_bytes(cv2.imencode(".png", np.full((config.camera.height, config.camera.width, 3), 90,
-                                                  np.uint8))[1].tobytes())
-    for job in jobs:
-        for i in job.frames:
-            path = root / layout.image_rel(job.split, job.shard, i)
-            path.parent.mkdir(parents=True, exist_ok=True)
-            os.link(grey, path)
-    grey.unlink()
-    write_image_lists(layout, jobs)
+    write_placeholder_images(Layout.of(root, config), plan_shards(config), config.camera.width, config.camera.height)
     return root
 
 
@@ -158,7 +147,7 @@ def _fit_axis(src: np.ndarray, dst: np.ndarray) -> tuple[float, float, float]:
     return float(a), float(t), float(np.abs(a * src + t - dst).max())
 
 
-def _source_instances(root: Path, layout) -> list[tuple[int, np.ndarray]]:
+def _source_instances(root: Path) -> list[tuple[int, np.ndarray]]:
     """Every pose instance in the label files: (class, keypoints (K, 3) in continuous pixels)."""
     view = load_dataset(root)
     k = view.intrinsics
@@ -180,15 +169,11 @@ def test_pose_keypoints_stay_on_the_true_centres_through_mosaic_scale_translate_
     hyp = yaml.safe_load((root / "hyp.yaml").read_text())
     assert hyp["mosaic"] == 1.0 and hyp["fliplr"] == 0.5 and hyp["scale"] > 0 and hyp["translate"] > 0
     flip = np.array(yaml.safe_load((root / "data.yaml").read_text())["flip_idx"])
-    from datagen.core.keypoints import PoseLayout
-
-    layout = PoseLayout.from_features(load_dataset(root).features)
-    sources = _source_instances(root, layout)
+    sources = _source_instances(root)
     seen = pose_items(root, "train")
     listed = (root / "train.txt").read_text().splitlines()
     assert len(seen["im_files"]) == len(listed)  # no image dropped as corrupt
     matched = flipped = 0
-    worst = 0.0
     for item in seen["items"]:
         for c, kp in zip(item["classes"], item["keypoints"], strict=True):
             on = kp[:, 2] > 0
@@ -209,7 +194,6 @@ def test_pose_keypoints_stay_on_the_true_centres_through_mosaic_scale_translate_
                     if best is None or max(rx, ry) < best[0]:
                         best = (max(rx, ry), mirrored)
             assert best is not None and best[0] < 5e-3, best
-            worst = max(worst, best[0])
             matched += 1
             flipped += best[1]
     assert matched > 40 and 0 < flipped < matched, (matched, flipped)

@@ -24,7 +24,7 @@ from datagen.core.errors import DatagenError
 from datagen.core.keypoints import PoseLayout
 from datagen.dataset.layout import POSE_IMAGES_LINK, SPLITS, Layout, ShardJob
 from datagen.dataset.schema import MANIFEST_VERSION, write_features, write_objects
-from datagen.files import symlink_folder, write_text
+from datagen.files import link_or_copy, symlink_folder, write_image, write_text
 from datagen.scene.resolved import Scene
 
 __all__ = [
@@ -41,6 +41,7 @@ __all__ = [
     "write_dataset_card",
     "write_dataset_files",
     "write_image_lists",
+    "write_placeholder_images",
 ]
 
 DATASET_SCHEMA: Final = "datagen.dataset"
@@ -253,6 +254,23 @@ def write_image_lists(layout: Layout, jobs: list[ShardJob]) -> list[Path]:
         if lines:
             written += [write_text(root / layout.image_list(split).name, "".join(lines)) for root in roots]
     return written
+
+
+def write_placeholder_images(layout: Layout, jobs: list[ShardJob], width: int, height: int) -> list[Path]:
+    """One grey image at every frame's image path (the first written, the others hard links
+    to it), then the image lists: a labels-only build that Ultralytics' dataloader reads
+    (the labels do not depend on the pixels). For tests and benchmarks, not datasets."""
+    import numpy as np
+
+    first = None
+    for job in jobs:
+        for i in job.frames:
+            path = layout.root / layout.image_rel(job.split, job.shard, i)
+            if first is None:
+                first = write_image(path, np.full((height, width, 3), 90, np.uint8))
+            else:
+                link_or_copy(first, path)
+    return write_image_lists(layout, jobs)
 
 
 #: The first line of a dataset card datagen wrote; a README.md without it is the user's and is never touched.
