@@ -285,31 +285,20 @@ def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> Dataset
     table = table.take(pa.array(order))
     names = [names[i] for i in order]
     b, f = table.num_rows, len(features)
-    lists = table.column("features").combine_chunks()
-    lengths = np.asarray(pc.list_value_length(lists))
-    if not np.all(lengths == f):
-        bad = int(np.argmax(lengths != f))
-        raise DatagenError(f"{root / names[bad]}: frame {table.column('frame_id')[bad]}: {lengths[bad]} feature "
-                           f"records, features.parquet has {f} classes")
+    flat = _records(table, "features", f, f"feature records, features.parquet has {f} classes", root, names)
     for column in FILE_COLUMNS:
         for i, rel in enumerate(table.column(column).to_pylist()):
             if rel is not None and not _relative_inside(rel):
                 raise DatagenError(f"{root / names[i]}: frame {table.column('frame_id')[i]}: {column} {rel[:80]!r} "
                                    "is not a path inside the dataset")
-    flat = lists.flatten()
 
     def matrices(name: str) -> NDArray[np.float64]:
         return _floats(table.column(name).combine_chunks(), (b, 4, 4))
 
     exclusion = np.array(flat.field("exclusion").to_pylist(), dtype=object).reshape(b, f)
     n_obj = len(features.objects)
-    object_lists = table.column("objects").combine_chunks()
-    counts = np.asarray(pc.list_value_length(object_lists))
-    if not np.all(counts == n_obj):
-        bad = int(np.argmax(counts != n_obj))
-        raise DatagenError(f"{root / names[bad]}: frame {table.column('frame_id')[bad]}: {counts[bad]} object "
-                           f"records, features.parquet has {n_obj} objects")
-    objects = object_lists.flatten()
+    objects = _records(table, "objects", n_obj, f"object records, features.parquet has {n_obj} objects", root,
+                       names)
     hulls = _read_hulls(root / "objects.parquet", features.objects)
     return DatasetView(
         root=root,
@@ -351,6 +340,17 @@ def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> Dataset
         appearance={c: table.column(c).to_pylist() for cols in APPEARANCE.values() for c in cols
                     if c in table.column_names},
     )
+
+
+def _records(table: pa.Table, column: str, count: int, what: str, root: Path, names: list[str]) -> pa.Array:
+    """The flattened records of a list column whose every row must hold ``count`` of them
+    (one line naming the manifest and frame of the first row that does not)."""
+    lists = table.column(column).combine_chunks()
+    lengths = np.asarray(pc.list_value_length(lists))
+    if not np.all(lengths == count):
+        bad = int(np.argmax(lengths != count))
+        raise DatagenError(f"{root / names[bad]}: frame {table.column('frame_id')[bad]}: {lengths[bad]} {what}")
+    return lists.flatten()
 
 
 def _read_hulls(path: Path, objects: tuple[str, ...]) -> dict[str, NDArray[np.float64]]:
