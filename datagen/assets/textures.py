@@ -23,6 +23,8 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from datagen.core.conventions import GRAVITY_MPS2
+
 __all__ = [
     "CLOUD_TEXELS",
     "CLOUD_TILE_M",
@@ -47,7 +49,6 @@ WAVE_TEXELS: Final = 512
 #: A livery texture's size (it spans the object's bounding box).
 LIVERY_TEXELS: Final = 512
 
-GRAVITY_MPS2: Final = 9.80665
 FloatArray = NDArray[np.float32]
 
 

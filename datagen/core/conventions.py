@@ -92,6 +92,7 @@ __all__ = [
     "CV_DOWN",
     "CV_FORWARD",
     "CV_RIGHT",
+    "GRAVITY_MPS2",
     "MICAM_FROM_CVCAM",
     "NEAR_PLANE_M",
     "OBJECT_NAMES",
@@ -104,7 +105,10 @@ __all__ = [
     "evaluation_rng",
     "frame_rng",
     "frame_seed_sequence",
+    "index_px",
     "object_id",
+    "pixel_centre",
+    "pixel_centres",
     "random_features_rng",
     "render_seed",
     "split_uniform",
@@ -116,6 +120,8 @@ __all__ = [
 BODY_FORWARD: Final = np.array([1.0, 0.0, 0.0])
 BODY_LEFT: Final = np.array([0.0, 1.0, 0.0])
 BODY_UP: Final = np.array([0.0, 0.0, 1.0])
+#: Standard gravity, m/s^2, along the world's -z (the tanker's turns, the sea's waves).
+GRAVITY_MPS2: Final = 9.80665
 
 #: The rigid bodies of a refueling scene, in the order their object ids are
 #: assigned (id = index + 1; id 0 is background).
@@ -167,11 +173,19 @@ def drawing_px(uv_px):
     return index_px(uv_px)
 
 
+def pixel_centre(index):
+    """The continuous coordinate of the centre of pixel ``index`` (any array of column or
+    row indices, its dtype kept): ``index + 0.5``."""
+    return index + 0.5
+
+
 def pixel_centres(width: int, height: int, stride: int = 1):
     """``(u, v)`` grids ``(h, w)`` of the continuous coordinates of every pixel centre
     (``stride`` 1) or of the centre of every ``stride`` x ``stride`` block."""
     w, h = -(-width // stride), -(-height // stride)
-    return np.meshgrid(np.arange(w) * stride + stride / 2, np.arange(h) * stride + stride / 2)
+    # A block's centre is the centre of its middle pixel: index i * stride + (stride - 1) / 2.
+    return np.meshgrid(pixel_centre(np.arange(w) * stride + (stride - 1) / 2),
+                       pixel_centre(np.arange(h) * stride + (stride - 1) / 2))
 
 
 # --- randomness --------------------------------------------------------------

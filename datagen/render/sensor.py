@@ -24,7 +24,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.core.camera import Intrinsics, undistort_px
-from datagen.core.conventions import OBJECT_NAMES, object_id, texture_rng
+from datagen.core.conventions import (
+    OBJECT_NAMES,
+    drawing_px,
+    index_px,
+    object_id,
+    pixel_centre,
+    pixel_centres,
+    texture_rng,
+)
 from datagen.core.transforms import invert_rigid
 from datagen.render.tonemap import WHITE_RADIANCE, exposure_scale
 
@@ -88,8 +96,8 @@ def image_motion(state: FrameState, depth: NDArray[np.float32], ids: NDArray[np.
     if stride > 1:
         out = image_motion(state, depth[::stride, ::stride], ids[::stride, ::stride],
                            Intrinsics(-(-full[1] // stride), -(-full[0] // stride), intrinsics.fx / stride,
-                                      intrinsics.fy / stride, (intrinsics.cx - 0.5) / stride + 0.5,
-                                      (intrinsics.cy - 0.5) / stride + 0.5))
+                                      intrinsics.fy / stride, pixel_centre(float(index_px(intrinsics.cx)) / stride),
+                                      pixel_centre(float(index_px(intrinsics.cy)) / stride)))
         return np.repeat(np.repeat(out * np.float32(stride), stride, axis=0), stride, axis=1)[:full[0], :full[1]]
     before = state.earlier
     h, w = depth.shape
@@ -98,8 +106,8 @@ def image_motion(state: FrameState, depth: NDArray[np.float32], ids: NDArray[np.
         return out
     dt = state.time_s - before.time_s
     k = intrinsics
-    u = (np.arange(w, dtype=np.float32) + 0.5 - k.cx) / k.fx
-    v = (np.arange(h, dtype=np.float32) + 0.5 - k.cy) / k.fy
+    u = (pixel_centre(np.arange(w, dtype=np.float32)) - k.cx) / k.fx
+    v = (pixel_centre(np.arange(h, dtype=np.float32)) - k.cy) / k.fy
     x_n, y_n = np.meshgrid(u, v)
     finite = np.isfinite(depth)
     earlier_from_now = {0: before.cam_from_world @ state.world_from_cam}  # the world (sea, clouds, sky)
@@ -170,11 +178,11 @@ def distort_image(images: dict[str, NDArray], output: Intrinsics, margin_px: int
     import cv2
 
     w, h = output.width, output.height
-    uu, vv = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+    uu, vv = pixel_centres(w, h)
     src = undistort_px(np.stack([uu, vv], axis=-1), output, distortion)
     # Continuous pinhole pixels -> the render's OpenCV grid (integers at pixel centres).
-    map_x = (src[..., 0] + margin_px - 0.5).astype(np.float32)
-    map_y = (src[..., 1] + margin_px - 0.5).astype(np.float32)
+    map_x = index_px(src[..., 0] + margin_px).astype(np.float32)
+    map_y = index_px(src[..., 1] + margin_px).astype(np.float32)
     out = {}
     for name, img in images.items():
         if img is None:
@@ -191,8 +199,8 @@ def distort_image(images: dict[str, NDArray], output: Intrinsics, margin_px: int
 def vignette(rgb: NDArray[np.float32], strength: float) -> NDArray[np.float32]:
     """``1 - strength r^2`` with ``r`` the distance from the centre, 1 at the corners."""
     h, w = rgb.shape[:2]
-    x = (np.arange(w, dtype=np.float32) + 0.5) / w * 2 - 1
-    y = (np.arange(h, dtype=np.float32) + 0.5) / h * 2 - 1
+    x = pixel_centre(np.arange(w, dtype=np.float32)) / w * 2 - 1
+    y = pixel_centre(np.arange(h, dtype=np.float32)) / h * 2 - 1
     r2 = (x[None, :] ** 2 * w * w + y[:, None] ** 2 * h * h) / np.float32(w * w + h * h)
     return rgb * (1.0 - np.float32(strength) * r2)[..., None]
 
@@ -214,8 +222,8 @@ def sun_glare(shape: tuple[int, int], intrinsics: Intrinsics, sun_cam: NDArray, 
     off_axis = math.degrees(math.acos(np.clip(d[2], -1.0, 1.0)))
     if strength <= 0.0 or off_axis > half_diagonal + GLARE_REACH_DEG:
         return None, False
-    x = (np.arange(w, dtype=np.float32) + 0.5 - k.cx) / k.fx
-    y = (np.arange(h, dtype=np.float32) + 0.5 - k.cy) / k.fy
+    x = (pixel_centre(np.arange(w, dtype=np.float32)) - k.cx) / k.fx
+    y = (pixel_centre(np.arange(h, dtype=np.float32)) - k.cy) / k.fy
     rays = np.stack(np.broadcast_arrays(x[None, :], y[:, None], np.float32(1.0)), axis=-1)
     cos = (rays @ d.astype(np.float32)) / np.linalg.norm(rays, axis=-1)
     theta = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
@@ -231,7 +239,7 @@ def sun_glare(shape: tuple[int, int], intrinsics: Intrinsics, sun_cam: NDArray, 
             gu, gv = k.cx + t * (su - k.cx), k.cy + t * (sv - k.cy)
             if not (-w < gu < 2 * w and -h < gv < 2 * h):
                 continue
-            cv2.circle(ghosts, (int(gu - 0.5), int(gv - 0.5)), max(2, int(radius * w)), tint, -1, cv2.LINE_AA)
+            cv2.circle(ghosts, (int(drawing_px(gu)), int(drawing_px(gv))), max(2, int(radius * w)), tint, -1, cv2.LINE_AA)
         ghosts = cv2.GaussianBlur(ghosts, (0, 0), max(1.0, 0.004 * w))
         glare += ghosts * np.float32(0.04 * strength * radiance)
     return glare, inside

@@ -44,7 +44,7 @@ from numpy.typing import NDArray
 
 from datagen.assets.rig import HOSE_ATTACH_DROGUE_M, HOSE_PORT_TANKER_M, MOUNTS
 from datagen.config.schema import Config
-from datagen.core.conventions import approach_rng
+from datagen.core.conventions import GRAVITY_MPS2, approach_rng
 from datagen.core.transforms import (
     invert_rigid,
     make_transform,
@@ -66,7 +66,6 @@ __all__ = [
     "trace_approach",
 ]
 
-GRAVITY_MPS2 = 9.80665
 #: Turbulence runs this long before an approach starts, so the drogue starts in its stationary motion.
 TURBULENCE_WARMUP_S = 10.0
 #: How much earlier :attr:`FrameState.earlier` is, seconds (image motion by finite differences).
