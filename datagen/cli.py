@@ -315,7 +315,6 @@ def evaluate(
     accuracy and reliability against distance (paper 3.3-3.6)."""
     from datagen.analysis.evaluate import covered_splits, parse_predictions, summarize
     from datagen.analysis.evaluate import evaluate as run_evaluate
-    from datagen.core.keypoints import PoseLayout
     from datagen.dataset.reader import load_dataset
     from datagen.report.evaluation_report import write_evaluation
 
@@ -325,7 +324,7 @@ def evaluate(
     runs = []
     if predictions is not None:
         k = view.intrinsics
-        pose = PoseLayout.from_features(view.features) if view.pose_yaml is not None else None
+        pose = view.pose_layout if view.pose_yaml is not None else None
         found = parse_predictions(predictions, k.width, k.height, len(view.features), min_conf=conf, pose=pose)
         if split is None:
             covered = covered_splits(view, found)

@@ -22,7 +22,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.core.keypoints import KEYPOINT_RANGE, PoseLayout, keypoint_flags, mirror_name
+from datagen.core.keypoints import KEYPOINT_RANGE, keypoint_flags, mirror_name
 from datagen.core.labels import Exclusion, FrameLabels
 from datagen.dataset.layout import MANIFEST_NAME
 from datagen.dataset.reader import DatasetView, image_size
@@ -407,7 +407,7 @@ def _check_pose_files(view: DatasetView, labels: FrameLabels, objects: FrameLabe
                       ) -> tuple[list[Check], NDArray[np.float64]]:
     """The pose label files line by line, and every well-formed instance as a row
     ``(frame row, class, cx, cy, w, h)``."""
-    layout = PoseLayout.from_features(view.features)
+    layout = view.pose_layout
     k = view.intrinsics
     w, h, n_obj, kpts = k.width, k.height, len(layout.objects), layout.kpt_count
     lo, hi = KEYPOINT_RANGE
@@ -498,7 +498,7 @@ def _check_pose_files(view: DatasetView, labels: FrameLabels, objects: FrameLabe
 
 def _check_pose_names(view: DatasetView) -> Check:
     """The pose set's data.yaml: names, nc, kpt_shape and flip_idx."""
-    layout = PoseLayout.from_features(view.features)
+    layout = view.pose_layout
     where = "pose/data.yaml" if view.label_format == "both" else "data.yaml"
     doc = view.pose_yaml or {}
     check = Check("pose_names", "the pose data.yaml names the objects, its kpt_shape is [K, 3] (K the largest feature "

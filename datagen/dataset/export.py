@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 
 from datagen.core.conventions import index_px, object_id
 from datagen.core.errors import DatagenError
-from datagen.core.keypoints import PoseLayout
+from datagen.core.labels import FrameLabels
 from datagen.dataset.reader import DatasetView
 from datagen.files import link_or_copy, write_image, write_text
 
@@ -91,10 +91,10 @@ def _xywh(xyxy: NDArray[np.float64]) -> list[float]:
 
 
 # --- COCO ----------------------------------------------------------------------------------------
-def coco_document(view: DatasetView, rows: list[int]) -> dict:
-    """The COCO keypoints document of the manifest rows ``rows`` (image paths as in the dataset)."""
-    layout = PoseLayout.from_features(view.features)
-    objects = view.recompute_objects()
+def coco_document(view: DatasetView, rows: list[int], objects: FrameLabels) -> dict:
+    """The COCO keypoints document of the manifest rows ``rows`` (image paths as in the dataset);
+    ``objects``: the dataset's pose boxes (:meth:`DatasetView.recompute_objects`)."""
+    layout = view.pose_layout
     k = view.intrinsics
     names = layout.names(view.features)
     categories = [{"id": c + 1, "name": name, "supercategory": "aircraft", "keypoints": names[c], "skeleton": []}
@@ -123,6 +123,7 @@ def coco_document(view: DatasetView, rows: list[int]) -> dict:
 def export_coco(view: DatasetView, out: Path, progress: Callable[[int], None]) -> None:
     """COCO keypoint files per split, with the images linked under ``out``."""
     (out / "annotations").mkdir()
+    objects = view.recompute_objects()
     for split in ("train", "val"):
         rows = [b for b in range(len(view)) if view.split[b] == split]
         if not rows:
@@ -130,7 +131,7 @@ def export_coco(view: DatasetView, out: Path, progress: Callable[[int], None]) -
         for b in rows:
             link_or_copy(view.root / view.image_path[b], out / view.image_path[b])
             progress(1)
-        doc = coco_document(view, rows)
+        doc = coco_document(view, rows, objects)
         write_text(out / "annotations" / f"{split}.json", json.dumps(doc))
 
 

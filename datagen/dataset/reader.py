@@ -9,6 +9,7 @@ intrinsics and ``features.parquet``.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,7 +27,7 @@ from datagen.core.camera import Intrinsics
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import DatagenError
 from datagen.core.features import FeatureTable
-from datagen.core.keypoints import object_boxes, object_table
+from datagen.core.keypoints import PoseLayout, object_boxes, object_table
 from datagen.core.labels import FrameLabels, compute_labels
 from datagen.core.training import TrainView, label_options
 from datagen.dataset.layout import MANIFEST_NAME
@@ -120,10 +121,15 @@ class DatasetView:
         return [Path(next(p for p in paths if p)).stem
                 for paths in zip(self.image_path, self.label_path, self.pose_label_path, strict=True)]
 
-    @property
+    @functools.cached_property
     def object_table(self) -> FeatureTable:
         """The hulls as the table :func:`recompute_objects` labels (:func:`datagen.core.keypoints.object_table`)."""
         return object_table(self.features.objects, self.hulls)
+
+    @functools.cached_property
+    def pose_layout(self) -> PoseLayout:
+        """Where each feature goes in a pose instance (:class:`datagen.core.keypoints.PoseLayout`)."""
+        return PoseLayout.from_features(self.features)
 
     def recompute_objects(self) -> FrameLabels:
         """Every frame's pose boxes from the poses and objects.parquet alone."""
