@@ -308,3 +308,21 @@ def test_bop_export_of_a_dataset_without_exr_is_refused(tmp_path) -> None:
     with pytest.raises(DatagenError, match="needs the EXR object ids for its masks: build the dataset with --exr"):
         export_dataset(load_dataset(tmp_path / "ds"), tmp_path / "bop", "bop")
     assert not (tmp_path / "bop").exists()
+
+
+def test_audit_names_a_frame_whose_manifest_names_no_label_file_instead_of_failing(both, tmp_path) -> None:
+    """label_path is nullable since pose-only datasets have none: a detect dataset's manifest with
+    a null one (edited by hand) is an audit failure naming the frame, not a traceback."""
+    import pyarrow as pa
+
+    dst = tmp_path / "ds"
+    shutil.copytree(both, dst, symlinks=True)
+    manifest = min((dst / "manifests").glob("*.parquet"))
+    table = pq.read_table(manifest)
+    paths = table.column("label_path").to_pylist()
+    paths[0] = None
+    index = table.schema.get_field_index("label_path")
+    pq.write_table(table.set_column(index, table.schema.field("label_path"), pa.array(paths, pa.string())), manifest)
+    result = run_cli("audit", str(dst), "--overlays", "0")
+    assert result.returncode == 1, result.stderr
+    assert "no label file named" in result.stdout and "Traceback" not in result.stderr

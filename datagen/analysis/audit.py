@@ -15,6 +15,7 @@ import math
 import os
 import stat
 from collections import Counter
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Final
@@ -177,6 +178,21 @@ def _read_label_file(path: Path) -> tuple[list[str], str | None]:
 
 
 
+def _label_files(view: DatasetView, paths: list[str | None], check: Check,
+                 kind: str = "label file") -> Iterator[tuple[int, str, list[str]]]:
+    """``(row, path, non-empty lines)`` of each frame's label file in ``paths``; a frame whose
+    manifest names none, or whose file cannot be read, fails ``check`` instead."""
+    for b, rel in enumerate(paths):
+        if rel is None:
+            check.fail(f"{view.manifest_file[b]} frame {view.frame_id[b]}", f"no {kind} named")
+            continue
+        rows, problem = _read_label_file(view.root / rel)
+        if problem:
+            check.fail(rel, problem)
+            continue
+        yield b, rel, rows
+
+
 # --- the audit -----------------------------------------------------------------------------
 def audit(view: DatasetView, *, min_learnable: float = MIN_LEARNABLE_SHARE) -> AuditResult:
     """Run every check and compute every statistic of a loaded dataset.
@@ -257,12 +273,7 @@ def _check_label_files(view: DatasetView, labels) -> tuple[list[Check], NDArray[
     labeled_all = labels.labeled  # a whole-dataset array: computed once, not per line
     worst_drift = worst_line = 0.0
     parsed: list[tuple[float, ...]] = []
-    for b in range(len(view)):
-        rel = view.label_path[b]
-        rows, problem = _read_label_file(view.root / rel)
-        if problem:
-            lines.fail(rel, problem)
-            continue
+    for b, rel, rows in _label_files(view, view.label_path, lines):
         seen: Counter = Counter()
         per_class: Counter = Counter()
         for n, line in enumerate(rows, start=1):
@@ -429,15 +440,7 @@ def _check_pose_files(view: DatasetView, labels: FrameLabels, objects: FrameLabe
     slots = np.arange(kpts)
     parsed: list[tuple[float, ...]] = []
     worst = 0.0
-    for b in range(len(view)):
-        rel = view.pose_label_path[b]
-        if rel is None:
-            lines.fail(f"{view.manifest_file[b]} frame {view.frame_id[b]}", "no pose label file named")
-            continue
-        rows, problem = _read_label_file(view.root / rel)
-        if problem:
-            lines.fail(rel, problem)
-            continue
+    for b, rel, rows in _label_files(view, view.pose_label_path, lines, "pose label file"):
         seen: set = set()
         classes: Counter = Counter()
         for n, line in enumerate(rows, start=1):
