@@ -118,8 +118,8 @@ class ShardWriter:
         objects = object_labels(scene, draws)
         label_rel = layout.label_rel(job.split, job.shard, i)
         pose_rel = layout.pose_label_rel(job.split, job.shard, i)
-        lines = yolo_lines(labels, features.class_id, k.width, k.height)
         if label_rel is not None:
+            lines = yolo_lines(labels, features.class_id, k.width, k.height)
             write_text(layout.root / label_rel, "".join(line + "\n" for line in lines))
         if pose_rel is not None:
             rows = pose_rows(objects, labels.center_px, records.keypoint_flag, scene.pose_layout, k.width, k.height)
@@ -129,7 +129,8 @@ class ShardWriter:
             pose_label_path=pose_rel, exr_path=exr_rel, intrinsics=k, state=draws.state, look=draws.look, seed=draws.seed,
             render_seed=draws.render_seed, spp=scene.config.render.spp if self.renderer is not None else None,
             denoise=scene.config.render.denoise if self.renderer is not None else None,
-            features=records, objects=object_records(objects, features.objects), n_labeled=len(lines),
+            features=records, objects=object_records(objects, features.objects),
+            n_labeled=int(labels.labeled.sum()),
             rendered=rendered, render_s=render_s, denoise_s=denoise_s, frame_s=time.perf_counter() - started,
             worker=f"{platform.node()}:{os.getpid()}", worker_rss_mib=_rss_mib())
 
