@@ -259,8 +259,7 @@ def object_boxes(table: FeatureTable, cam_from_objects: ArrayLike, intrinsics: I
         box[index] = _front_box(table.point_set(index[-1]), cam_from_objects[index], intrinsics, frame_lens)
     w, h = intrinsics.width, intrinsics.height
     with np.errstate(invalid="ignore"):
-        clipped = np.stack([np.clip(box[..., 0], 0, w), np.clip(box[..., 1], 0, h),
-                            np.clip(box[..., 2], 0, w), np.clip(box[..., 3], 0, h)], axis=-1)
+        clipped = np.clip(box, 0.0, [w, h, w, h])
         keep = cut & (clipped[..., 2] > clipped[..., 0]) & (clipped[..., 3] > clipped[..., 1])
     return dataclasses.replace(labels, label_xyxy=np.where(keep[..., None], clipped, labels.label_xyxy),
                                exclusion=np.where(keep, np.int8(Exclusion.NONE), labels.exclusion).astype(np.int8))
