@@ -165,6 +165,7 @@ class Renderer:
             description[obj] = {"type": "instance", "shapegroup": {"type": "ref", "id": f"{obj}_group"}}
         self._hose_points = None
         self._sky_probe = None
+        self._sky_probe_inputs = None
         self._camera_render = np.zeros(3)
         self.scene = None
         self._scene_dict = description
@@ -222,6 +223,9 @@ class Renderer:
         render_from_world = make_transform(np.eye(3), -origin)
         self._world_from_cam = state.world_from_cam
         self._camera_render = cam_pos - origin
+        sun_dir = [float(v) for v in sun_direction_world(state, look)]
+        irradiance = (self._sky_irradiance(sun_dir, look.turbidity, look.sun_scale, look.sky_scale)
+                      if self.world.clouds else None)
         liveries = self.world.livery_textures(look)
         for obj in RIGID_OBJECTS:
             p[f"{obj}.to_world"] = mi.Transform4f((render_from_world @ state.world_from(obj)).tolist())
@@ -238,12 +242,12 @@ class Renderer:
         sea = make_transform(np.eye(3), [0.0, 0.0, -origin[2]]) @ np.diag([SEA_SIZE_M / 2, SEA_SIZE_M / 2, 1.0, 1.0])
         p["sea.to_world"] = mi.Transform4f(sea.tolist())
         p[f"{self._sea_prefix}.roughness.value"] = look.sea_roughness_applied
-        p["sky.sun_direction"] = mi.Vector3f(*(float(v) for v in sun_direction_world(state, look)))
+        p["sky.sun_direction"] = mi.Vector3f(*sun_dir)
         p["sky.turbidity"] = look.turbidity
         p["sky.sun_scale"] = look.sun_scale
         p["sky.sky_scale"] = look.sky_scale
         self.world.apply(p, look, float(origin[2]), self._sea_prefix,
-                         self._sky_irradiance(p) if self.world.clouds else None)
+                         irradiance)
         p.update()
 
     @property
@@ -262,17 +266,21 @@ class Renderer:
         z = round(float(cam_pos[2]) / CLOUD_REFERENCE_STEP_M) * CLOUD_REFERENCE_STEP_M
         return np.array([cam_pos[0], cam_pos[1], z])
 
-    def _sky_irradiance(self, p) -> NDArray[np.float64]:
-        """RGB irradiance of the frame's sun and sky (as set in ``p``) on a horizontal
-        surface, no occluders, from a fixed stratified set of a probe emitter's own
-        importance samples (deterministic; the scene itself is not updated for it)."""
+    def _sky_irradiance(self, sun_direction, turbidity, sun_scale, sky_scale) -> NDArray[np.float64]:
+        """RGB irradiance of the frame's sun and sky on a horizontal surface, no occluders,
+        from a fixed stratified set of a probe emitter's own importance samples
+        (deterministic; the scene itself is not updated for it). The probe's inputs are
+        made once and opaque: built per call, they sometimes compiled three new kernels
+        (a literal folded into one frame's probe and not another's)."""
         mi, dr = self._mi, self._dr
         if self._sky_probe is None:
             self._sky_probe = mi.load_dict({"type": "sunsky", "sun_direction": [0.0, 0.5, 0.866]})
             self._sky_probe_params = mi.traverse(self._sky_probe)
         q = self._sky_probe_params
-        for key in ("sun_direction", "turbidity", "sun_scale", "sky_scale"):
-            q[key] = p[f"sky.{key}"]
+        q["sun_direction"] = mi.Vector3f(*sun_direction)
+        q["turbidity"] = turbidity
+        q["sun_scale"] = sun_scale
+        q["sky_scale"] = sky_scale
         q.update()
         sky = self._sky_probe
         scalar = self.variant.startswith("scalar")
@@ -284,8 +292,12 @@ class Renderer:
                 ds, weight = sky.sample_direction(dr.zeros(mi.Interaction3f), mi.Point2f(float(u), float(v)))
                 total += np.array([weight[c] for c in range(3)], dtype=np.float64) * max(float(ds.d.z), 0.0)
             return total / len(grid)
-        it = dr.zeros(mi.Interaction3f, n * n)
-        ds, weight = sky.sample_direction(it, mi.Point2f(mi.Float(grid[:, 0]), mi.Float(grid[:, 1])))
+        if self._sky_probe_inputs is None:
+            it = dr.zeros(mi.Interaction3f, n * n)
+            uv = mi.Point2f(mi.Float(grid[:, 0]), mi.Float(grid[:, 1]))
+            dr.make_opaque(it, uv)
+            self._sky_probe_inputs = it, uv
+        ds, weight = sky.sample_direction(*self._sky_probe_inputs)
         cos = dr.maximum(ds.d.z, 0.0)
         e = [dr.mean(weight[c] * cos) for c in range(3)]
         dr.eval(e)
