@@ -242,17 +242,22 @@ def audit(
                                           help="Overlay images in the HTML report.")] = 3,
     min_learnable: Annotated[float, typer.Option("--min-learnable", min=0.0, max=1.0, help="Share of label lines "
                                                  "that must be learnable at labels.train_imgsz.")] = 0.95,
+    workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="Processes that check shards "
+                                         "(each holds one shard at a time).")] = 1,
 ) -> None:
     """Check a dataset's labels against the true centre projections; write
     report.json, plots and report.html. Exit 1 when a check fails."""
     from datagen.analysis.audit import audit as run_audit
-    from datagen.dataset.reader import load_dataset
+    from datagen.dataset.reader import open_dataset
+    from datagen.pipeline.progress import BuildProgress
     from datagen.report.audit_report import write_report
 
     folder = output_path(out if out is not None else Path(dataset) / "audit", "--out")
-    view = load_dataset(dataset, allow_duplicates=True)
-    result = run_audit(view, min_learnable=min_learnable)
-    written = write_report(result, view, folder, overlays=overlays)
+    source = open_dataset(dataset)
+    index = source.index()
+    result = run_audit(source, min_learnable=min_learnable, workers=workers, index=index,
+                       progress=BuildProgress(source.root.name, verb="audit", announce=False))
+    written = write_report(result, source, folder, overlays=overlays, index=index)
     for check in result.checks:
         status = "n/a " if not check.applicable else ("pass" if check.passed else "FAIL")
         if check.min_pass_share is not None:
@@ -310,24 +315,27 @@ def evaluate(
                                               "prediction files cover).", show_default=False)] = None,
     seed: Annotated[int | None, typer.Option("--seed", min=0, help="Noise seed (default: the dataset's).")] = None,
     out: Annotated[Path | None, typer.Option("--out", help="Output folder (default: DATASET/evaluation).")] = None,
+    workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="Processes that solve approaches "
+                                         "(results do not depend on it).")] = 1,
 ) -> None:
     """PtD vectors by dual-object PnP from true centres (with noise) or detections;
     accuracy and reliability against distance (paper 3.3-3.6)."""
-    from datagen.analysis.evaluate import covered_splits, parse_predictions, summarize
-    from datagen.analysis.evaluate import evaluate as run_evaluate
-    from datagen.dataset.reader import load_dataset
+    from datagen.analysis.evaluate import Run, covered_splits, evaluate_runs, parse_predictions, summarize
+    from datagen.dataset.reader import open_dataset
+    from datagen.pipeline.progress import BuildProgress
     from datagen.report.evaluation_report import write_evaluation
 
     if split not in (None, "all", "train", "val"):
         raise DatagenError(f"--split: {split!r}: choose all, train or val")
-    view = load_dataset(dataset)
-    runs = []
+    source = open_dataset(dataset)
+    index = source.index(allow_duplicates=False)
+    progress = BuildProgress(source.root.name, verb="evaluate", announce=False)
     if predictions is not None:
-        k = view.intrinsics
-        pose = view.pose_layout if view.pose_yaml is not None else None
-        found = parse_predictions(predictions, k.width, k.height, len(view.features), min_conf=conf, pose=pose)
+        k = source.intrinsics
+        pose = source.pose_layout if source.pose_yaml is not None else None
+        found = parse_predictions(predictions, k.width, k.height, len(source.features), min_conf=conf, pose=pose)
         if split is None:
-            covered = covered_splits(view, found)
+            covered = covered_splits(index, found)
             if not found:  # yolo predict writes no file for an image without detections
                 split = "val"
                 typer.echo(f"{predictions}: no prediction file: the detector found nothing; scoring the val "
@@ -339,13 +347,10 @@ def evaluate(
                 split = covered[0] if len(covered) == 1 else "all"
                 typer.echo(f"scoring the {split} split{'s' if split == 'all' else ''}: the frames the "
                            "predictions cover (--split to choose)")
-        only = None if split == "all" else split
-        result = run_evaluate(view, predictions=found, split=only)
-        runs.append(({"source": "predictions", "predictions": str(predictions), "conf": conf, "split": split},
-                     result))
+        sources = [{"source": "predictions", "predictions": str(predictions), "conf": conf, "split": split}]
+        plan = [Run(predictions=found)]
     else:
         split = split or "all"
-        only = None if split == "all" else split
         try:
             radii = [float(r) for r in noise_px.split(",")]
         except ValueError:
@@ -355,11 +360,13 @@ def evaluate(
         if max(radii) > MAX_NOISE_PX or len(radii) > MAX_NOISE_RUNS:
             raise DatagenError(f"--noise-px: {noise_px[:60]!r}: at most {MAX_NOISE_RUNS} radii of at most "
                                f"{MAX_NOISE_PX:g} px each")
-        for run, radius in enumerate(radii):
-            runs.append(({"source": "truth", "noise_px": radius, "split": split},
-                         run_evaluate(view, noise_px=radius, run=run, seed=seed, split=only)))
-    written = write_evaluation(view, runs, output_path(out if out is not None else Path(dataset) / "evaluation",
-                                                       "--out"))
+        sources = [{"source": "truth", "noise_px": radius, "split": split} for radius in radii]
+        plan = [Run(noise_px=radius, run=run) for run, radius in enumerate(radii)]
+    only = None if split == "all" else split
+    results = evaluate_runs(source, plan, seed=seed, split=only, workers=workers, progress=progress, index=index)
+    runs = list(zip(sources, results, strict=True))
+    written = write_evaluation(index, runs, output_path(out if out is not None else Path(dataset) / "evaluation",
+                                                        "--out"))
     for source, result in runs:
         s = summarize(result)
         what = f"noise {source['noise_px']:g} px" if source["source"] == "truth" else "predictions"

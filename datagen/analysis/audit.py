@@ -11,8 +11,10 @@ feature size and view obliqueness (paper Fig. 8).
 from __future__ import annotations
 
 import contextlib
+import heapq
 import math
 import os
+import re
 import stat
 from collections import Counter
 from collections.abc import Iterator
@@ -23,10 +25,11 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from datagen.core.camera import Intrinsics
 from datagen.core.keypoints import KEYPOINT_RANGE, keypoint_flags, mirror_name
 from datagen.core.labels import Exclusion, FrameLabels
 from datagen.dataset.layout import MANIFEST_NAME
-from datagen.dataset.reader import DatasetView, image_size
+from datagen.dataset.reader import DatasetIndex, DatasetMeta, DatasetSource, DatasetView, image_size
 from datagen.dataset.yolo import YOLO_DECIMALS, parse_line
 from datagen.files import is_temporary
 
@@ -74,7 +77,10 @@ class Check:
     applicable: bool = True
     #: None: any failure fails the check; else the check passes while at least this share passes.
     min_pass_share: float | None = None
-    _scored: list[tuple[float, str]] = field(default_factory=list, repr=False)
+    #: (-score, frame order, sequence, text) of every failure; ``row`` (a row of the view
+    #: the check ran on) is turned into the frame order by :meth:`ranked`.
+    _scored: list[tuple[float, int, int, str]] = field(default_factory=list, repr=False)
+    _seq: int = field(default=0, repr=False)
 
     @property
     def pass_share(self) -> float | None:
@@ -86,13 +92,33 @@ class Check:
             return self.failures == 0
         return self.checked == 0 or self.pass_share >= self.min_pass_share
 
-    def fail(self, where: str, what: str, score: float = math.inf) -> None:
+    def fail(self, where: str, what: str, score: float = math.inf, row: int | None = None,
+             seq: int | None = None) -> None:
+        """Count a failure; ``row``: the row of the view it is about (offenders of equal
+        score are listed in frame order, then in the order they failed, or of ``seq``)."""
         self.failures += 1
-        self._scored.append((score, f"{where}: {what}"))
+        self._scored.append((-score, 0 if row is None else int(row), self._seq if seq is None else seq,
+                             f"{where}: {what}"))
+        self._seq += 1
+
+    def ranked(self, rank: NDArray[np.int64]) -> Check:
+        """The offenders' rows as positions in the dataset's frame order (``rank[row]``),
+        the worst :data:`MAX_OFFENDERS` kept."""
+        self._scored = heapq.nsmallest(MAX_OFFENDERS, ((s, int(rank[r]), q, t) for s, r, q, t in self._scored))
+        return self
+
+    def merge(self, other: Check) -> Check:
+        """Add the counts and offenders of the same check run on other frames."""
+        self.checked += other.checked
+        self.failures += other.failures
+        if other.worst is not None:
+            self.worst = other.worst if self.worst is None else max(self.worst, other.worst)
+        self._scored = heapq.nsmallest(MAX_OFFENDERS, self._scored + other._scored)
+        return self
 
     def finish(self) -> Check:
-        self._scored.sort(key=lambda s: -s[0])
-        self.offenders = [text for _, text in self._scored[:MAX_OFFENDERS]]
+        self._scored.sort()
+        self.offenders = [text for *_, text in self._scored[:MAX_OFFENDERS]]
         self._scored = []
         return self
 
@@ -110,7 +136,6 @@ class AuditResult:
     frames: int
     checks: list[Check]
     stats: dict
-    labels: FrameLabels  # the recomputation the checks ran against (reused by the report's overlays)
 
     @property
     def passed(self) -> bool:
@@ -184,79 +209,198 @@ def _label_files(view: DatasetView, paths: list[str | None], check: Check,
     manifest names none, or whose file cannot be read, fails ``check`` instead."""
     for b, rel in enumerate(paths):
         if rel is None:
-            check.fail(f"{view.manifest_file[b]} frame {view.frame_id[b]}", f"no {kind} named")
+            check.fail(f"{view.manifest_file[b]} frame {view.frame_id[b]}", f"no {kind} named", row=b)
             continue
         rows, problem = _read_label_file(view.root / rel)
         if problem:
-            check.fail(rel, problem)
+            check.fail(rel, problem, row=b)
             continue
         yield b, rel, rows
 
 
 # --- the audit -----------------------------------------------------------------------------
-def audit(view: DatasetView, *, min_learnable: float = MIN_LEARNABLE_SHARE) -> AuditResult:
-    """Run every check and compute every statistic of a loaded dataset.
+@dataclass
+class _Part:
+    """The audit of some of a dataset's frames (one shard's, or a whole view's): its
+    per-frame checks, offenders ranked in the dataset's frame order, and the compact values
+    the statistics need (:func:`_statistics_part`, :func:`_learnable_part`)."""
 
-    ``min_learnable``: the share of label lines that must be learnable by Ultralytics'
-    trainer at ``labels.train_imgsz`` (:mod:`datagen.core.training`)."""
+    checks: list[Check]
+    stats: dict
+    lines: dict | None  # label lines (_learnable_part), None without detection labels
+    pose_learnable: NDArray[np.bool_] | None  # per pose instance, None without pose labels
+
+
+def _audit_part(view: DatasetView, rank: NDArray[np.int64]) -> _Part:
+    """Every per-frame check of ``view``'s rows; ``rank``: each row's position in the
+    dataset's frame order."""
     labels = view.recompute()
     objects = view.recompute_objects()
     checks = [_check_manifest(view, labels), _check_objects(view, objects)]
-    stats = _statistics(view, labels)
+    lines = pose = None
     if view.label_format != "pose":
-        line_checks, lines = _check_label_files(view, labels)
-        learnable, stats["learnable"] = _check_learnable(view, lines, min_learnable)
-        checks += [*line_checks, learnable, _check_names(view)]
+        line_checks, parsed = _check_label_files(view, labels)
+        checks += line_checks
+        lines = _learnable_part(view, parsed)
     if view.pose_yaml is not None:
         pose_checks, instances = _check_pose_files(view, labels, objects)
-        checks += [*pose_checks, _check_pose_names(view)]
-        stats["learnable_pose"] = _pose_learnable(view, instances)
-    checks += [_check_files(view), _check_images(view)]
-    stats["appearance"] = appearance(view.appearance)
-    return AuditResult(view.root, str(view.doc.get("name", view.root.name)), len(view), [c.finish() for c in checks],
-                       stats, labels)
+        checks += pose_checks
+        pose = _pose_learnable_part(view, instances)
+    return _Part([c.ranked(rank) for c in checks], _statistics_part(view, labels, rank), lines, pose)
 
 
-def _check_manifest(view: DatasetView, labels) -> Check:
+def _audit_shard(source: DatasetSource, name: str, rank: NDArray[np.int64]) -> _Part:
+    return _audit_part(source.read_shard(name), rank)
+
+
+def _parts(source: DatasetSource, index: DatasetIndex, workers: int, progress) -> Iterator[_Part]:
+    """The audit of each shard, in manifest order: in this process, or in ``workers``
+    spawned processes (each reads and checks whole shards; only the compact results come back)."""
+    names = list(source.manifests)
+    if workers <= 1 or len(names) <= 1:
+        for name in names:
+            part = _audit_shard(source, name, index.rank[name])
+            progress.advance(len(index.rank[name]))
+            yield part
+        return
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(min(workers, len(names)), mp_context=mp.get_context("spawn")) as pool:
+        futures = [pool.submit(_audit_shard, source, name, index.rank[name]) for name in names]
+        for name, future in zip(names, futures, strict=True):
+            part = future.result()
+            progress.advance(len(index.rank[name]))
+            yield part
+
+
+def audit(dataset: DatasetView | DatasetSource, *, min_learnable: float = MIN_LEARNABLE_SHARE, workers: int = 1,
+          progress=None, index: DatasetIndex | None = None) -> AuditResult:
+    """Run every check and compute every statistic of a dataset.
+
+    ``dataset``: a loaded view (all in memory), or an opened source, which is read and
+    checked shard by shard (in ``workers`` processes), keeping only counts, the worst
+    offenders and the compact values the statistics need: the same report either way.
+    ``min_learnable``: the share of label lines that must be learnable by Ultralytics'
+    trainer at ``labels.train_imgsz`` (:mod:`datagen.core.training`).
+    ``progress``: an object with ``start(total, done)``, ``advance(n)`` and ``close()``
+    (:class:`datagen.pipeline.progress.BuildProgress`). ``index``: the source's, where the
+    caller has read it."""
+    progress = progress or _NoProgress()
+    if isinstance(dataset, DatasetView):
+        index = dataset
+        progress.start(len(dataset), 0)
+        parts: Iterator[_Part] = iter([_audit_part(dataset, np.arange(len(dataset)))])
+        progress.advance(len(dataset))
+    else:
+        index = index or dataset.index()
+        progress.start(len(index), 0)
+        parts = _parts(dataset, index, workers, progress)
+    merged: dict[str, Check] = {}
+    stat_parts, line_parts, pose_parts = [], [], []
+    for part in parts:
+        for c in part.checks:
+            merged[c.name] = merged[c.name].merge(c) if c.name in merged else c
+        stat_parts.append(part.stats)
+        if part.lines is not None:
+            line_parts.append(part.lines)
+        if part.pose_learnable is not None:
+            pose_parts.append(part.pose_learnable)
+    progress.close()
+    stats = _statistics(dataset, stat_parts)
+    checks = [merged["manifest_boxes"], merged["manifest_objects"]]
+    if dataset.label_format != "pose":
+        learnable, stats["learnable"] = _check_learnable(dataset, line_parts, stats["_top_m"], min_learnable)
+        checks += [merged[n] for n in ("label_lines", "centre_drift", "edge_margin_and_front", "ultralytics_rules")]
+        checks += [learnable, _check_names(dataset)]
+    if dataset.pose_yaml is not None:
+        checks += [merged[n] for n in ("pose_lines", "keypoint_flags", "ultralytics_pose_rules")]
+        checks += [_check_pose_names(dataset)]
+        stats["learnable_pose"] = _pose_learnable(dataset, pose_parts)
+    checks += [_check_files(index), _check_images(index, dataset.intrinsics)]
+    stats["appearance"] = _appearance_finish([p["appearance"] for p in stat_parts])
+    del stats["_top_m"]
+    return AuditResult(dataset.root, str(dataset.doc.get("name", dataset.root.name)), len(index),
+                       [c.finish() for c in checks], stats)
+
+
+class _NoProgress:
+    def start(self, total: int, done: int) -> None:
+        pass
+
+    def advance(self, n: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+#: Exclusion code -> the reason a manifest records (None: labeled).
+_REASONS: Final = np.array([None if e is Exclusion.NONE else Exclusion(e).reason for e in range(max(Exclusion) + 1)],
+                           dtype=object)
+
+
+def _check_manifest(view: DatasetView, labels: FrameLabels) -> Check:
     check = Check("manifest_boxes", "manifest centres, tight, corrected and label boxes and exclusions equal a "
                   f"recomputation from the poses and features.parquet (to {MANIFEST_TOLERANCE_PX:g} px)")
-    expected_k = np.array([view.intrinsics.width, view.intrinsics.height, view.intrinsics.fx, view.intrinsics.fy,
-                           view.intrinsics.cx, view.intrinsics.cy])
-    worst = 0.0
-    labeled = labels.labeled  # a whole-dataset array: computed once
-    for b in range(len(view)):
+    k = view.intrinsics
+    expected_k = np.array([k.width, k.height, k.fx, k.fy, k.cx, k.cy])
+    check.checked = len(view)
+    k_ok = np.isclose(view.row_intrinsics, expected_k, rtol=0, atol=1e-9).all(axis=1)
+    class_ok = (view.class_id == view.features.class_id).all(axis=1)
+    fresh_label = np.where(labels.labeled[..., None], labels.label_xyxy, np.nan)  # stored only for labeled features
+    err = np.max([_nan_error(view.center_px, labels.center_px), _nan_error(view.tight_xyxy, labels.tight_xyxy),
+                  _nan_error(view.corrected_xyxy, labels.corrected_xyxy), _nan_error(view.label_xyxy, fresh_label)],
+                 axis=0)
+    good = k_ok & class_ok
+    checked = err[good]
+    check.worst = float(checked[np.isfinite(checked)].max(initial=0.0))
+    reasons = _REASONS[labels.exclusion.astype(np.int64)]
+    bad = good[:, None] & ((err > MANIFEST_TOLERANCE_PX) | (reasons != view.exclusion) | (view.labeled != labels.labeled))
+    for b in np.flatnonzero(~good | bad.any(axis=1)):
         where = f"{view.manifest_file[b]} frame {view.frame_id[b]}"
-        check.checked += 1
-        if not np.allclose(view.row_intrinsics[b], expected_k, rtol=0, atol=1e-9):
-            check.fail(where, f"intrinsics {view.row_intrinsics[b].tolist()} differ from dataset.json's")
-            continue
-        if not np.array_equal(view.class_id[b], view.features.class_id):
-            check.fail(where, "feature records are not one per class in class-id order")
-            continue
-        errors = []
-        for name in ("center_px", "tight_xyxy", "corrected_xyxy", "label_xyxy"):
-            stored, fresh = getattr(view, name)[b], getattr(labels, name)[b]
-            if name == "label_xyxy":  # stored only for labeled features
-                fresh = np.where(labeled[b][:, None], fresh, np.nan)
-            both_nan = np.isnan(stored) & np.isnan(fresh)
-            err = np.where(both_nan, 0.0, np.abs(stored - fresh))
-            err = np.where(np.isnan(err), np.inf, err).max(axis=-1)
-            errors.append(err)
-        err = np.max(errors, axis=0)
-        worst = max(worst, float(err[np.isfinite(err)].max(initial=0.0)))
-        reasons = np.array([Exclusion(int(e)).reason for e in labels.exclusion[b]], dtype=object)
-        bad = np.flatnonzero((err > MANIFEST_TOLERANCE_PX) | (reasons != view.exclusion[b])
-                             | (view.labeled[b] != labeled[b]))
-        for f in bad[:3]:
-            what = (f"class {f}: stored exclusion {view.exclusion[b][f]!r}, recomputed {reasons[f]!r}"
-                    if reasons[f] != view.exclusion[b][f] else f"class {f}: box or centre off by {err[f]:.3g} px")
-            check.fail(where, what, float(err[f]))
-    check.worst = worst
+        if not k_ok[b]:
+            check.fail(where, f"intrinsics {view.row_intrinsics[b].tolist()} differ from dataset.json's", row=b)
+        elif not class_ok[b]:
+            check.fail(where, "feature records are not one per class in class-id order", row=b)
+        for f in np.flatnonzero(bad[b])[:3]:
+            what = (f"class {f}: stored exclusion {view.exclusion[b][f]!r}, recomputed {reasons[b, f]!r}"
+                    if reasons[b, f] != view.exclusion[b][f] else f"class {f}: box or centre off by {err[b, f]:.3g} px")
+            check.fail(where, what, float(err[b, f]), row=b)
     return check
 
 
-def _check_label_files(view: DatasetView, labels) -> tuple[list[Check], NDArray[np.float64]]:
-    """The per-line checks, and every well-formed line as a row ``(frame row, class, cx, cy, w, h)``."""
+#: A plain decimal number; a label file of these alone is parsed in bulk (:func:`_parse_file`).
+_PLAIN_FILE: Final = re.compile(r"[ \t]*(?:-?[0-9]+(?:\.[0-9]+)?[ \t]*)*(?:\r?\n[ \t]*(?:-?[0-9]+(?:\.[0-9]+)?[ \t]*)*)*\r?\n?")
+
+
+def _parse_lines(rows: list[str], nc: int, columns: int) -> tuple[NDArray[np.float64], list[str | None]]:
+    """``(values (N, columns), problems)`` of a file's non-blank lines: what
+    :func:`datagen.dataset.yolo.parse_line` gives, in bulk where every token is a plain
+    decimal and every line has ``columns`` of them (a line with a problem has NaN values)."""
+    tokens = [line.split() for line in rows]
+    if all(len(t) == columns for t in tokens) and all(_PLAIN_FILE.fullmatch(line) for line in rows):
+        values = np.array(tokens, dtype=np.float64).reshape(len(rows), columns)
+        cls = values[:, 0]
+        ok = np.isfinite(values).all(axis=1) & (cls == np.floor(cls)) & (cls >= 0) & (cls < nc)
+        if ok.all():
+            return values, [None] * len(rows)
+    values = np.full((len(rows), columns), np.nan)
+    problems: list[str | None] = []
+    for n, line in enumerate(rows):
+        parsed, problem = parse_line(line, nc, columns=(columns,))
+        problems.append(problem)
+        if parsed is not None:
+            values[n] = parsed
+    return values, problems
+
+
+def _check_label_files(view: DatasetView, labels: FrameLabels) -> tuple[list[Check], NDArray[np.float64]]:
+    """The per-line checks, and every well-formed line as a row ``(frame row, class, cx, cy, w, h)``.
+
+    Vectorized over the view's lines; the failures, their order (frame, line, then the
+    order the rules are listed in below) and their scores are those of checking one line
+    at a time."""
     k = view.intrinsics
     w, h, m = k.width, k.height, view.edge_margin_px
     nc = len(view.features)
@@ -268,84 +412,131 @@ def _check_label_files(view: DatasetView, labels) -> tuple[list[Check], NDArray[
                    "border and no labeled feature has a point at or behind the camera plane")
     rules = Check("ultralytics_rules", "label files follow Ultralytics' rules: 5 columns, integer class < nc, "
                   "values in [0, 1], positive size, no duplicate rows")
-    label_centre = labels.label_center_px
-    box = labels.label_xyxy
-    labeled_all = labels.labeled  # a whole-dataset array: computed once, not per line
-    worst_drift = worst_line = 0.0
-    parsed: list[tuple[float, ...]] = []
+    # Every line of every readable file, in (frame, line) order.
+    texts: list[str] = []
+    frame_rows: list[int] = []
+    numbers: list[int] = []
+    files: dict[int, tuple[str, int, int]] = {}  # row -> (path, first line index, line count)
+    values_parts, problems = [], []
     for b, rel, rows in _label_files(view, view.label_path, lines):
-        seen: Counter = Counter()
-        per_class: Counter = Counter()
-        for n, line in enumerate(rows, start=1):
-            where = f"{rel}:{n}"
-            rules.checked += 1
-            lines.checked += 1
-            values, problem = parse_line(line, nc)
-            if problem:
-                rules.fail(where, problem)
-                continue
-            tokens = line.split()
-            if min(values[1:]) < 0 or max(values[1:]) > 1 or values[3] <= 0 or values[4] <= 0:
-                rules.fail(where, f"values {tokens[1:]} outside [0, 1] or a size not positive")
-            parsed.append((b, *values))
-            key = tuple(tokens)
-            seen[key] += 1
-            if seen[key] == 2:
-                rules.fail(where, "duplicate row")
-            f = int(values[0])
-            per_class[f] += 1
-            if per_class[f] == 2:
-                lines.fail(where, f"class {f} has more than one line")
-            if not labeled_all[b, f]:
-                reason = Exclusion(int(labels.exclusion[b, f])).reason
-                lines.fail(where, f"class {f} has a line but the feature is excluded ({reason})")
-                if labels.exclusion[b, f] == Exclusion.BEHIND_CAMERA:
-                    margin.fail(where, f"class {f} is behind the camera")
-            else:
-                expected = np.array([label_centre[b, f, 0] / w, label_centre[b, f, 1] / h,
-                                     (box[b, f, 2] - box[b, f, 0]) / w, (box[b, f, 3] - box[b, f, 1]) / h])
-                err = np.abs(np.array(values[1:]) - expected)
-                if np.all(np.isfinite(err)):
-                    worst_line = max(worst_line, float((err * [w, h, w, h]).max()))
-                if not np.all(err <= LINE_TOLERANCE):
-                    lines.fail(where, f"class {f} differs from the manifest box by "
-                               f"{(err * [w, h, w, h]).max():.3g} px", float((err * [w, h, w, h]).max()))
-            cx, cy, bw, bh = (values[1] * w, values[2] * h, values[3] * w, values[4] * h)
-            drift.checked += 1
-            d = math.hypot(cx - labels.center_px[b, f, 0], cy - labels.center_px[b, f, 1])
-            if np.isfinite(d):
-                worst_drift = max(worst_drift, d)
-            if view.corrected and not d <= DRIFT_LIMIT_PX:
-                drift.fail(where, f"class {f} centre is {d:.3g} px from the true centre projection", d)
-            margin.checked += 1
-            x0, y0, x1, y1 = cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2
-            inside = min(x0, y0, w - x1, h - y1)
-            if inside < m - 1e-3:
-                margin.fail(where, f"class {f} box is {inside:.2f} px from the border, margin {m:g} px", m - inside)
-        labeled = set(np.flatnonzero(labeled_all[b]).tolist())
-        for f in sorted(labeled - set(per_class)):
-            lines.fail(rel, f"class {f} is labeled in the manifest but has no line")
-    lines.worst, drift.worst = worst_line, worst_drift
-    return [lines, drift, margin, rules], np.array(parsed, dtype=np.float64).reshape(-1, 6)
+        files[b] = (rel, len(texts), len(rows))
+        values, why = _parse_lines(rows, nc, 5)
+        values_parts.append(values)
+        problems += why
+        texts += rows
+        frame_rows += [b] * len(rows)
+        numbers += range(1, len(rows) + 1)
+    n_lines = len(texts)
+    rules.checked = lines.checked = n_lines
+    values = np.concatenate(values_parts) if values_parts else np.zeros((0, 5))
+    row = np.asarray(frame_rows, dtype=np.int64)
+    number = np.asarray(numbers, dtype=np.int64)
+
+    def where(i: int) -> str:
+        return f"{view.label_path[row[i]]}:{number[i]}"
+
+    def seq(i: int, sub: int) -> int:  # a line's failures in the order the rules run
+        return int(number[i]) * 8 + sub
+
+    well = np.array([p is None for p in problems], dtype=bool)
+    for i in np.flatnonzero(~well):
+        rules.fail(where(i), problems[i], row=row[i], seq=seq(i, 0))
+    idx = np.flatnonzero(well)
+    v, b, f = values[idx], row[idx], values[idx, 0].astype(np.int64)
+    outside = (v[:, 1:].min(axis=1) < 0) | (v[:, 1:].max(axis=1) > 1) | (v[:, 3] <= 0) | (v[:, 4] <= 0)
+    for i in idx[outside]:
+        rules.fail(where(i), f"values {texts[i].split()[1:]} outside [0, 1] or a size not positive", row=row[i],
+                   seq=seq(i, 1))
+    # Duplicate rows (same tokens) and second lines of a class, per file: flagged on the second occurrence.
+    for b_file, (rel, start, count) in files.items():
+        mine = idx[(idx >= start) & (idx < start + count)]
+        keys = [tuple(texts[i].split()) for i in mine]
+        classes = values[mine, 0].astype(np.int64)
+        if len(set(keys)) < len(keys):
+            seen: Counter = Counter()
+            for i, key in zip(mine, keys, strict=True):
+                seen[key] += 1
+                if seen[key] == 2:
+                    rules.fail(where(i), "duplicate row", row=b_file, seq=seq(i, 2))
+        if len(set(classes.tolist())) < len(classes):
+            per_class: Counter = Counter()
+            for i, c in zip(mine, classes.tolist(), strict=True):
+                per_class[c] += 1
+                if per_class[c] == 2:
+                    lines.fail(where(i), f"class {c} has more than one line", row=b_file, seq=seq(i, 0))
+    labeled = labels.labeled[b, f]
+    exclusion = labels.exclusion[b, f].astype(np.int64)
+    for i, c, e in zip(idx[~labeled], f[~labeled], exclusion[~labeled], strict=True):
+        lines.fail(where(i), f"class {c} has a line but the feature is excluded ({_REASONS[e]})", row=row[i],
+                   seq=seq(i, 1))
+        if e == Exclusion.BEHIND_CAMERA:
+            margin.fail(where(i), f"class {c} is behind the camera", row=row[i], seq=seq(i, 0))
+    centre, box = labels.label_center_px[b, f], labels.label_xyxy[b, f]
+    expected = np.stack([centre[:, 0] / w, centre[:, 1] / h, (box[:, 2] - box[:, 0]) / w, (box[:, 3] - box[:, 1]) / h],
+                        axis=-1)
+    err = np.abs(v[:, 1:] - expected)
+    err_px = (err * [w, h, w, h]).max(axis=1)
+    finite = labeled & np.isfinite(err).all(axis=1)
+    lines.worst = float(err_px[finite].max(initial=0.0))
+    off = labeled & ~np.all(err <= LINE_TOLERANCE, axis=1)
+    for i, c, e in zip(idx[off], f[off], err_px[off], strict=True):
+        lines.fail(where(i), f"class {c} differs from the manifest box by {e:.3g} px", float(e), row=row[i],
+                   seq=seq(i, 1))
+    cx, cy, bw, bh = v[:, 1] * w, v[:, 2] * h, v[:, 3] * w, v[:, 4] * h
+    drift.checked = margin.checked = len(idx)
+    true_centre = labels.center_px[b, f]
+    d = np.hypot(cx - true_centre[:, 0], cy - true_centre[:, 1])
+    drift.worst = float(d[np.isfinite(d)].max(initial=0.0))
+    if view.corrected:
+        far = ~(d <= DRIFT_LIMIT_PX)
+        for i, c, e in zip(idx[far], f[far], d[far], strict=True):
+            drift.fail(where(i), f"class {c} centre is {e:.3g} px from the true centre projection", float(e),
+                       row=row[i], seq=seq(i, 0))
+    inside = np.min([cx - bw / 2, cy - bh / 2, w - (cx + bw / 2), h - (cy + bh / 2)], axis=0)
+    near = inside < m - 1e-3
+    for i, c, e in zip(idx[near], f[near], inside[near], strict=True):
+        margin.fail(where(i), f"class {c} box is {e:.2f} px from the border, margin {m:g} px", float(m - e),
+                    row=row[i], seq=seq(i, 1))
+    # Labeled features without a line: after the file's lines.
+    have = np.zeros(labels.labeled.shape, dtype=bool)
+    have[b, f] = True
+    for b_file, (rel, _, count) in files.items():
+        for c in np.flatnonzero(labels.labeled[b_file] & ~have[b_file]):
+            lines.fail(rel, f"class {c} is labeled in the manifest but has no line", row=b_file,
+                       seq=(count + 1) * 8 + int(c))
+    parsed = np.column_stack([b.astype(np.float64), v]) if len(idx) else np.zeros((0, 6))
+    return [lines, drift, margin, rules], parsed
 
 
-def _check_learnable(view: DatasetView, lines: NDArray[np.float64], min_share: float) -> tuple[Check, dict]:
-    """Which label lines Ultralytics' trainer keeps at ``labels.train_imgsz`` and can assign
-    to an anchor (:mod:`datagen.core.training`); the check passes while at least ``min_share`` can."""
-    rules = view.label_rules
+def _learnable_part(view: DatasetView, lines: NDArray[np.float64]) -> dict[str, NDArray]:
+    """Per well-formed label line (rows ``(frame row, class, cx, cy, w, h)``): its class and
+    frame distance, whether Ultralytics' trainer keeps it at ``labels.train_imgsz`` and
+    whether it holds an anchor centre (:mod:`datagen.core.training`), and its shorter side
+    there."""
     train = view.train_view
-    check = Check("learnable", f"at least {100 * min_share:g}% of label lines survive Ultralytics' training "
-                  f"transforms at imgsz {rules.train_imgsz} (both sides above 2 px) and hold an anchor centre "
-                  "(strides 8/16/32)", min_pass_share=min_share)
     k = view.intrinsics
     b, cls = lines[:, 0].astype(np.int64), lines[:, 1].astype(np.int64)
     cx, cy, bw, bh = lines[:, 2] * k.width, lines[:, 3] * k.height, lines[:, 4] * k.width, lines[:, 5] * k.height
     xyxy = np.stack([cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2], axis=-1)
-    survives, anchored = train.survives(xyxy), train.has_anchor(xyxy)
+    return {"cls": cls, "distance": view.distance_m[b], "survives": train.survives(xyxy),
+            "anchored": train.has_anchor(xyxy), "train_w": np.minimum(bw * train.scale[0], bh * train.scale[1])}
+
+
+def _check_learnable(meta: DatasetMeta, parts: list[dict[str, NDArray]], top: float,
+                     min_share: float) -> tuple[Check, dict]:
+    """Which label lines Ultralytics' trainer keeps at ``labels.train_imgsz`` and can assign
+    to an anchor (:func:`_learnable_part` of every shard); the check passes while at least
+    ``min_share`` can. ``top``: the upper end of the distance bins."""
+    rules = meta.label_rules
+    check = Check("learnable", f"at least {100 * min_share:g}% of label lines survive Ultralytics' training "
+                  f"transforms at imgsz {rules.train_imgsz} (both sides above 2 px) and hold an anchor centre "
+                  "(strides 8/16/32)", min_pass_share=min_share)
+    cls, distance, survives, anchored, train_w = (np.concatenate([p[key] for p in parts]) for key in
+                                                  ("cls", "distance", "survives", "anchored", "train_w"))
     ok = survives & anchored
     check.checked = int(ok.size)
     check.worst = None if not ok.size else float(1.0 - ok.mean())
-    names = view.features.name
+    names = meta.features.name
     by_class = {}
     for c in np.unique(cls):
         mine = ok[cls == c]
@@ -358,11 +549,8 @@ def _check_learnable(view: DatasetView, lines: NDArray[np.float64], min_share: f
     def share(mask: NDArray[np.bool_]) -> dict:
         return {"lines": int(mask.sum()), "share": float(ok[mask].mean()) if mask.any() else None}
 
-    distance = view.distance_m[b] if b.size else np.zeros(0)
-    top = max(10.0, float(np.ceil(view.distance_m.max() / 10.0) * 10.0)) if len(view) else 10.0
     edges = np.arange(0.0, top + 10.0, 10.0)
-    size = np.array(view.features.size, dtype=object)[cls] if cls.size else np.zeros(0, dtype=object)
-    train_w = np.minimum(bw * train.scale[0], bh * train.scale[1])
+    size = np.array(meta.features.size, dtype=object)[cls] if cls.size else np.zeros(0, dtype=object)
     stats = {
         "train_imgsz": rules.train_imgsz,
         "min_box_px": rules.min_box_px,
@@ -376,15 +564,12 @@ def _check_learnable(view: DatasetView, lines: NDArray[np.float64], min_share: f
                               "min": float(train_w.min()) if ok.size else None},
         "by_distance_m": [{"lo": float(lo), "hi": float(hi), **share((distance >= lo) & (distance < hi))}
                           for lo, hi in zip(edges[:-1], edges[1:], strict=True)],
-        "by_size": {(tag or "untagged"): share(size == tag) for tag in sorted(set(view.features.size))},
+        "by_size": {(tag or "untagged"): share(size == tag) for tag in sorted(set(meta.features.size))},
         "by_class": by_class,
         "worst_classes": [{"class": n, **v} for n, v in sorted(by_class.items(), key=lambda kv: kv[1]["share"])
                           if v["share"] < 1.0][:10],
     }
     return check, stats
-
-
-
 
 
 def _nan_error(stored: NDArray[np.float64], fresh: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -408,9 +593,9 @@ def _check_objects(view: DatasetView, objects: FrameLabels) -> Check:
         where = f"{view.manifest_file[b]} frame {view.frame_id[b]}"
         name = view.features.objects[c]
         if reasons[b, c] != view.object_exclusion[b, c]:
-            check.fail(where, f"{name}: stored exclusion {view.object_exclusion[b, c]!r}, recomputed {reasons[b, c]!r}")
+            check.fail(where, f"{name}: stored exclusion {view.object_exclusion[b, c]!r}, recomputed {reasons[b, c]!r}", row=b)
         else:
-            check.fail(where, f"{name}: box off by {err[b, c]:.3g} px", float(err[b, c]))
+            check.fail(where, f"{name}: box off by {err[b, c]:.3g} px", float(err[b, c]), row=b)
     return check
 
 
@@ -435,7 +620,7 @@ def _check_pose_files(view: DatasetView, labels: FrameLabels, objects: FrameLabe
     flags.checked = int(expected_flags.size)
     for b, f in zip(*bad, strict=True):
         flags.fail(f"{view.manifest_file[b]} frame {view.frame_id[b]}",
-                   f"class {f}: stored flag {view.keypoint_flag[b, f]}, the rule gives {expected_flags[b, f]}")
+                   f"class {f}: stored flag {view.keypoint_flag[b, f]}, the rule gives {expected_flags[b, f]}", row=b)
     centre, box = objects.label_center_px, objects.label_xyxy
     slots = np.arange(kpts)
     parsed: list[tuple[float, ...]] = []
@@ -449,25 +634,25 @@ def _check_pose_files(view: DatasetView, labels: FrameLabels, objects: FrameLabe
             lines.checked += 1
             values, problem = parse_line(line, n_obj, columns=(layout.columns,))
             if problem:
-                rules.fail(where, problem)
+                rules.fail(where, problem, row=b)
                 continue
             v = np.asarray(values)
             kp = v[5:].reshape(kpts, 3)
             if min(v[1:5]) < 0 or max(v[1:5]) > 1 or v[3] <= 0 or v[4] <= 0:
-                rules.fail(where, f"box {line.split()[1:5]} outside [0, 1] or a size not positive")
+                rules.fail(where, f"box {line.split()[1:5]} outside [0, 1] or a size not positive", row=b)
             if kp[:, :2].min() < lo or kp[:, :2].max() > hi or not np.isin(kp[:, 2], (0, 1, 2)).all():
-                rules.fail(where, f"a keypoint outside [{lo}, {hi}] or a flag not 0, 1 or 2")
+                rules.fail(where, f"a keypoint outside [{lo}, {hi}] or a flag not 0, 1 or 2", row=b)
             if line in seen:
-                rules.fail(where, "duplicate row")
+                rules.fail(where, "duplicate row", row=b)
             seen.add(line)
             c = int(v[0])
             classes[c] += 1
             parsed.append((b, *v[:5]))
             if classes[c] == 2:
-                lines.fail(where, f"class {c} ({layout.objects[c]}) has more than one line")
+                lines.fail(where, f"class {c} ({layout.objects[c]}) has more than one line", row=b)
             if not objects.labeled[b, c]:
                 reason = Exclusion(int(objects.exclusion[b, c])).reason
-                lines.fail(where, f"class {c} ({layout.objects[c]}) has a line but the object is excluded ({reason})")
+                lines.fail(where, f"class {c} ({layout.objects[c]}) has a line but the object is excluded ({reason})", row=b)
                 continue
             want_box = np.array([centre[b, c, 0] / w, centre[b, c, 1] / h,
                                  (box[b, c, 2] - box[b, c, 0]) / w, (box[b, c, 3] - box[b, c, 1]) / h])
@@ -483,23 +668,23 @@ def _check_pose_files(view: DatasetView, labels: FrameLabels, objects: FrameLabe
             worst = max(worst, float(kp_err.max(initial=0.0)) * max(w, h))
             if not np.all(box_err <= LINE_TOLERANCE):
                 lines.fail(where, f"class {c} box differs from the manifest's by {(box_err * [w, h, w, h]).max():.3g} px",
-                           float((box_err * [w, h, w, h]).max()))
+                           float((box_err * [w, h, w, h]).max()), row=b)
             wrong_flag = slots[kp[:, 2] != want_flag]
             if len(wrong_flag):
                 s0 = int(wrong_flag[0])
-                lines.fail(where, f"class {c} keypoint {s0}: flag {kp[s0, 2]:g}, the manifest says {want_flag[s0]}")
+                lines.fail(where, f"class {c} keypoint {s0}: flag {kp[s0, 2]:g}, the manifest says {want_flag[s0]}", row=b)
             off = slots[kp_err > POSE_TOLERANCE]
             if len(off):
                 s0 = int(off[np.argmax(kp_err[off])])
                 lines.fail(where, f"class {c} keypoint {s0} is {kp_err[s0] * max(w, h):.3g} px from its true centre "
-                           "projection", float(kp_err[s0] * max(w, h)))
+                           "projection", float(kp_err[s0] * max(w, h)), row=b)
         for c in sorted(set(np.flatnonzero(objects.labeled[b]).tolist()) - set(classes)):
-            lines.fail(rel, f"class {c} ({layout.objects[c]}) is labeled in the manifest but has no line")
+            lines.fail(rel, f"class {c} ({layout.objects[c]}) is labeled in the manifest but has no line", row=b)
     lines.worst = worst
     return [lines, flags, rules], np.array(parsed, dtype=np.float64).reshape(-1, 6)
 
 
-def _check_pose_names(view: DatasetView) -> Check:
+def _check_pose_names(view: DatasetMeta) -> Check:
     """The pose set's data.yaml: names, nc, kpt_shape and flip_idx."""
     layout = view.pose_layout
     where = "pose/data.yaml" if view.label_format == "both" else "data.yaml"
@@ -535,20 +720,26 @@ def _check_pose_names(view: DatasetView) -> Check:
     return check
 
 
-def _pose_learnable(view: DatasetView, instances: NDArray[np.float64]) -> dict:
-    """The share of pose instances Ultralytics' trainer keeps at ``labels.train_imgsz`` and can
-    assign to an anchor, without mosaic (as for boxes: :mod:`datagen.core.training`)."""
+def _pose_learnable_part(view: DatasetView, instances: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Which pose instances (rows ``(frame row, class, cx, cy, w, h)``) Ultralytics' trainer
+    keeps at ``labels.train_imgsz`` and can assign to an anchor, without mosaic (as for
+    boxes: :mod:`datagen.core.training`)."""
     k = view.intrinsics
     cx, cy = instances[:, 2] * k.width, instances[:, 3] * k.height
     bw, bh = instances[:, 4] * k.width, instances[:, 5] * k.height
     xyxy = np.stack([cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2], axis=-1)
-    learnable = view.train_view.learnable(xyxy)
-    return {"instances": len(instances), "learnable": int(learnable.sum()),
-            "share": float(learnable.mean()) if len(instances) else None,
-            "imgsz": view.train_view.imgsz}
+    return view.train_view.learnable(xyxy)
 
 
-def _check_files(view: DatasetView) -> Check:
+def _pose_learnable(meta: DatasetMeta, parts: list[NDArray[np.bool_]]) -> dict:
+    """The share of pose instances that are learnable (:func:`_pose_learnable_part`)."""
+    learnable = np.concatenate(parts)
+    return {"instances": len(learnable), "learnable": int(learnable.sum()),
+            "share": float(learnable.mean()) if len(learnable) else None,
+            "imgsz": meta.train_view.imgsz}
+
+
+def _check_files(view: DatasetIndex | DatasetView) -> Check:
     check = Check("files", "every image, label and EXR a manifest names exists, no file in images/, labels/ "
                   "or exr/ is unnamed, no temporary file is left, and every planned shard is finished")
     root = view.root
@@ -614,13 +805,12 @@ def _check_files(view: DatasetView) -> Check:
 _HEADER_BYTES: Final = 65536
 
 
-def _check_images(view: DatasetView) -> Check:
-    """Open every image a manifest names: its header states the dataset's size, and it
-    decodes fully (a truncated file or one that is not an image fails). Missing files
+def _check_images(view: DatasetIndex | DatasetView, k: Intrinsics) -> Check:
+    """Open every image a manifest names: its header states the dataset's size (``k``), and
+    it decodes fully (a truncated file or one that is not an image fails). Missing files
     are the ``files`` check's."""
     import cv2
 
-    k = view.intrinsics
     check = Check("images", f"every image a manifest names decodes fully, {k.width}x{k.height} 8-bit colour as "
                   "dataset.json states")
     paths = [p for p in view.image_path if p]
@@ -681,7 +871,7 @@ def _quiet_stderr():
         os.close(saved)
 
 
-def _check_names(view: DatasetView) -> Check:
+def _check_names(view: DatasetMeta) -> Check:
     check = Check("class_names", "data.yaml's nc and names match features.parquet class for class")
     names = view.data_yaml.get("names")
     expected = dict(zip(view.features.class_id.tolist(), view.features.name, strict=True))
@@ -702,7 +892,10 @@ def _check_names(view: DatasetView) -> Check:
 
 
 # --- statistics ------------------------------------------------------------------------------
-def _statistics(view: DatasetView, labels) -> dict:
+def _statistics_part(view: DatasetView, labels: FrameLabels, rank: NDArray[np.int64]) -> dict:
+    """What the statistics need of ``view``'s rows: the drift, distance, obliqueness and class
+    of each feature in view (with its frame's position ``rank`` in the dataset's frame
+    order, so that the merged values keep the order a whole-dataset view has), and counts."""
     features = view.features
     k = view.intrinsics
     in_image = labels.exclusion != Exclusion.BEHIND_CAMERA
@@ -713,28 +906,55 @@ def _statistics(view: DatasetView, labels) -> dict:
     cam_from_model = view.cam_from_objects()[:, features.object_index]
     oblique = obliqueness_deg(cam_from_model, feature_normals(features.points_model, features.n_points),
                               features.center_model)
-    distance = np.broadcast_to(view.distance_m[:, None], drift.shape)
-    d, dist, obl = drift[inside], distance[inside], oblique[inside]
-    size = np.broadcast_to(np.array(features.size, dtype=object)[None, :], drift.shape)[inside]
-    top = max(10.0, float(np.ceil(view.distance_m.max() / 10.0) * 10.0)) if len(view) else 10.0
+    rows, cls = np.nonzero(inside)
+    vis = view.visible_fraction[labels.labeled]
+    cv = view.center_visible[labels.labeled]
+    cv = cv[np.isfinite(cv)]
+    return {
+        "drift": drift[inside], "distance": view.distance_m[rows], "obliqueness": oblique[inside],
+        "class": cls.astype(np.int32), "rank": rank[rows],
+        "exclusions": np.bincount(labels.exclusion.ravel().astype(np.int64), minlength=max(Exclusion) + 1),
+        "labeled_per_class": labels.labeled.sum(axis=0),
+        "labeled_per_object": np.stack([labels.labeled[:, features.object_index == j].sum(axis=1)
+                                        for j in range(len(features.objects))], axis=1).astype(np.int32),
+        "visible_fraction": vis[np.isfinite(vis)],
+        "centre_visible": (int(cv.size), int((cv == 1.0).sum())),
+        "frame_distance": view.distance_m.copy(),
+        "appearance": _appearance_part(view.appearance, rank),
+    }
+
+
+def _statistics(meta: DatasetMeta, parts: list[dict]) -> dict:
+    """The statistics of the merged :func:`_statistics_part` of every shard."""
+    features = meta.features
+    order = np.argsort(np.concatenate([p["rank"] for p in parts]), kind="stable")
+
+    def merged(key: str) -> NDArray:
+        return np.concatenate([p[key] for p in parts])[order]
+
+    d, dist, obl = merged("drift"), merged("distance"), merged("obliqueness")
+    size = np.array(features.size, dtype=object)[merged("class")] if d.size else np.zeros(0, dtype=object)
+    frame_distance = np.concatenate([p["frame_distance"] for p in parts])
+    frames = len(frame_distance)
+    top = max(10.0, float(np.ceil(frame_distance.max() / 10.0) * 10.0)) if frames else 10.0
     by_size = {}
     for tag in sorted(set(features.size)):
         v = d[size == tag]
         by_size[tag or "untagged"] = {"count": int(v.size), **({"mean": float(v.mean()), "median": float(np.median(v)),
                                                                  "p95": float(np.percentile(v, 95)),
                                                                  "max": float(v.max())} if v.size else {})}
-    reasons = Counter(Exclusion(int(e)).reason or "labeled" for e in labels.exclusion.ravel())
-    per_class = labels.labeled.sum(axis=0)
+    exclusions = np.sum([p["exclusions"] for p in parts], axis=0)
+    per_class = np.sum([p["labeled_per_class"] for p in parts], axis=0)
+    per_object = np.concatenate([p["labeled_per_object"] for p in parts])
     pnp = {}
     for j, obj in enumerate(features.objects):
-        count = labels.labeled[:, features.object_index == j].sum(axis=1)
+        count = per_object[:, j]
         pnp[obj] = {"frames_below_3": int((count < PNP_MIN_FEATURES).sum()),
-                    "share_below_3": float((count < PNP_MIN_FEATURES).mean()) if len(view) else 0.0,
-                    "median_labeled": float(np.median(count)) if len(view) else 0.0}
-    vis = view.visible_fraction[labels.labeled]
-    vis = vis[np.isfinite(vis)]
-    cv = view.center_visible[labels.labeled]
-    cv = cv[np.isfinite(cv)]
+                    "share_below_3": float((count < PNP_MIN_FEATURES).mean()) if frames else 0.0,
+                    "median_labeled": float(np.median(count)) if frames else 0.0}
+    vis = np.concatenate([p["visible_fraction"] for p in parts])
+    cv_count = sum(p["centre_visible"][0] for p in parts)
+    cv_ones = sum(p["centre_visible"][1] for p in parts)
     coverage_edges = np.arange(0.0, top + 5.0, 5.0)
     return {
         "tight_drift_px": {
@@ -748,36 +968,44 @@ def _statistics(view: DatasetView, labels) -> dict:
             "by_obliqueness_deg": _binned(d, obl, np.arange(0.0, 91.0, 15.0)),
         },
         "labels_per_class": {features.name[i]: int(per_class[i]) for i in range(len(features))},
-        "exclusions": {r.reason or "labeled": int(reasons.get(r.reason or "labeled", 0)) for r in Exclusion},
+        "exclusions": {r.reason or "labeled": int(exclusions[r]) for r in Exclusion},
         "visibility": {
             "labeled_features_rendered": int(vis.size),
             "visible_fraction_histogram": np.histogram(vis, bins=10, range=(0.0, 1.0))[0].tolist(),
             "share_fully_visible": float((vis >= 1.0).mean()) if vis.size else None,
-            "share_centre_visible": float(cv.mean()) if cv.size else None,
+            # centre_visible is 1 or 0 where rendered: the mean is the share of ones
+            "share_centre_visible": cv_ones / cv_count if cv_count else None,
         },
         "pnp_below_3_features": pnp,
         "distance_coverage": {"edges_m": coverage_edges.tolist(),
-                              "frames": np.histogram(view.distance_m, bins=coverage_edges)[0].tolist()},
+                              "frames": np.histogram(frame_distance, bins=coverage_edges)[0].tolist()},
+        "_top_m": top,
         "_arrays": {"drift": d, "distance": dist, "obliqueness": obl, "size": size,
                     "visible_fraction": vis},
     }
-
-
-
-
-
-
-
-
-
-
 
 
 #: Bins of the appearance section's histograms.
 APPEARANCE_BINS: Final = 10
 
 
-def appearance(columns: dict[str, list]) -> dict:
+def _appearance_part(columns: dict[str, list], rank: NDArray[np.int64]) -> dict[str, dict]:
+    """Per appearance column of some rows: how many drew it, and the draws (counts per value
+    for names and flags; for numbers the values with their frames' ``rank``)."""
+    out = {}
+    for name, column in columns.items():
+        rows = [i for i, v in enumerate(column) if v is not None]
+        drawn = [column[i] for i in rows]
+        if drawn and isinstance(drawn[0], (bool, str)):
+            out[name] = {"frames": len(drawn), "values": Counter(str(v).lower() if isinstance(v, bool) else v
+                                                                 for v in drawn)}
+        else:
+            out[name] = {"frames": len(drawn), "numbers": np.asarray(drawn, dtype=np.float64).reshape(-1),
+                         "rank": rank[np.asarray(rows, dtype=np.int64)]}
+    return out
+
+
+def _appearance_finish(parts: list[dict[str, dict]]) -> dict:
     """The appearance section: per dimension (:data:`datagen.dataset.schema.APPEARANCE`) and
     column, how many frames drew it and the distribution of the draws (a histogram of
     :data:`APPEARANCE_BINS` bins for numbers, counts per value for names and flags). A
@@ -788,21 +1016,22 @@ def appearance(columns: dict[str, list]) -> dict:
     for dimension, names in APPEARANCE.items():
         section = {}
         for name in names:
-            if name not in columns:
+            mine = [p[name] for p in parts if name in p]
+            if not mine:
                 continue
-            drawn = [v for v in columns[name] if v is not None]
-            entry: dict = {"frames": len(drawn)}
-            if drawn and isinstance(drawn[0], (bool, str)):
-                entry["values"] = dict(sorted(Counter(str(v).lower() if isinstance(v, bool) else v
-                                                      for v in drawn).items()))
-            elif drawn:
-                values = np.asarray(drawn, dtype=np.float64)
+            entry: dict = {"frames": sum(m["frames"] for m in mine)}
+            counts = [m["values"] for m in mine if "values" in m]
+            if counts:
+                entry["values"] = dict(sorted(sum(counts, Counter()).items()))
+            elif entry["frames"]:
+                values = np.concatenate([m["numbers"] for m in mine])
+                values = values[np.argsort(np.concatenate([m["rank"] for m in mine]), kind="stable")]
                 values = values[np.isfinite(values)]
                 if values.size:
                     lo, hi = float(values.min()), float(values.max())
-                    counts, edges = np.histogram(values, bins=APPEARANCE_BINS, range=(lo, hi if hi > lo else lo + 1.0))
+                    counts_, edges = np.histogram(values, bins=APPEARANCE_BINS, range=(lo, hi if hi > lo else lo + 1.0))
                     entry.update(min=lo, max=hi, mean=float(values.mean()), edges=edges.tolist(),
-                                 histogram=counts.tolist())
+                                 histogram=counts_.tolist())
             section[name] = entry
         out[dimension] = section
     return out

@@ -35,14 +35,16 @@ from datagen.core.conventions import evaluation_rng
 from datagen.core.errors import DatagenError
 from datagen.core.keypoints import PoseLayout
 from datagen.core.transforms import invert_rigid
-from datagen.dataset.reader import DatasetView
+from datagen.dataset.reader import DatasetIndex, DatasetMeta, DatasetSource, DatasetView
 from datagen.dataset.yolo import parse_line
 
 __all__ = [
     "PnPSettings",
     "Predictions",
+    "Run",
     "covered_splits",
     "evaluate",
+    "evaluate_runs",
     "noise_offsets",
     "parse_predictions",
     "ptd_from_points",
@@ -244,13 +246,13 @@ def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_con
     return Predictions(out, min_conf, detections, below)
 
 
-def covered_splits(view: DatasetView, predictions: Mapping) -> list[str]:
+def covered_splits(view: DatasetIndex | DatasetView, predictions: Mapping) -> list[str]:
     """The splits of the frames that have a prediction file, in dataset order."""
     return [s for s in dict.fromkeys(view.split[i] for i, stem in enumerate(view.stems) if stem in predictions)]
 
 
 # --- a whole dataset -------------------------------------------------------------------------------
-def _target_object(view: DatasetView) -> str:
+def _target_object(view: DatasetMeta) -> str:
     objects = view.features.objects
     if "receiver" not in objects or len(objects) != 2:
         raise DatagenError(f"{view.root / 'features.parquet'}: evaluate needs receiver features and one other "
@@ -258,7 +260,223 @@ def _target_object(view: DatasetView) -> str:
     return next(o for o in objects if o != "receiver")
 
 
-def evaluate(view: DatasetView, *, noise_px: float = 0.0, run: int = 0, seed: int | None = None,
+@dataclass(frozen=True)
+class Run:
+    """One source of 2D points: the truth perturbed by ``noise_px`` (noise stream ``run``),
+    or a detector's ``predictions``."""
+
+    noise_px: float = 0.0
+    run: int = 0
+    predictions: Mapping | None = None
+
+
+@dataclass
+class _Chain:
+    """What one run carries from frame to frame within an approach."""
+
+    key: tuple[int, int] | None = None
+    guesses: dict = field(default_factory=dict)
+    history: deque = field(default_factory=deque)
+
+
+#: Per-frame result columns and their dtypes (``ptd_m`` and ``truth_m`` are (N, 3)).
+_COLUMNS: Final = {"frame_id": np.int64, "distance_m": np.float64, "matches_receiver": np.int32,
+                   "matches_target": np.int32, "reason": np.int8, "ptd_m": np.float64, "solve_s": np.float64,
+                   "truth_m": np.float64, "ptd_receiver_m": np.float64, "has_predictions": bool}
+
+
+def _evaluate_rows(view: DatasetView, rows: NDArray[np.int64], runs: list[Run], chains: list[_Chain], *,
+                   seed: int, settings: PnPSettings, out: list[dict[str, list]]) -> None:
+    """Solve ``rows`` of ``view`` (in frame order) for every run, appending to ``out``."""
+    features = view.features
+    target = _target_object(view)
+    k = view.intrinsics
+    obj_of = features.objects.index
+    masks = (("receiver", features.object_index == obj_of("receiver")),
+             (target, features.object_index == obj_of(target)))
+    centers = features.center_model
+    receiver_from_world = invert_rigid(view.world_from["receiver"][rows])
+    truth = np.einsum("bij,bj->bi", receiver_from_world[:, :3, :3], view.world_from[target][rows][:, :3, 3]) \
+        + receiver_from_world[:, :3, 3]
+    stems = view.stems if any(r.predictions is not None for r in runs) else None
+    for j, i in enumerate(rows.tolist()):
+        key = (int(view.approach_index[i]), int(view.approach_number[i]))
+        distortion = view.distortion[i] if view.distortion[i].any() else None
+        for run, chain, res in zip(runs, chains, out, strict=True):
+            if key != chain.key:
+                chain.key, chain.guesses, chain.history = key, {}, deque(maxlen=settings.rolling_window)
+            predictions = run.predictions
+            if predictions is None:
+                uv = view.center_px[i]
+                if run.noise_px > 0:
+                    uv = uv + noise_offsets(evaluation_rng(seed, int(view.frame_id[i]), run.run), len(uv),
+                                            run.noise_px)
+                have = view.labeled[i]
+            else:
+                found = predictions.get(stems[i], {})
+                uv = np.full((len(features), 2), np.nan)
+                for cls, (u, v, _) in found.items():
+                    uv[cls] = (u, v)
+                have = np.isfinite(uv[:, 0])
+            res["frame_id"].append(int(view.frame_id[i]))
+            res["distance_m"].append(float(view.distance_m[i]))
+            res["truth_m"].append(truth[j])
+            res["ptd_receiver_m"].append(view.ptd_receiver_m[i])
+            res["has_predictions"].append(predictions is None or stems[i] in predictions)
+            start = time.perf_counter()
+            poses = {}
+            matches = {}
+            for name, mask in masks:
+                sel = mask & have
+                matches[name] = int(sel.sum())
+                if matches[name] < settings.min_matches:
+                    poses[name] = "few"
+                    continue
+                poses[name] = solve_pose(centers[sel], uv[sel], k, settings, chain.guesses.get(name), distortion)
+            res["solve_s"].append(time.perf_counter() - start)
+            res["matches_receiver"].append(matches["receiver"])
+            res["matches_target"].append(matches[target])
+            ptd = np.full(3, np.nan)
+            reason = "ok"
+            if "few" in poses.values():
+                reason = "too_few_matches"
+                if predictions is not None:
+                    stem = stems[i]
+                    if stem not in predictions:
+                        reason = "no_detections"
+                    elif isinstance(predictions, Predictions) and predictions.all_below_conf(stem):
+                        reason = "below_conf"
+            elif poses["receiver"] is None or poses[target] is None:
+                reason = "pnp_failed"
+            else:
+                ptd = ptd_from_poses(poses["receiver"], poses[target])
+                if np.linalg.norm(ptd) > settings.max_range_m:
+                    reason = "beyond_range"
+                elif len(chain.history) >= settings.rolling_min and _outlier(ptd, chain.history, settings):
+                    reason = "outlier"
+                else:
+                    chain.history.append(ptd)
+                    chain.guesses = dict(poses)  # only an accepted pose seeds the next frame's solve
+            res["ptd_m"].append(ptd)
+            res["reason"].append(REASONS.index(reason))
+
+
+def _outlier(ptd: NDArray[np.float64], history: deque, settings: PnPSettings) -> bool:
+    """Beyond ``outlier_sigma`` of the rolling average of the approach's accepted vectors."""
+    past = np.array(history)
+    sigma = np.maximum(past.std(axis=0), 1e-3)
+    return bool(np.any(np.abs(ptd - past.mean(axis=0)) > settings.outlier_sigma * sigma))
+
+
+def _chunks(dataset: DatasetView | DatasetSource, positions: NDArray[np.int64], index: DatasetIndex | None
+            ) -> Iterator[tuple[DatasetView, NDArray[np.int64]]]:
+    """``(view, rows)`` runs of the dataset's frames at ``positions`` (in frame order): a
+    source's shards are read as the frames reach them, at most one per split held."""
+    if index is None:
+        yield dataset, positions
+        return
+    held: dict[str, tuple[DatasetView, dict[int, int]]] = {}
+    names = [index.manifest_file[p] for p in positions.tolist()]
+    start = 0
+    while start < len(positions):
+        name = names[start]
+        end = start
+        while end < len(positions) and names[end] == name:
+            end += 1
+        if name not in held:
+            shard = dataset.read_shard(name)
+            rank = index.rank[name]
+            split = shard.split[0] if len(shard) else ""
+            for other in [n for n, (v, _) in held.items() if (v.split[0] if len(v) else "") == split]:
+                del held[other]
+            held[name] = (shard, {int(r): row for row, r in enumerate(rank.tolist())})
+        shard, row_of = held[name]
+        yield shard, np.array([row_of[int(p)] for p in positions[start:end]], dtype=np.int64)
+        start = end
+
+
+def _evaluate_block(dataset: DatasetView | DatasetSource, positions: NDArray[np.int64], index: DatasetIndex | None,
+                    runs: list[Run], seed: int, settings: PnPSettings) -> list[dict[str, NDArray]]:
+    """The per-frame results of every run over the frames at ``positions`` (whole approaches,
+    in frame order), as arrays."""
+    chains = [_Chain() for _ in runs]
+    out: list[dict[str, list]] = [{c: [] for c in _COLUMNS} for _ in runs]
+    for view, rows in _chunks(dataset, positions, index):
+        _evaluate_rows(view, rows, runs, chains, seed=seed, settings=settings, out=out)
+    arrays = []
+    for res in out:
+        arrays.append({c: (np.array(v, dtype=t).reshape(-1, 3) if c in ("ptd_m", "truth_m", "ptd_receiver_m")
+                           else np.array(v, dtype=t)) for (c, t), v in zip(_COLUMNS.items(), res.values(),
+                                                                            strict=True)})
+    return arrays
+
+
+def _blocks(index: DatasetIndex | DatasetView, attempted: NDArray[np.int64], n: int) -> list[NDArray[np.int64]]:
+    """``attempted`` (positions in frame order) cut into about ``n`` blocks of whole approaches."""
+    if n <= 1 or len(attempted) < 2:
+        return [attempted]
+    key = index.approach_index[attempted] * (1 << 32) + index.approach_number[attempted]
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])  # where an approach begins
+    cuts = starts[np.searchsorted(starts, np.linspace(0, len(attempted), n + 1)[1:-1])] if len(starts) > 1 else []
+    return [b for b in np.split(attempted, np.unique(cuts)) if len(b)]
+
+
+def evaluate_runs(dataset: DatasetView | DatasetSource, runs: list[Run], *, seed: int | None = None,
+                  settings: PnPSettings = PnPSettings(), split: str | None = None, workers: int = 1,
+                  progress=None, index: DatasetIndex | None = None) -> list[dict]:
+    """PtD vectors of every frame (frame order) for each run's 2D points, in one pass over
+    the dataset: a loaded view, or an opened source read shard by shard as the frames in
+    frame order reach them (one shard per split held at a time). With ``workers`` > 1 the
+    approaches are shared among processes in blocks of whole approaches (each approach's
+    frames are solved in order, as the rolling average and the extrinsic guess need): the
+    results do not depend on ``workers``.
+
+    ``split`` limits the attempts to one split's frames (``val`` when scoring a detector
+    on what it did not train on). ``index``: the source's, where the caller has read it.
+    Returns per run the arrays of :func:`evaluate`."""
+    target = _target_object(dataset)
+    seed = int(dataset.doc.get("seed", 0)) if seed is None else seed
+    if isinstance(dataset, DatasetSource):
+        index = index or dataset.index(allow_duplicates=False)
+    else:
+        index = None
+    rows = index if index is not None else dataset
+    attempted = np.flatnonzero(np.array([split is None or s == split for s in rows.split], dtype=bool))
+    blocks = _blocks(rows, attempted, 4 * workers if workers > 1 else 1)
+    if progress is not None:
+        progress.start(len(attempted), 0)
+    parts: list[list[dict[str, NDArray]]] = []
+    if workers <= 1 or len(blocks) <= 1:
+        for block in blocks:
+            parts.append(_evaluate_block(dataset, block, index, runs, seed, settings))
+            if progress is not None:
+                progress.advance(len(block))
+    else:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
+            futures = [pool.submit(_evaluate_block, dataset, block, index, runs, seed, settings) for block in blocks]
+            for block, future in zip(blocks, futures, strict=True):
+                parts.append(future.result())
+                if progress is not None:
+                    progress.advance(len(block))
+    if progress is not None:
+        progress.close()
+    results = []
+    for r, run in enumerate(runs):
+        out = {c: np.concatenate([p[r][c] for p in parts]) for c in _COLUMNS}
+        out["success"] = out["reason"] == 0
+        out["error_m"] = np.linalg.norm(out["ptd_m"] - out["truth_m"], axis=1)
+        out["error_to_drogue_m"] = np.linalg.norm(out["ptd_m"] - out.pop("ptd_receiver_m"), axis=1)
+        has = out.pop("has_predictions")
+        out["missing_predictions"] = 0 if run.predictions is None else int((~has).sum())
+        out["target"] = target
+        results.append(out)
+    return results
+
+
+def evaluate(view: DatasetView | DatasetSource, *, noise_px: float = 0.0, run: int = 0, seed: int | None = None,
              predictions: Mapping | None = None, settings: PnPSettings = PnPSettings(),
              split: str | None = None) -> dict[str, NDArray]:
     """PtD vectors of every frame (frame order) for one source of 2D points.
@@ -271,96 +489,7 @@ def evaluate(view: DatasetView, *, noise_px: float = 0.0, run: int = 0, seed: in
     (NaN where no vector), ``truth_m`` (the true vector to the target's origin),
     ``error_m``, ``error_to_drogue_m`` (against the true drogue centre) and ``solve_s``.
     """
-    features = view.features
-    target = _target_object(view)
-    k = view.intrinsics
-    seed = int(view.doc.get("seed", 0)) if seed is None else seed
-    obj_of = features.objects.index
-    is_receiver = features.object_index == obj_of("receiver")
-    is_target = features.object_index == obj_of(target)
-    centers = features.center_model
-    b = len(view)
-    out = {
-        "frame_id": view.frame_id.copy(),
-        "distance_m": view.distance_m.copy(),
-        "matches_receiver": np.zeros(b, np.int32),
-        "matches_target": np.zeros(b, np.int32),
-        "reason": np.zeros(b, np.int8),
-        "ptd_m": np.full((b, 3), np.nan),
-        "solve_s": np.zeros(b),
-    }
-    receiver_from_world = invert_rigid(view.world_from["receiver"])
-    out["truth_m"] = np.einsum("bij,bj->bi", receiver_from_world[:, :3, :3], view.world_from[target][:, :3, 3]) \
-        + receiver_from_world[:, :3, 3]
-    stems = view.stems
-    guesses: dict[str, tuple] = {}
-    chain = None
-    history: deque = deque(maxlen=settings.rolling_window)
-    attempted = np.array([split is None or s == split for s in view.split])
-    for i in range(b):
-        if not attempted[i]:
-            continue
-        key = (int(view.approach_index[i]), int(view.approach_number[i]))
-        if key != chain:
-            chain, guesses, history = key, {}, deque(maxlen=settings.rolling_window)
-        if predictions is None:
-            uv = view.center_px[i]
-            labeled = view.labeled[i]
-            if noise_px > 0:
-                uv = uv + noise_offsets(evaluation_rng(seed, int(view.frame_id[i]), run), len(uv), noise_px)
-            have = labeled
-        else:
-            found = predictions.get(stems[i], {})
-            uv = np.full((len(features), 2), np.nan)
-            for cls, (u, v, _) in found.items():
-                uv[cls] = (u, v)
-            have = np.isfinite(uv[:, 0])
-        start = time.perf_counter()
-        poses = {}
-        for name, mask in (("receiver", is_receiver), (target, is_target)):
-            sel = mask & have
-            out["matches_receiver" if name == "receiver" else "matches_target"][i] = int(sel.sum())
-            if sel.sum() < settings.min_matches:
-                poses[name] = "few"
-                continue
-            poses[name] = solve_pose(centers[sel], uv[sel], k, settings, guesses.get(name),
-                                     view.distortion[i] if view.distortion[i].any() else None)
-        out["solve_s"][i] = time.perf_counter() - start
-        if "few" in poses.values():
-            reason = "too_few_matches"
-            if predictions is not None:
-                stem = stems[i]
-                if stem not in predictions:
-                    reason = "no_detections"
-                elif isinstance(predictions, Predictions) and predictions.all_below_conf(stem):
-                    reason = "below_conf"
-            out["reason"][i] = REASONS.index(reason)
-            continue
-        if poses["receiver"] is None or poses[target] is None:
-            out["reason"][i] = REASONS.index("pnp_failed")
-            continue
-        ptd = ptd_from_poses(poses["receiver"], poses[target])
-        out["ptd_m"][i] = ptd
-        if np.linalg.norm(ptd) > settings.max_range_m:
-            out["reason"][i] = REASONS.index("beyond_range")
-            continue
-        if len(history) >= settings.rolling_min:
-            past = np.array(history)
-            sigma = np.maximum(past.std(axis=0), 1e-3)
-            if np.any(np.abs(ptd - past.mean(axis=0)) > settings.outlier_sigma * sigma):
-                out["reason"][i] = REASONS.index("outlier")
-                continue
-        history.append(ptd)
-        guesses = dict(poses)  # only an accepted pose seeds the next frame's solve
-    for name in list(out):  # frames of other splits were not attempted: drop them
-        out[name] = out[name][attempted]
-    out["success"] = out["reason"] == 0
-    out["error_m"] = np.linalg.norm(out["ptd_m"] - out["truth_m"], axis=1)
-    out["error_to_drogue_m"] = np.linalg.norm(out["ptd_m"] - view.ptd_receiver_m[attempted], axis=1)
-    out["missing_predictions"] = 0 if predictions is None else int(sum(
-        1 for i in np.flatnonzero(attempted) if (stems[i]) not in predictions))
-    out["target"] = target
-    return out
+    return evaluate_runs(view, [Run(noise_px, run, predictions)], seed=seed, settings=settings, split=split)[0]
 
 
 #: Distance bins of the metrics, metres (contact first).

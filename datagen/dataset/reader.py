@@ -13,6 +13,7 @@ import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Final
 
 import numpy as np
 import pyarrow as pa
@@ -40,13 +41,13 @@ from datagen.dataset.schema import (
     read_objects,
 )
 
-__all__ = ["DatasetView", "image_size", "load_dataset"]
+__all__ = ["DatasetIndex", "DatasetMeta", "DatasetSource", "DatasetView", "image_size", "load_dataset", "open_dataset"]
 
 
 @dataclass(frozen=True, eq=False)
-class DatasetView:
-    """A dataset's metadata and manifest rows, per-feature columns as ``(B, F)`` arrays
-    (rows sorted by frame id)."""
+class DatasetMeta:
+    """What every frame of a dataset shares: dataset.json, the data.yaml files, the feature
+    table, the intrinsics and the object hulls."""
 
     root: Path
     doc: dict  # dataset.json
@@ -54,6 +55,47 @@ class DatasetView:
     pose_yaml: dict | None  # the pose set's data.yaml (pose/data.yaml with labels.format 'both')
     features: FeatureTable
     intrinsics: Intrinsics
+    hulls: dict[str, NDArray[np.float64]]  # objects.parquet: labeled object -> hull vertices (H, 3)
+
+    @property
+    def corrected(self) -> bool:
+        return bool(self.doc["corrected"])
+
+    @property
+    def edge_margin_px(self) -> float:
+        return float(self.doc["edge_margin_px"])
+
+    @property
+    def label_rules(self) -> LabelsConfig:
+        """The ``labels`` section of the config the dataset was built with."""
+        return LabelsConfig.model_validate(self.doc["config"]["labels"])
+
+    @property
+    def train_view(self) -> TrainView:
+        """How Ultralytics' trainer sees this dataset's images (``labels.train_imgsz``)."""
+        return TrainView(self.intrinsics.width, self.intrinsics.height, self.label_rules.train_imgsz)
+
+    @property
+    def label_format(self) -> str:
+        """``labels.format``: detect, pose or both."""
+        return self.label_rules.format
+
+    @functools.cached_property
+    def object_table(self) -> FeatureTable:
+        """The hulls as the table :func:`recompute_objects` labels (:func:`datagen.core.keypoints.object_table`)."""
+        return object_table(self.features.objects, self.hulls)
+
+    @functools.cached_property
+    def pose_layout(self) -> PoseLayout:
+        """Where each feature goes in a pose instance (:class:`datagen.core.keypoints.PoseLayout`)."""
+        return PoseLayout.from_features(self.features)
+
+
+@dataclass(frozen=True, eq=False)
+class DatasetView(DatasetMeta):
+    """A dataset's metadata and manifest rows (all of them, or one shard's), per-feature
+    columns as ``(B, F)`` arrays (rows sorted by frame id)."""
+
     manifest_file: list[str]  # per row: the manifest it came from (relative to root)
     frame_id: NDArray[np.int64]
     split: list[str]
@@ -78,7 +120,6 @@ class DatasetView:
     visible_fraction: NDArray[np.float64]  # (B, F), NaN where not rendered
     center_visible: NDArray[np.float64]  # (B, F) 1, 0 or NaN
     keypoint_flag: NDArray[np.int8]  # (B, F) the pose visibility flag (datagen.core.keypoints)
-    hulls: dict[str, NDArray[np.float64]]  # objects.parquet: labeled object -> hull vertices (H, 3)
     object_tight_xyxy: NDArray[np.float64]  # (B, O, 4) box of each object's projected hull, NaN if not finite
     object_label_xyxy: NDArray[np.float64]  # (B, O, 4) its pose box, NaN where not labeled
     object_exclusion: NDArray[np.object_]  # (B, O) reason or None
@@ -88,48 +129,14 @@ class DatasetView:
     def __len__(self) -> int:
         return len(self.frame_id)
 
-    @property
-    def corrected(self) -> bool:
-        return bool(self.doc["corrected"])
-
-    @property
-    def edge_margin_px(self) -> float:
-        return float(self.doc["edge_margin_px"])
-
-    @property
-    def label_rules(self) -> LabelsConfig:
-        """The ``labels`` section of the config the dataset was built with."""
-        return LabelsConfig.model_validate(self.doc["config"]["labels"])
-
-    @property
-    def train_view(self) -> TrainView:
-        """How Ultralytics' trainer sees this dataset's images (``labels.train_imgsz``)."""
-        return TrainView(self.intrinsics.width, self.intrinsics.height, self.label_rules.train_imgsz)
-
     def cam_from_objects(self) -> NDArray[np.float64]:
         """``(B, O, 4, 4)`` in the order of ``features.objects``."""
         return np.stack([self.cam_from_world @ self.world_from[o] for o in self.features.objects], axis=1)
 
     @property
-    def label_format(self) -> str:
-        """``labels.format``: detect, pose or both."""
-        return self.label_rules.format
-
-    @property
     def stems(self) -> list[str]:
         """Each row's file stem (the frame's image, or label, file name without extension)."""
-        return [Path(next(p for p in paths if p)).stem
-                for paths in zip(self.image_path, self.label_path, self.pose_label_path, strict=True)]
-
-    @functools.cached_property
-    def object_table(self) -> FeatureTable:
-        """The hulls as the table :func:`recompute_objects` labels (:func:`datagen.core.keypoints.object_table`)."""
-        return object_table(self.features.objects, self.hulls)
-
-    @functools.cached_property
-    def pose_layout(self) -> PoseLayout:
-        """Where each feature goes in a pose instance (:class:`datagen.core.keypoints.PoseLayout`)."""
-        return PoseLayout.from_features(self.features)
+        return _stems(self)
 
     def recompute_objects(self) -> FrameLabels:
         """Every frame's pose boxes from the poses and objects.parquet alone."""
@@ -151,6 +158,90 @@ class DatasetView:
             fraction = np.where(np.isnan(self.visible_fraction), 1.0, self.visible_fraction)
             labels = labels.with_visibility(fraction, threshold)
         return labels
+
+
+@dataclass(frozen=True, eq=False)
+class DatasetIndex:
+    """The small per-row columns of every manifest, in frame order (as a :class:`DatasetView`
+    of the whole dataset orders its rows): what the checks across shards need."""
+
+    root: Path
+    doc: dict
+    label_format: str
+    manifest_file: list[str]
+    frame_id: NDArray[np.int64]
+    split: list[str]
+    image_path: list[str | None]
+    label_path: list[str | None]
+    pose_label_path: list[str | None]
+    exr_path: list[str | None]
+    approach_index: NDArray[np.int64]
+    approach_number: NDArray[np.int64]
+    rank: dict[str, NDArray[np.int64]]  # manifest -> each of its rows' position in frame order (its rows sorted)
+
+    def __len__(self) -> int:
+        return len(self.frame_id)
+
+    @property
+    def stems(self) -> list[str]:
+        """Each row's file stem (the frame's image, or label, file name without extension)."""
+        return _stems(self)
+
+
+def _stems(rows: DatasetIndex | DatasetView) -> list[str]:
+    return [Path(next(p for p in paths if p)).stem
+            for paths in zip(rows.image_path, rows.label_path, rows.pose_label_path, strict=True)]
+
+
+#: The columns of :class:`DatasetIndex`.
+INDEX_COLUMNS: Final = ("frame_id", "split", *FILE_COLUMNS, "approach_index", "approach_number")
+
+
+@dataclass(frozen=True, eq=False)
+class DatasetSource(DatasetMeta):
+    """An opened dataset whose manifests are read one at a time (:meth:`read_shard`), so that
+    what streams over them holds one shard, not the dataset."""
+
+    manifests: tuple[str, ...]  # relative to root, sorted
+
+    def read_manifest(self, name: str, columns: tuple[str, ...] | None = None) -> pa.Table:
+        """One manifest, checked against the schema (one line naming it when it is not a
+        manifest this datagen reads)."""
+        return _read_manifest(self.root / name, columns)
+
+    def read_shard(self, name: str) -> DatasetView:
+        """One manifest's rows as a view."""
+        return _view(self, [self.read_manifest(name)], [name], allow_duplicates=True)
+
+    def index(self, *, allow_duplicates: bool = True) -> DatasetIndex:
+        """Every manifest's small columns (:data:`INDEX_COLUMNS`), rows in frame order.
+
+        ``allow_duplicates``: keep rows of a frame that several manifests hold (the audit
+        names them); otherwise they are refused in one line, as by :func:`load_dataset`."""
+        tables = [self.read_manifest(name, INDEX_COLUMNS) for name in self.manifests]
+        names = [name for name, t in zip(self.manifests, tables, strict=True) for _ in range(t.num_rows)]
+        frame_ids = np.concatenate([np.asarray(t.column("frame_id"), dtype=np.int64) for t in tables])
+        if not allow_duplicates:
+            _refuse_duplicates(self.root, frame_ids, names)
+        order = np.argsort(frame_ids, kind="stable")
+        rank = np.empty(len(order), dtype=np.int64)
+        rank[order] = np.arange(len(order))
+        ranks, start = {}, 0
+        for name, t in zip(self.manifests, tables, strict=True):
+            mine = rank[start:start + t.num_rows]
+            ranks[name] = mine[np.argsort(frame_ids[start:start + t.num_rows], kind="stable")]
+            start += t.num_rows
+
+        def column(c: str) -> list:
+            values = [v for t in tables for v in t.column(c).to_pylist()]
+            return [values[i] for i in order]
+
+        def integers(c: str) -> NDArray[np.int64]:
+            return np.concatenate([np.asarray(t.column(c), dtype=np.int64) for t in tables])[order]
+
+        return DatasetIndex(self.root, self.doc, self.label_format, [names[i] for i in order], frame_ids[order],
+                            column("split"), *(column(c) for c in FILE_COLUMNS), integers("approach_index"),
+                            integers("approach_number"), ranks)
 
 
 def _read_json(path: Path) -> dict:
@@ -219,6 +310,18 @@ def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> Dataset
     Raises:
         DatagenError: one line naming the file and what is wrong with it.
     """
+    source = open_dataset(root)
+    tables = [source.read_manifest(name) for name in source.manifests]
+    return _view(source, tables, list(source.manifests), allow_duplicates=allow_duplicates)
+
+
+def open_dataset(root: str | Path) -> DatasetSource:
+    """Read ``root``'s dataset.json, data.yaml, features.parquet and objects.parquet, and
+    list its manifests (read them with :meth:`DatasetSource.read_shard`).
+
+    Raises:
+        DatagenError: one line naming the file and what is wrong with it.
+    """
     root = Path(root)
     if not root.is_dir():
         raise DatagenError(f"{root}: no such dataset folder")
@@ -253,40 +356,54 @@ def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> Dataset
     k = doc["intrinsics"]
     intrinsics = Intrinsics(doc["image_width"], doc["image_height"], float(k["fx"]), float(k["fy"]),
                             float(k["cx"]), float(k["cy"]))
-    expected = manifest_schema()
-    tables, names = [], []
+    manifests = []
     for path in sorted((root / "manifests").glob("*.parquet")):
         if not MANIFEST_NAME.fullmatch(path.name):
             continue  # not a shard's manifest (the audit names it)
         if not path.is_file():
             raise DatagenError(f"{path}: not a regular file")
-        try:
-            table = pq.read_table(path)
-        except (OSError, pa.ArrowException) as exc:
-            raise DatagenError(f"{path}: unreadable manifest ({type(exc).__name__})") from None
-        version = (table.schema.metadata or {}).get(b"datagen.manifest_version", b"?").decode(errors="replace")[:20]
-        if version != MANIFEST_VERSION:
-            raise DatagenError(f"{path}: manifest version {version}, this datagen reads {MANIFEST_VERSION}")
-        for field in expected:
-            have = table.schema.field(field.name) if field.name in table.schema.names else None
-            if have is None or not have.type.equals(field.type):
-                what = "missing" if have is None else f"type {have.type}, expected {field.type}"
-                raise DatagenError(f"{path}: column {field.name}: {what}")
-        tables.append(table.select(expected.names).cast(expected))
-        names += [str(path.relative_to(root))] * table.num_rows
-    if not tables:
+        manifests.append(str(path.relative_to(root)))
+    if not manifests:
         raise DatagenError(f"{root / 'manifests'}: no manifest; the dataset has no finished shard")
+    hulls = _read_hulls(root / "objects.parquet", features.objects)
+    return DatasetSource(root=root, doc=doc, data_yaml=data_yaml, pose_yaml=pose_yaml, features=features,
+                         intrinsics=intrinsics, hulls=hulls, manifests=tuple(manifests))
+
+
+def _read_manifest(path: Path, columns: tuple[str, ...] | None = None) -> pa.Table:
+    """A manifest checked against :func:`datagen.dataset.schema.manifest_schema` (its
+    ``columns``, or all)."""
+    expected = manifest_schema()
+    if columns is not None:
+        expected = pa.schema([expected.field(c) for c in columns])
+    try:
+        schema = pq.read_schema(path)
+        table = pq.read_table(path, columns=[c for c in expected.names if c in schema.names])
+        version = (schema.metadata or {}).get(b"datagen.manifest_version", b"?")
+    except (OSError, pa.ArrowException) as exc:
+        raise DatagenError(f"{path}: unreadable manifest ({type(exc).__name__})") from None
+    version = version.decode(errors="replace")[:20]
+    if version != MANIFEST_VERSION:
+        raise DatagenError(f"{path}: manifest version {version}, this datagen reads {MANIFEST_VERSION}")
+    for field in expected:
+        have = table.schema.field(field.name) if field.name in table.schema.names else None
+        if have is None or not have.type.equals(field.type):
+            what = "missing" if have is None else f"type {have.type}, expected {field.type}"
+            raise DatagenError(f"{path}: column {field.name}: {what}")
+    return table.select(expected.names).cast(expected)
+
+
+def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, allow_duplicates: bool) -> DatasetView:
+    """The rows of ``tables`` (read from ``manifests``) as one view, sorted by frame id."""
+    root, features = meta.root, meta.features
+    names = [name for name, t in zip(manifests, tables, strict=True) for _ in range(t.num_rows)]
     try:
         table = pa.concat_tables(tables)
     except pa.ArrowException as exc:
         raise DatagenError(f"{root / 'manifests'}: manifests with different schemas ({exc})") from None
     frame_ids = np.asarray(table.column("frame_id"))
-    if not allow_duplicates and len(np.unique(frame_ids)) != len(frame_ids):
-        ids, counts = np.unique(frame_ids, return_counts=True)
-        frame = int(ids[np.argmax(counts > 1)])
-        where = sorted({names[i] for i in np.flatnonzero(frame_ids == frame)})
-        raise DatagenError(f"{root / where[0]}: frame {frame} is in {len(where)} manifests ({', '.join(where)}): a "
-                           "manifest copied or renamed by hand; datagen audit names every such frame")
+    if not allow_duplicates:
+        _refuse_duplicates(root, frame_ids, names)
     order = np.argsort(frame_ids, kind="stable")
     table = table.take(pa.array(order))
     names = [names[i] for i in order]
@@ -305,14 +422,14 @@ def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> Dataset
     n_obj = len(features.objects)
     objects = _records(table, "objects", n_obj, f"object records, features.parquet has {n_obj} objects", root,
                        names)
-    hulls = _read_hulls(root / "objects.parquet", features.objects)
     return DatasetView(
         root=root,
-        doc=doc,
-        data_yaml=data_yaml,
-        pose_yaml=pose_yaml,
+        doc=meta.doc,
+        data_yaml=meta.data_yaml,
+        pose_yaml=meta.pose_yaml,
         features=features,
-        intrinsics=intrinsics,
+        intrinsics=meta.intrinsics,
+        hulls=meta.hulls,
         manifest_file=names,
         frame_id=np.asarray(table.column("frame_id"), dtype=np.int64),
         split=table.column("split").to_pylist(),
@@ -338,7 +455,6 @@ def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> Dataset
         visible_fraction=_floats(flat.field("visible_fraction"), (b, f)),
         center_visible=_floats(pc.cast(flat.field("center_visible"), pa.float64()), (b, f)),
         keypoint_flag=np.asarray(flat.field("keypoint_flag").to_numpy(zero_copy_only=False), dtype=np.int8).reshape(b, f),
-        hulls=hulls,
         object_tight_xyxy=_floats(objects.field("tight_xyxy"), (b, n_obj, 4)),
         object_label_xyxy=_floats(objects.field("label_xyxy"), (b, n_obj, 4)),
         object_exclusion=np.array(objects.field("exclusion").to_pylist(), dtype=object).reshape(b, n_obj),
@@ -346,6 +462,18 @@ def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> Dataset
         appearance={c: table.column(c).to_pylist() for cols in APPEARANCE.values() for c in cols
                     if c in table.column_names},
     )
+
+
+def _refuse_duplicates(root: Path, frame_ids: NDArray[np.int64], names: list[str]) -> None:
+    """One line naming the manifests of the first frame that several rows hold (they would
+    count it twice)."""
+    if len(np.unique(frame_ids)) == len(frame_ids):
+        return
+    ids, counts = np.unique(frame_ids, return_counts=True)
+    frame = int(ids[np.argmax(counts > 1)])
+    where = sorted({names[i] for i in np.flatnonzero(frame_ids == frame)})
+    raise DatagenError(f"{root / where[0]}: frame {frame} is in {len(where)} manifests ({', '.join(where)}): a "
+                       "manifest copied or renamed by hand; datagen audit names every such frame")
 
 
 def _records(table: pa.Table, column: str, count: int, what: str, root: Path, names: list[str]) -> pa.Array:

@@ -114,8 +114,11 @@ class BuildProgress:
     """Frames done, frames/s and ETA: a live bar on a terminal, else a plain line
     every ``interval_s`` seconds and one per finished shard (on stderr)."""
 
-    def __init__(self, name: str, *, stream=None, interval_s: float = 30.0, live: bool | None = None) -> None:
+    def __init__(self, name: str, *, stream=None, interval_s: float = 30.0, live: bool | None = None,
+                 verb: str = "build", announce: bool = True) -> None:
         self.name = name
+        self.verb = verb  # what the lines say is under way: build, audit, evaluate
+        self.announce = announce  # a line at the start (else the first after interval_s)
         self.stream = stream or sys.stderr
         self.live = self.stream.isatty() if live is None else live
         self.interval_s = interval_s
@@ -138,10 +141,10 @@ class BuildProgress:
             self._bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                                  TextColumn("{task.fields[rate]}"), TimeElapsedColumn(), TextColumn("ETA"),
                                  TimeRemainingColumn(), console=Console(file=self.stream))
-            self._task = self._bar.add_task(self.name, total=total, completed=done, rate="")
+            self._task = self._bar.add_task(f"{self.verb} {self.name}", total=total, completed=done, rate="")
             self._bar.start()
-        else:
-            self._print(f"build {self.name}: {total} frames, {done} already done")
+        elif self.announce:
+            self._print(f"{self.verb} {self.name}: {total} frames, {done} already done")
 
     def _rate(self) -> tuple[float, float]:
         elapsed = time.perf_counter() - self.t0
@@ -160,7 +163,7 @@ class BuildProgress:
     def _status(self) -> None:
         rate, eta = self._rate()
         eta_text = time.strftime("%H:%M:%S", time.gmtime(eta)) if math.isfinite(eta) and eta < 86400 * 365 else "?"
-        self._print(f"build {self.name}: {self.done}/{self.total} frames ({100 * self.done / max(1, self.total):.0f}%),"
+        self._print(f"{self.verb} {self.name}: {self.done}/{self.total} frames ({100 * self.done / max(1, self.total):.0f}%),"
                     f" {rate:.3f} frames/s, ETA {eta_text}")
 
     def shard_done(self, summary: ShardSummary) -> None:

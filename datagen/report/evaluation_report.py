@@ -16,13 +16,13 @@ from pathlib import Path
 import pyarrow as pa
 
 from datagen.analysis.evaluate import REASONS, PnPSettings, summarize
-from datagen.dataset.reader import DatasetView
+from datagen.dataset.reader import DatasetIndex, DatasetView
 from datagen.files import write_parquet, write_text
 
 __all__ = ["write_evaluation"]
 
 
-def write_evaluation(view: DatasetView, runs: list[tuple[dict, dict]], out: Path,
+def write_evaluation(view: DatasetIndex | DatasetView, runs: list[tuple[dict, dict]], out: Path,
                      settings: PnPSettings = PnPSettings()) -> dict[str, Path]:
     """``evaluation.json`` (settings and each run's metrics), ``results.parquet`` (one row
     per frame and run) and PNG plots in the style of the paper's Figs 14-17.

@@ -1,0 +1,160 @@
+"""Audit and evaluate at scale (issue 20): read shard by shard, in worker processes, they
+give what a whole-dataset view gives: the same checks, counts, worst offenders and
+statistics, and the same per-frame PtD results."""
+
+from __future__ import annotations
+
+import io
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from datagen.analysis.audit import audit
+from datagen.analysis.evaluate import Run, evaluate_runs
+from datagen.config import load_config, override_config
+from datagen.dataset.reader import load_dataset, open_dataset
+from datagen.pipeline.progress import BuildProgress
+from datagen.pipeline.run import build_dataset
+from datagen.report.audit_report import report_document
+
+from .support import run_cli
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory) -> Path:
+    """A labels-only wingcam55 build of 600 frames in shards of 80: train and val shards
+    interleave in frame order (split_by frame), and approaches cross shard boundaries."""
+    tmp = tmp_path_factory.mktemp("scale")
+    config = override_config(load_config(ROOT / "scenes" / "wingcam55.yaml"),
+                             {"dataset.frames": 600, "dataset.shard_size": 80})
+    build_dataset(config, tmp / "ds", render=False)
+    return tmp / "ds"
+
+
+@pytest.fixture(scope="module")
+def damaged(built, tmp_path_factory) -> Path:
+    """``built`` with label files and a manifest damaged in many ways across shards of both
+    splits: offenders of equal score in several shards, and several failures per line."""
+    root = tmp_path_factory.mktemp("damaged") / "ds"
+    shutil.copytree(built, root)
+    files = sorted((root / "labels").rglob("*.txt"))
+    rng = np.random.default_rng(5)
+    for n, path in enumerate(rng.choice(files, 48, replace=False)):
+        lines = path.read_text().splitlines()
+        kind = n % 8
+        if kind == 0 and lines:
+            lines.append(lines[0])  # a duplicate row and a second line of its class
+        elif kind == 1 and lines:
+            lines.pop()  # a labeled feature without a line
+        elif kind == 2 and lines:
+            tokens = lines[0].split()
+            tokens[1] = f"{float(tokens[1]) + 0.01:.6f}"  # off the manifest box and the true centre
+            lines[0] = " ".join(tokens)
+        elif kind == 3:
+            lines += ["3 abc 0.5 0.1 0.1", "0 0.5 0.5 0.1", "77 0.5 0.5 0.1 0.1", "1 nan 0.5 0.1 0.1"]
+        elif kind == 4 and lines:
+            tokens = lines[-1].split()
+            tokens[3] = "1.5"  # outside [0, 1]
+            lines[-1] = " ".join(tokens)
+        elif kind == 5:
+            path.unlink()
+            continue
+        elif kind == 6 and lines:
+            lines[0] = "  " + lines[0].replace(" ", "   ")  # the same values, other whitespace
+        elif kind == 7 and lines:
+            lines.append(" ".join([lines[0].split()[0], "0.001", "0.5", "0.001", "0.05"]))  # at the border
+        path.write_text("\n".join(lines) + "\n")
+    for manifest in sorted((root / "manifests").glob("*.parquet"))[1:3]:  # a train and a val shard
+        table = pq.read_table(manifest)
+        column = table.column("cam_from_world").combine_chunks()
+        values = column.flatten().flatten().to_numpy().copy().reshape(len(column), 4, 4)
+        values[[3, 5], :3, 3] += [[0.05, 0.0, 0.0], [0.0, 0.3, 0.0]]
+        moved = pa.FixedSizeListArray.from_arrays(pa.FixedSizeListArray.from_arrays(pa.array(values.ravel()), 4), 4)
+        table = table.set_column(table.schema.get_field_index("cam_from_world"), table.schema.field("cam_from_world"),
+                                 moved.cast(column.type))
+        pq.write_table(table.replace_schema_metadata(table.schema.metadata), manifest)
+    return root
+
+
+def _report(result) -> str:
+    doc = report_document(result)
+    doc.pop("dataset")
+    return json.dumps(doc)
+
+
+def test_streaming_audit_of_a_damaged_dataset_equals_the_whole_dataset_audit(damaged) -> None:
+    whole = audit(load_dataset(damaged, allow_duplicates=True))
+    assert not whole.passed
+    failing = {c.name for c in whole.checks if c.failures}
+    assert {"manifest_boxes", "label_lines", "centre_drift", "edge_margin_and_front", "ultralytics_rules",
+            "files"} <= failing
+    assert any(len(c.offenders) == 20 and c.failures > 20 for c in whole.checks)  # the top 20 is a choice
+    for workers in (1, 2):
+        assert _report(audit(open_dataset(damaged), workers=workers)) == _report(whole), workers
+
+
+def test_streaming_audit_of_a_good_dataset_passes_with_the_same_statistics(built) -> None:
+    whole = audit(load_dataset(built))
+    streamed = audit(open_dataset(built), workers=2)
+    assert whole.passed and streamed.passed
+    assert _report(streamed) == _report(whole)
+    for key, values in whole.stats["_arrays"].items():
+        assert np.array_equal(streamed.stats["_arrays"][key], values), key
+
+
+@pytest.mark.parametrize("split", [None, "val"])
+def test_streaming_evaluate_gives_the_loaded_views_results_for_any_worker_count(built, split) -> None:
+    runs = [Run(0.0, 0), Run(1.0, 1)]
+    whole = evaluate_runs(load_dataset(built), runs, split=split)
+    source = open_dataset(built)
+    for workers in (1, 2):
+        streamed = evaluate_runs(source, runs, split=split, workers=workers)
+        for a, b in zip(whole, streamed, strict=True):
+            assert set(a) == set(b)
+            for key in a:
+                if key != "solve_s":
+                    assert np.array_equal(a[key], b[key], equal_nan=True) if isinstance(a[key], np.ndarray) \
+                        else a[key] == b[key], (workers, key)
+    assert len(whole[0]["frame_id"]) == (600 if split is None else load_dataset(built).split.count("val"))
+    assert np.all(np.diff(whole[0]["frame_id"]) > 0)
+
+
+def test_audit_and_evaluate_with_workers_give_their_usual_results(built, tmp_path) -> None:
+    done = run_cli("audit", str(built), "--workers", "2", "--overlays", "1", "--out", str(tmp_path / "a"))
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert _report_file(tmp_path / "a") == _report_file_of(built, tmp_path / "a1")
+    done = run_cli("evaluate", str(built), "--noise-px", "0,1", "--workers", "2", "--out", str(tmp_path / "e"))
+    assert done.returncode == 0, done.stderr[-2000:]
+    doc = json.loads((tmp_path / "e" / "evaluation.json").read_text())
+    assert [r["noise_px"] for r in doc["runs"]] == [0.0, 1.0]
+    assert all(r["overall"]["attempts"] == 600 for r in doc["runs"])
+
+
+def test_audit_and_evaluate_report_their_progress_in_frames(built) -> None:
+    for verb, work in (("audit", lambda p: audit(open_dataset(built), workers=2, progress=p)),
+                       ("evaluate", lambda p: evaluate_runs(open_dataset(built), [Run()], workers=2, progress=p))):
+        stream = io.StringIO()
+        work(BuildProgress("ds", verb=verb, stream=stream, interval_s=0.0, live=False))
+        lines = stream.getvalue().splitlines()
+        assert lines[0] == f"{verb} ds: 600 frames, 0 already done"
+        assert lines[-1].startswith(f"{verb} ds: 600/600 frames (100%)"), lines[-1]
+
+
+def _report_file(folder: Path) -> dict:
+    doc = json.loads((folder / "report.json").read_text())
+    for key in ("dataset", "files"):
+        doc.pop(key)
+    return doc
+
+
+def _report_file_of(root: Path, folder: Path) -> dict:
+    done = run_cli("audit", str(root), "--overlays", "1", "--out", str(folder))
+    assert done.returncode == 0, done.stderr[-2000:]
+    return _report_file(folder)
