@@ -6,6 +6,8 @@ second and peak RSS (the largest resident set of any one process of the command,
     python bench/bench_scale.py [--sizes 10000,100000] [--config scenes/wingcam55.yaml]
                                 [--workers 2] [--noise-px 0,1]
 
+``--workers`` is given to all three commands.
+
 Prints one Markdown table row per (size, command) and the ratio of the time per frame at
 each size to that at the smallest (linear time: about 1).
 """
@@ -60,8 +62,9 @@ def main() -> None:
             commands = {
                 "build --no-render": ["build", "--config", args.config, "--out", str(root), "--frames", str(n),
                                       "--no-render", "--workers", str(args.workers)],
-                "audit": ["audit", str(root), "--overlays", "0"],
-                f"evaluate --noise-px {args.noise_px}": ["evaluate", str(root), "--noise-px", args.noise_px],
+                "audit": ["audit", str(root), "--overlays", "0", "--workers", str(args.workers)],
+                f"evaluate --noise-px {args.noise_px}": ["evaluate", str(root), "--noise-px", args.noise_px,
+                                                         "--workers", str(args.workers)],
             }
             for name, command in commands.items():
                 wall, rss, _ = run(command)

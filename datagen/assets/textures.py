@@ -107,6 +107,7 @@ def _wave_variance(wind_mps: float, direction_rad: float, n: int, tile: float) -
     return variance
 
 
+@functools.lru_cache(maxsize=256)
 def wave_slope_variance(wind_mps: float, n: int = WAVE_TEXELS, tile: float = WAVE_TILE_M) -> float:
     """Expected mean square slope (both axes) of :func:`wave_field` at ``wind_mps``: the
     part of Cox and Munk's slope variance that the normal map resolves."""

@@ -59,7 +59,9 @@ Randomness
     shared by the consecutive frames of one approach chain ``a`` (initial pose,
     turbulence, tanker flight, mount perturbation) come from
     :func:`approach_rng` ``(seed, a)``, a separate stream (spawn key
-    ``(a, APPROACH_STREAM)``) that can never collide with a frame's. Random
+    ``(a, APPROACH_STREAM)``) that can never collide with a frame's (with
+    approach model 2 the drogue's gusts come from :func:`gust_rng` ``(seed,
+    a)``, spawn key ``(a, GUST_STREAM)``). Random
     surface features (paper model I) come from :func:`random_features_rng`
     ``(seed, object)``, spawn key ``(object id - 1, RANDOM_FEATURES_STREAM)``.
     The train/val split of a frame comes from :func:`split_uniform` ``(seed,
@@ -93,6 +95,7 @@ __all__ = [
     "CV_FORWARD",
     "CV_RIGHT",
     "GRAVITY_MPS2",
+    "GUST_STREAM",
     "MICAM_FROM_CVCAM",
     "NEAR_PLANE_M",
     "OBJECT_NAMES",
@@ -105,6 +108,7 @@ __all__ = [
     "evaluation_rng",
     "frame_rng",
     "frame_seed_sequence",
+    "gust_rng",
     "index_px",
     "object_id",
     "pixel_centre",
@@ -215,6 +219,16 @@ APPROACH_STREAM: Final[int] = 1
 def approach_rng(seed: int, approach_index: int) -> np.random.Generator:
     """The RNG of approach chain ``approach_index``: every draw its frames share."""
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(approach_index, APPROACH_STREAM)))
+
+
+#: Second spawn-key element of the drogue-gust streams (approach model 2).
+GUST_STREAM: Final[int] = 6
+
+
+def gust_rng(seed: int, approach_index: int) -> np.random.Generator:
+    """The RNG of approach chain ``approach_index``'s drogue gusts (approach model 2; model 1
+    draws them from :func:`approach_rng`)."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(approach_index, GUST_STREAM)))
 
 
 #: Second spawn-key element of the random-feature streams (paper model I).

@@ -122,6 +122,7 @@ def dataset_document(scene: Scene, jobs: list[ShardJob], fingerprint: str, *, re
         "features": {"file": "features.parquet", "classes": len(class_names),
                      "variant": config.features.variant, "objects": list(config.features.objects)},
         "seed": config.dataset.seed,
+        "approach_model": config.approach.model,
         "shard_size": config.dataset.shard_size,
         "splits": splits,
         "assets": assets,

@@ -44,7 +44,7 @@ from numpy.typing import NDArray
 
 from datagen.assets.rig import HOSE_ATTACH_DROGUE_M, HOSE_PORT_TANKER_M, MOUNTS
 from datagen.config.schema import Config
-from datagen.core.conventions import GRAVITY_MPS2, approach_rng
+from datagen.core.conventions import GRAVITY_MPS2, approach_rng, gust_rng
 from datagen.core.transforms import (
     invert_rigid,
     make_transform,
@@ -145,9 +145,11 @@ class DrogueTurbulence:
     """Dryden-filtered gusts (first-order Gauss-Markov per axis) driving a damped
     second-order drogue response; displacement in the tanker frame."""
 
-    def __init__(self, config: Config, rng: np.random.Generator, dt: float):
+    def __init__(self, config: Config, rng: np.random.Generator, dt: float, normals=None, *, warmup: bool = True):
         d = config.drogue
         self.rng = rng
+        # Each step's three standard normals: from ``rng`` (model 1) or ``normals()``.
+        self._normals = normals or (lambda: rng.standard_normal(3))
         self.intensity = float(rng.uniform(*d.intensity))
         self.sigma = np.asarray(d.rms_m) * self.intensity
         self.decay = math.exp(-dt / d.gust_time_s)
@@ -158,11 +160,12 @@ class DrogueTurbulence:
         self.gust = self.sigma * rng.standard_normal(3)
         self.position = self.gust.copy()
         self.velocity = np.zeros(3)
-        for _ in range(int(round(TURBULENCE_WARMUP_S / dt))):
+        self.warmup_steps = int(round(TURBULENCE_WARMUP_S / dt))
+        for _ in range(self.warmup_steps if warmup else 0):
             self.step()
 
     def step(self) -> None:
-        self.gust = self.gust * self.decay + self.sigma * self.kick * self.rng.standard_normal(3)
+        self.gust = self.gust * self.decay + self.sigma * self.kick * np.asarray(self._normals())
         accel = self.omega**2 * (self.gust - self.position) - 2.0 * self.zeta * self.omega * self.velocity
         self.velocity = self.velocity + self.dt * accel  # semi-implicit Euler: stable for omega*dt < 2
         self.position = self.position + self.dt * self.velocity
@@ -263,13 +266,19 @@ class _Chain:
         self.rng = rng
         self.dt = a.dt_s
         self.tanker = TankerFlight(config, rng)
-        self.turbulence = DrogueTurbulence(config, rng, self.dt)
+        self.turbulence = self._turbulence()
         self.gains = a.forward_gain * np.array([1.0, a.lateral_gain_ratio, a.lateral_gain_ratio])
         self.limits = np.array([a.max_closure_mps, a.max_lateral_mps, a.max_lateral_mps])
         self.attitude_decay = math.exp(-self.dt / a.attitude_time_constant_s)
         self.time_s = 0.0
         self.approach_number = -1
         self.steps_this_approach = 0
+
+    def _turbulence(self) -> DrogueTurbulence:
+        return DrogueTurbulence(self.config, self.rng, self.dt)
+
+    def _sync(self) -> None:
+        """Bring the arrays (probe, rotvec, turbulence) up to date (a subclass may step in floats)."""
 
     def new_approach(self, distance_m: float) -> None:
         self.approach_number += 1
@@ -319,6 +328,103 @@ class _Chain:
                          drogue_velocity=self.turbulence.velocity.copy())
 
 
+#: Rows of gust normals approach model 2 draws at a time.
+GUST_BLOCK = 1024
+
+
+def _rotation_rows(rx: float, ry: float, rz: float) -> tuple[float, ...]:
+    """Row-major ``(3, 3)`` rotation of a rotation vector in plain floats (Rodrigues)."""
+    angle = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if angle < 1e-12:
+        return (1.0, -rz, ry, rz, 1.0, -rx, -ry, rx, 1.0)
+    x, y, z = rx / angle, ry / angle, rz / angle
+    s, c = math.sin(angle), 1.0 - math.cos(angle)
+    return (1.0 - c * (y * y + z * z), -s * z + c * x * y, s * y + c * x * z,
+            s * z + c * x * y, 1.0 - c * (x * x + z * z), -s * x + c * y * z,
+            -s * y + c * x * z, s * x + c * y * z, 1.0 - c * (x * x + y * y))
+
+
+class _FastChain(_Chain):
+    """Approach model 2: :class:`_Chain`'s dynamics with the drogue's gusts drawn in blocks
+    of :data:`GUST_BLOCK` from a stream of their own (:func:`gust_rng`), and each step in
+    plain floats instead of 3-vectors (numpy's per-call cost dominated model 1)."""
+
+    def __init__(self, config: Config, rng: np.random.Generator, gusts: np.random.Generator):
+        self._gusts = gusts
+        self._normals: list[list[float]] = []
+        super().__init__(config, rng)
+        t = self.turbulence
+        self._sigma_kick = [float(v) * t.kick for v in t.sigma]
+        self._gust = [float(v) for v in t.gust]
+        self._position = [float(v) for v in t.position]
+        self._velocity = [float(v) for v in t.velocity]
+        self._gains = [float(v) for v in self.gains]
+        self._limits = [float(v) for v in self.limits]
+        for _ in range(t.warmup_steps):
+            self._gust_step()
+
+    def _gust_step(self) -> None:
+        """One step of the drogue's turbulence (:meth:`DrogueTurbulence.step` in floats)."""
+        t, dt = self.turbulence, self.dt
+        n = self._normal()
+        gust = [g * t.decay + k * e for g, k, e in zip(self._gust, self._sigma_kick, n, strict=True)]
+        w2, damp = t.omega * t.omega, 2.0 * t.zeta * t.omega
+        velocity = [v + dt * (w2 * (g - p) - damp * v)
+                    for g, p, v in zip(gust, self._position, self._velocity, strict=True)]
+        self._position = [p + dt * v for p, v in zip(self._position, velocity, strict=True)]
+        self._gust, self._velocity = gust, velocity
+
+    def _turbulence(self) -> DrogueTurbulence:
+        return DrogueTurbulence(self.config, self.rng, self.dt, normals=self._normal, warmup=False)
+
+    def _normal(self) -> list[float]:
+        if not self._normals:
+            self._normals = self._gusts.standard_normal((GUST_BLOCK, 3)).tolist()[::-1]
+        return self._normals.pop()
+
+    def new_approach(self, distance_m: float) -> None:
+        self._sync()
+        super().new_approach(distance_m)
+        self._probe = [float(v) for v in self.probe]
+        self._rotvec = [float(v) for v in self.rotvec]
+
+    def _sync(self) -> None:
+        """The float state back into the arrays :meth:`snap` and :meth:`new_approach` read."""
+        t = self.turbulence
+        t.gust, t.position, t.velocity = np.array(self._gust), np.array(self._position), np.array(self._velocity)
+        if hasattr(self, "_probe"):  # after the chain's first approach began
+            self.probe, self.rotvec = np.array(self._probe), np.array(self._rotvec)
+
+    @property
+    def distance(self) -> float:
+        p, q = self._position, self._probe
+        return math.sqrt((p[0] - q[0]) ** 2 + (p[1] - q[1]) ** 2 + (p[2] - q[2]) ** 2)
+
+    def step(self) -> None:
+        if self.steps_this_approach >= self.config.approach.max_steps:
+            super().step()  # raises, naming the distance
+        dt = self.dt
+        before = self._position
+        self._gust_step()
+        position = self._position
+        r = _rotation_rows(*self._rotvec)
+        e = [b - q for b, q in zip(before, self._probe, strict=True)]
+        ptd = (r[0] * e[0] + r[3] * e[1] + r[6] * e[2], r[1] * e[0] + r[4] * e[1] + r[7] * e[2],
+               r[2] * e[0] + r[5] * e[1] + r[8] * e[2])  # rotation.T @ e
+        v = [min(max(g * x, -lim), lim) for g, x, lim in zip(self._gains, ptd, self._limits, strict=True)]
+        closing = (r[0] * v[0] + r[1] * v[1] + r[2] * v[2], r[3] * v[0] + r[4] * v[1] + r[5] * v[2],
+                   r[6] * v[0] + r[7] * v[1] + r[8] * v[2])
+        self._probe = [q + (p - b) + dt * c for q, p, b, c in zip(self._probe, position, before, closing, strict=True)]
+        decay = self.attitude_decay
+        self._rotvec = [x * decay for x in self._rotvec]
+        self.time_s += dt
+        self.steps_this_approach += 1
+
+    def snap(self) -> _Snapshot:
+        self._sync()
+        return super().snap()
+
+
 def _start_chain(config: Config, seed: int, approach_index: int) -> tuple[_Chain, FloatArray | None]:
     """Chain ``approach_index`` with its first approach begun, and for 'distance' sampling
     its distance targets (far to near). The one place that fixes the order of the chain's
@@ -326,7 +432,8 @@ def _start_chain(config: Config, seed: int, approach_index: int) -> tuple[_Chain
     a = config.approach
     k = a.frames_per_approach
     lo, hi = a.range_m
-    chain = _Chain(config, approach_rng(seed, approach_index))
+    rng = approach_rng(seed, approach_index)
+    chain = _Chain(config, rng) if a.model == 1 else _FastChain(config, rng, gust_rng(seed, approach_index))
     if a.sampling == "distance":
         # One frame per distance stratum, visited from far to near, on one approach.
         targets = np.sort(lo + (np.arange(k) + chain.rng.random(k)) * (hi - lo) / k)[::-1]
@@ -374,6 +481,7 @@ def trace_approach(config: Config, seed: int, approach_index: int, every: int = 
     step = 0
     while True:
         if step % every == 0 or chain.distance < a.contact_m:
+            chain._sync()
             rotation = rotation_from_rotvec(chain.rotvec)
             rows.append((chain.time_s, chain.distance, rotation.T @ chain.ptd_tanker, -chain.ptd_tanker))
         if chain.distance < a.contact_m:
