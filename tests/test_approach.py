@@ -284,3 +284,31 @@ def test_approach_model_1_is_still_selectable_and_model_2_samples_other_trajecto
     assert not np.allclose(one[5].world_from_drogue, two[5].world_from_drogue)
     for states in (one, two):
         assert states[15].distance_m < states[0].distance_m  # each approach closes on the drogue
+
+
+@pytest.mark.parametrize("sampling", ["distance", "time"])
+def test_chains_simulated_together_equal_each_chain_simulated_alone(sampling: str) -> None:
+    """simulate_chains steps model 2's chains together, element by element: each chain's
+    snapshots are bit for bit its own, whichever chains it shares a batch with."""
+    config = variant(approach={"sampling": sampling, "stride_steps": 90, "range_m": [2.0, 12.0]})
+    alone = {a: ap.simulate_chain(config, 11, a) for a in range(20, 32)}
+    for batch in (range(20, 32), range(26, 29), [31, 20]):
+        together = ap.simulate_chains(config, 11, batch)
+        assert set(together) == set(batch)
+        for a, snapshots in together.items():
+            assert len(snapshots) == len(alone[a])
+            for x, y in zip(snapshots, alone[a], strict=True):
+                assert (x.time_s, x.approach_number) == (y.time_s, y.approach_number)
+                for name in ("probe_tanker", "attitude_rotvec", "drogue_offset", "probe_velocity", "drogue_velocity"):
+                    assert np.array_equal(getattr(x, name), getattr(y, name)), (a, name)
+    if sampling == "time":  # chains that reach contact and begin another approach mid-batch
+        assert any(s.approach_number > 0 for snapshots in alone.values() for s in snapshots)
+
+
+def test_prefetched_frame_states_equal_frame_states_made_alone() -> None:
+    states = ap.FrameStates(BASE, 5)
+    states.prefetch(range(3, 300, 7))
+    for i in (3, 10, 150, 297):
+        alone = ap.frame_state(BASE, i, 5)
+        assert np.array_equal(states(i).world_from_cam, alone.world_from_cam)
+        assert np.array_equal(states(i).hose_points_world, alone.hose_points_world)

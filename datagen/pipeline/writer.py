@@ -76,6 +76,7 @@ class ShardWriter:
         self._stop = stop or (lambda: False)
         rows, excluded, labels = [], Counter(), 0
         rendered, render_s, denoise_s, frame_s = 0, 0.0, 0.0, 0.0
+        self.states.prefetch(job.frames)  # the shard's approach chains, simulated together
         for frame in job.frames:
             if self._stop():
                 raise KeyboardInterrupt

@@ -160,7 +160,7 @@ class DrogueTurbulence:
         self.gust = self.sigma * rng.standard_normal(3)
         self.position = self.gust.copy()
         self.velocity = np.zeros(3)
-        self.warmup_steps = int(round(TURBULENCE_WARMUP_S / dt))
+        self.warmup_steps = round(TURBULENCE_WARMUP_S / dt)
         for _ in range(self.warmup_steps if warmup else 0):
             self.step()
 
@@ -471,6 +471,136 @@ def simulate_chain(config: Config, seed: int, approach_index: int) -> list[_Snap
         step += 1
 
 
+def simulate_chains(config: Config, seed: int, approach_indices) -> dict[int, list[_Snapshot]]:
+    """:func:`simulate_chain` of many chains. With approach model 2 they step together,
+    each step one numpy operation over every chain instead of one Python step per chain:
+    the same arithmetic in the same order, element by element (sines and cosines per
+    chain, through :mod:`math`), so each chain's snapshots are bit for bit those it has
+    alone, whichever chains it is simulated with."""
+    indices = list(dict.fromkeys(int(i) for i in approach_indices))
+    a = config.approach
+    if a.model == 1 or len(indices) < 2:
+        return {i: simulate_chain(config, seed, i) for i in indices}
+    k = a.frames_per_approach
+    started = [_start_chain(config, seed, i) for i in indices]
+    chains: list[_FastChain] = [c for c, _ in started]
+    targets = [t for _, t in started]
+    snapshots: list[list[_Snapshot]] = [[] for _ in indices]
+    first = chains[0]
+    t = first.turbulence
+    dt, decay, w2, damp = first.dt, t.decay, t.omega * t.omega, 2.0 * t.zeta * t.omega
+    attitude_decay = first.attitude_decay
+    gains, limits = np.array(first._gains), np.array(first._limits)
+    active = list(range(len(chains)))
+
+    def load() -> dict[str, FloatArray]:
+        rows = [chains[c] for c in active]
+        return {name: np.array([getattr(ch, name) for ch in rows]).reshape(len(rows), -1)
+                for name in ("_gust", "_position", "_velocity", "_probe", "_rotvec", "_sigma_kick")} | {
+            "time_s": np.array([ch.time_s for ch in rows])}
+
+    def store(state: dict[str, FloatArray]) -> None:
+        for row, c in enumerate(active):
+            ch = chains[c]
+            for name in ("_gust", "_position", "_velocity", "_probe", "_rotvec"):
+                setattr(ch, name, state[name][row].tolist())
+            ch.time_s = float(state["time_s"][row])
+
+    # Each chain's gusts: the rest of the block its warm-up began (every chain has drawn
+    # as many), then a block per chain whenever they run out, as _FastChain._normal does.
+    normals = np.array([ch._normals[::-1] for ch in chains]).reshape(len(chains), -1, 3)
+    used = 0
+    inf = math.inf
+    next_target = np.array([tg[0] if tg is not None else inf for tg in targets])
+    steps = np.array([ch.steps_this_approach for ch in chains])
+    state = load()
+    step = 0
+    while active:
+        rows = np.array(active)
+        q = state["_probe"]
+        p = state["_position"]
+        distance = np.sqrt((p[:, 0] - q[:, 0]) ** 2 + (p[:, 1] - q[:, 1]) ** 2 + (p[:, 2] - q[:, 2]) ** 2)
+        contact = distance < a.contact_m
+        if a.sampling == "distance":
+            due = np.flatnonzero(contact | (next_target[rows] >= distance)).tolist()
+        else:
+            due = list(range(len(active))) if step % a.stride_steps == 0 else np.flatnonzero(contact).tolist()
+        if due:  # a snapshot, a new approach or a chain done: in each chain's own terms
+            store(state)
+            for row in due:
+                c = active[row]
+                chain = chains[c]
+                chain.steps_this_approach = int(steps[c])
+                if a.sampling == "distance":
+                    while len(snapshots[c]) < k and (contact[row] or targets[c][len(snapshots[c])] >= distance[row]):
+                        snapshots[c].append(chain.snap())
+                    next_target[c] = targets[c][len(snapshots[c])] if len(snapshots[c]) < k else inf
+                else:
+                    if step % a.stride_steps == 0:
+                        snapshots[c].append(chain.snap())
+                    if len(snapshots[c]) < k and contact[row]:
+                        chain.new_approach(float(chain.rng.uniform(*a.range_m)))
+                        steps[c] = chain.steps_this_approach
+            active = [c for c in active if len(snapshots[c]) < k]
+            if not active:
+                break
+            rows = np.array(active)
+            state = load()
+        if (steps[rows] >= a.max_steps).any():
+            store(state)
+            for c in active:
+                chains[c].steps_this_approach = int(steps[c])
+                chains[c].step()  # raises for the chain that did not reach contact
+        if used == normals.shape[1]:
+            block = np.zeros((len(chains), GUST_BLOCK, 3))
+            for c in active:
+                block[c] = chains[c]._gusts.standard_normal((GUST_BLOCK, 3))
+            normals, used = block, 0
+        # One step of every active chain: _FastChain.step, element by element.
+        before = state["_position"]
+        n = normals[rows, used]
+        used += 1
+        gust = state["_gust"] * decay + state["_sigma_kick"] * n
+        velocity = state["_velocity"] + dt * (w2 * (gust - before) - damp * state["_velocity"])
+        position = before + dt * velocity
+        r = _rotation_batch(state["_rotvec"])
+        e = before - state["_probe"]
+        ptd = np.stack([r[:, 0] * e[:, 0] + r[:, 3] * e[:, 1] + r[:, 6] * e[:, 2],
+                        r[:, 1] * e[:, 0] + r[:, 4] * e[:, 1] + r[:, 7] * e[:, 2],
+                        r[:, 2] * e[:, 0] + r[:, 5] * e[:, 1] + r[:, 8] * e[:, 2]], axis=1)
+        v = np.minimum(np.maximum(gains * ptd, -limits), limits)
+        closing = np.stack([r[:, 0] * v[:, 0] + r[:, 1] * v[:, 1] + r[:, 2] * v[:, 2],
+                            r[:, 3] * v[:, 0] + r[:, 4] * v[:, 1] + r[:, 5] * v[:, 2],
+                            r[:, 6] * v[:, 0] + r[:, 7] * v[:, 1] + r[:, 8] * v[:, 2]], axis=1)
+        state["_probe"] = state["_probe"] + (position - before) + dt * closing
+        state["_gust"], state["_velocity"], state["_position"] = gust, velocity, position
+        state["_rotvec"] = state["_rotvec"] * attitude_decay
+        state["time_s"] = state["time_s"] + dt
+        steps[rows] += 1
+        step += 1
+    return dict(zip(indices, snapshots, strict=True))
+
+
+def _rotation_batch(rotvec: FloatArray) -> FloatArray:
+    """:func:`_rotation_rows` of each row of ``rotvec`` ``(C, 3)``: ``(C, 9)``, the same
+    arithmetic element by element."""
+    rx, ry, rz = rotvec[:, 0], rotvec[:, 1], rotvec[:, 2]
+    angle = np.sqrt(rx * rx + ry * ry + rz * rz)
+    small = angle < 1e-12
+    safe = np.where(small, 1.0, angle)
+    x, y, z = rx / safe, ry / safe, rz / safe
+    s = np.array([math.sin(v) for v in angle.tolist()])
+    c = np.array([1.0 - math.cos(v) for v in angle.tolist()])
+    full = np.stack([1.0 - c * (y * y + z * z), -s * z + c * x * y, s * y + c * x * z,
+                     s * z + c * x * y, 1.0 - c * (x * x + z * z), -s * x + c * y * z,
+                     -s * y + c * x * z, s * x + c * y * z, 1.0 - c * (x * x + y * y)], axis=1)
+    if small.any():
+        one = np.ones_like(rx)
+        tiny = np.stack([one, -rz, ry, rz, one, -rx, -ry, rx, one], axis=1)
+        full = np.where(small[:, None], tiny, full)
+    return full
+
+
 def trace_approach(config: Config, seed: int, approach_index: int, every: int = 3) -> dict[str, FloatArray]:
     """The first approach of chain ``approach_index`` from start to contact, every ``every``
     steps: ``time_s``, ``distance_m``, ``ptd_receiver_m`` (T, 3) and ``probe_drogue_m``
@@ -538,31 +668,42 @@ class FrameStates:
     """The frame states of one config and root seed, each approach chain simulated once.
 
     Holds the last ``chains`` chains it simulated (frames of one chain are
-    consecutive, so a shard rarely needs more); whoever creates it owns the memory.
-    The states' arrays are read-only. ``FrameStates(config)(i)`` is
+    consecutive, so a shard rarely needs more; :meth:`prefetch` keeps all it is given);
+    whoever creates it owns the memory. A frame's state is made when it is first asked
+    for. The states' arrays are read-only. ``FrameStates(config)(i)`` is
     :func:`frame_state` ``(config, i)``.
     """
 
     def __init__(self, config: Config, seed: int | None = None, *, chains: int = 4) -> None:
         self.config = config
         self.seed = config.dataset.seed if seed is None else seed
-        self._chains: dict[int, tuple[FrameState, ...]] = {}
+        self._chains: dict[int, list[_Snapshot | FrameState]] = {}
         self._keep = max(1, chains)
 
-    def chain(self, approach_index: int) -> tuple[FrameState, ...]:
-        """The states of every frame of approach chain ``approach_index``."""
-        if approach_index not in self._chains:
-            if len(self._chains) >= self._keep:
-                self._chains.pop(next(iter(self._chains)))
-            k = self.config.approach.frames_per_approach
-            snaps = simulate_chain(self.config, self.seed, approach_index)
-            self._chains[approach_index] = tuple(_state(self.config, approach_index * k + j, approach_index, s)
-                                                 for j, s in enumerate(snaps))
-        return self._chains[approach_index]
+    def _add(self, approach_index: int, snapshots: list[_Snapshot]) -> None:
+        while len(self._chains) >= self._keep:
+            self._chains.pop(next(iter(self._chains)))
+        self._chains[approach_index] = list(snapshots)
+
+    def prefetch(self, frame_indices) -> None:
+        """Simulate the chains of ``frame_indices`` that are not held, together
+        (:func:`simulate_chains`), and hold every chain of them."""
+        k = self.config.approach.frames_per_approach
+        wanted = list(dict.fromkeys(int(i) // k for i in frame_indices))
+        self._keep = max(self._keep, len(wanted))
+        missing = [a for a in wanted if a not in self._chains]
+        for a, snapshots in simulate_chains(self.config, self.seed, missing).items():
+            self._add(a, snapshots)
 
     def __call__(self, frame_index: int) -> FrameState:
         k = self.config.approach.frames_per_approach
-        return self.chain(frame_index // k)[frame_index % k]
+        a, j = divmod(frame_index, k)
+        if a not in self._chains:
+            self._add(a, simulate_chain(self.config, self.seed, a))
+        chain = self._chains[a]
+        if isinstance(chain[j], _Snapshot):
+            chain[j] = _state(self.config, frame_index, a, chain[j])
+        return chain[j]
 
 
 def frame_state(config: Config, frame_index: int, seed: int | None = None) -> FrameState:
