@@ -84,6 +84,25 @@ def cloud_opacity(rng: np.random.Generator, coverage: float, opacity: float,
     return (opacity * ramp * ramp * (3.0 - 2.0 * ramp))[..., None].astype(np.float32)
 
 
+@functools.lru_cache(maxsize=8)
+def _wave_spectrum_parts(direction_rad: float, n: int, tile: float) -> tuple[NDArray[np.float64], ...]:
+    """What :func:`_wave_variance` computes on the FFT grid before the wind enters: the
+    angular frequency, Pierson-Moskowitz's ``alpha g^2 omega^-5`` factor, ``2 omega``, the
+    spreading and the wavenumber (the same operations, in the same order, done once)."""
+    g = GRAVITY_MPS2
+    kx, ky = _wavenumbers(n, tile)
+    k = np.hypot(kx, ky)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        omega = np.sqrt(g * k)
+        alpha = 8.1e-3 * g**2 * omega**-5.0
+        cos = (kx * math.cos(direction_rad) + ky * math.sin(direction_rad)) / k
+        spread = np.where(cos > 0.0, 2.0 / np.pi * cos**2, 0.0)
+    parts = (omega, alpha, 2.0 * omega, spread, k)
+    for part in parts:
+        part.setflags(write=False)
+    return parts
+
+
 @functools.lru_cache(maxsize=64)
 def _wave_variance(wind_mps: float, direction_rad: float, n: int, tile: float) -> NDArray[np.float64]:
     """Per-bin height variance (m^2) of a directional Pierson-Moskowitz sea on the FFT grid.
@@ -92,16 +111,12 @@ def _wave_variance(wind_mps: float, direction_rad: float, n: int, tile: float) -
     deep water omega^2 = g k; spreading 2/pi cos^2 of the angle to the wind (waves running
     with it); the variance of a bin is F(kx, ky) dkx dky with F = S(omega) (d omega / dk) D / k."""
     g = GRAVITY_MPS2
-    kx, ky = _wavenumbers(n, tile)
-    k = np.hypot(kx, ky)
+    omega, alpha, two_omega, spread, k = _wave_spectrum_parts(direction_rad, n, tile)
     dk = 2.0 * np.pi / tile
     with np.errstate(divide="ignore", invalid="ignore"):
-        omega = np.sqrt(g * k)
         omega0 = g / max(wind_mps, 0.5)
-        s = 8.1e-3 * g**2 * omega**-5.0 * np.exp(-0.74 * (omega0 / omega) ** 4)
-        s_k = s * g / (2.0 * omega)
-        cos = (kx * math.cos(direction_rad) + ky * math.sin(direction_rad)) / k
-        spread = np.where(cos > 0.0, 2.0 / np.pi * cos**2, 0.0)
+        s = alpha * np.exp(-0.74 * (omega0 / omega) ** 4)
+        s_k = s * g / two_omega
         variance = np.nan_to_num(s_k * spread / k) * dk * dk
     variance[0, 0] = 0.0
     return variance
@@ -112,8 +127,13 @@ def wave_slope_variance(wind_mps: float, n: int = WAVE_TEXELS, tile: float = WAV
     """Expected mean square slope (both axes) of :func:`wave_field` at ``wind_mps``: the
     part of Cox and Munk's slope variance that the normal map resolves."""
     variance = _wave_variance(float(wind_mps), 0.0, n, tile)
+    return float(np.sum(_wavenumber_squared(n, tile) * variance))
+
+
+@functools.lru_cache(maxsize=4)
+def _wavenumber_squared(n: int, tile: float) -> NDArray[np.float64]:
     kx, ky = _wavenumbers(n, tile)
-    return float(np.sum((kx**2 + ky**2) * variance))
+    return kx**2 + ky**2
 
 
 def wave_field(rng: np.random.Generator, wind_mps: float, direction_deg: float,

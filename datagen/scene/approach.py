@@ -349,7 +349,7 @@ class _FastChain(_Chain):
     of :data:`GUST_BLOCK` from a stream of their own (:func:`gust_rng`), and each step in
     plain floats instead of 3-vectors (numpy's per-call cost dominated model 1)."""
 
-    def __init__(self, config: Config, rng: np.random.Generator, gusts: np.random.Generator):
+    def __init__(self, config: Config, rng: np.random.Generator, gusts: np.random.Generator, *, warm: bool = True):
         self._gusts = gusts
         self._normals: list[list[float]] = []
         super().__init__(config, rng)
@@ -360,7 +360,7 @@ class _FastChain(_Chain):
         self._velocity = [float(v) for v in t.velocity]
         self._gains = [float(v) for v in self.gains]
         self._limits = [float(v) for v in self.limits]
-        for _ in range(t.warmup_steps):
+        for _ in range(t.warmup_steps if warm else 0):  # else the caller warms it up (simulate_chains)
             self._gust_step()
 
     def _gust_step(self) -> None:
@@ -429,18 +429,23 @@ def _start_chain(config: Config, seed: int, approach_index: int) -> tuple[_Chain
     """Chain ``approach_index`` with its first approach begun, and for 'distance' sampling
     its distance targets (far to near). The one place that fixes the order of the chain's
     first draws, so that a traced approach is the one its frames come from."""
-    a = config.approach
+    rng = approach_rng(seed, approach_index)
+    chain = _Chain(config, rng) if config.approach.model == 1 else _FastChain(config, rng, gust_rng(seed, approach_index))
+    return chain, _begin_chain(chain)
+
+
+def _begin_chain(chain: _Chain) -> FloatArray | None:
+    """Begin a new chain's first approach (:func:`_start_chain`); its distance targets or None."""
+    a = chain.config.approach
     k = a.frames_per_approach
     lo, hi = a.range_m
-    rng = approach_rng(seed, approach_index)
-    chain = _Chain(config, rng) if a.model == 1 else _FastChain(config, rng, gust_rng(seed, approach_index))
     if a.sampling == "distance":
         # One frame per distance stratum, visited from far to near, on one approach.
         targets = np.sort(lo + (np.arange(k) + chain.rng.random(k)) * (hi - lo) / k)[::-1]
         chain.new_approach(hi)
-        return chain, targets
+        return targets
     chain.new_approach(float(chain.rng.uniform(lo, hi)))
-    return chain, None
+    return None
 
 
 def simulate_chain(config: Config, seed: int, approach_index: int) -> list[_Snapshot]:
@@ -482,16 +487,43 @@ def simulate_chains(config: Config, seed: int, approach_indices) -> dict[int, li
     if a.model == 1 or len(indices) < 2:
         return {i: simulate_chain(config, seed, i) for i in indices}
     k = a.frames_per_approach
-    started = [_start_chain(config, seed, i) for i in indices]
-    chains: list[_FastChain] = [c for c, _ in started]
-    targets = [t for _, t in started]
+    chains = [_FastChain(config, approach_rng(seed, i), gust_rng(seed, i), warm=False) for i in indices]
     snapshots: list[list[_Snapshot]] = [[] for _ in indices]
     first = chains[0]
     t = first.turbulence
     dt, decay, w2, damp = first.dt, t.decay, t.omega * t.omega, 2.0 * t.zeta * t.omega
     attitude_decay = first.attitude_decay
     gains, limits = np.array(first._gains), np.array(first._limits)
+    # Each chain's gusts, a block at a time, as _FastChain._normal draws them.
+    normals = np.array([ch._gusts.standard_normal((GUST_BLOCK, 3)) for ch in chains])
+    used = 0
+
+    def gusts(state: dict[str, FloatArray], rows: NDArray[np.int64]) -> FloatArray:
+        """One step of the turbulence of ``rows``' chains (_FastChain._gust_step); the
+        drogue positions before it."""
+        nonlocal normals, used
+        if used == normals.shape[1]:
+            block = np.zeros((len(chains), GUST_BLOCK, 3))
+            for c in rows.tolist():
+                block[c] = chains[c]._gusts.standard_normal((GUST_BLOCK, 3))
+            normals, used = block, 0
+        before = state["_position"]
+        gust = state["_gust"] * decay + state["_sigma_kick"] * normals[rows, used]
+        used += 1
+        velocity = state["_velocity"] + dt * (w2 * (gust - before) - damp * state["_velocity"])
+        state["_gust"], state["_velocity"], state["_position"] = gust, velocity, before + dt * velocity
+        return before
+
+    # The warm-up of every chain together, then each chain's first approach in its own terms.
     active = list(range(len(chains)))
+    warm = {name: np.array([getattr(ch, name) for ch in chains]) for name in ("_gust", "_position", "_velocity",
+                                                                            "_sigma_kick")}
+    for _ in range(t.warmup_steps):
+        gusts(warm, np.array(active))
+    for row, ch in enumerate(chains):
+        ch._gust, ch._position, ch._velocity = (warm[name][row].tolist() for name in ("_gust", "_position",
+                                                                                     "_velocity"))
+    targets = [_begin_chain(ch) for ch in chains]
 
     def load() -> dict[str, FloatArray]:
         rows = [chains[c] for c in active]
@@ -499,17 +531,15 @@ def simulate_chains(config: Config, seed: int, approach_indices) -> dict[int, li
                 for name in ("_gust", "_position", "_velocity", "_probe", "_rotvec", "_sigma_kick")} | {
             "time_s": np.array([ch.time_s for ch in rows])}
 
-    def store(state: dict[str, FloatArray]) -> None:
-        for row, c in enumerate(active):
-            ch = chains[c]
+    def store(state: dict[str, FloatArray], rows) -> None:
+        """The state of ``rows`` (of ``active``) into their chains, which snap and begin approaches."""
+        for row in rows:
+            ch = chains[active[row]]
             for name in ("_gust", "_position", "_velocity", "_probe", "_rotvec"):
                 setattr(ch, name, state[name][row].tolist())
             ch.time_s = float(state["time_s"][row])
+            ch.steps_this_approach = int(steps[active[row]])
 
-    # Each chain's gusts: the rest of the block its warm-up began (every chain has drawn
-    # as many), then a block per chain whenever they run out, as _FastChain._normal does.
-    normals = np.array([ch._normals[::-1] for ch in chains]).reshape(len(chains), -1, 3)
-    used = 0
     inf = math.inf
     next_target = np.array([tg[0] if tg is not None else inf for tg in targets])
     steps = np.array([ch.steps_this_approach for ch in chains])
@@ -526,11 +556,10 @@ def simulate_chains(config: Config, seed: int, approach_indices) -> dict[int, li
         else:
             due = list(range(len(active))) if step % a.stride_steps == 0 else np.flatnonzero(contact).tolist()
         if due:  # a snapshot, a new approach or a chain done: in each chain's own terms
-            store(state)
+            store(state, due)
             for row in due:
                 c = active[row]
                 chain = chains[c]
-                chain.steps_this_approach = int(steps[c])
                 if a.sampling == "distance":
                     while len(snapshots[c]) < k and (contact[row] or targets[c][len(snapshots[c])] >= distance[row]):
                         snapshots[c].append(chain.snap())
@@ -541,28 +570,21 @@ def simulate_chains(config: Config, seed: int, approach_indices) -> dict[int, li
                     if len(snapshots[c]) < k and contact[row]:
                         chain.new_approach(float(chain.rng.uniform(*a.range_m)))
                         steps[c] = chain.steps_this_approach
-            active = [c for c in active if len(snapshots[c]) < k]
-            if not active:
+                        state["_probe"][row], state["_rotvec"][row] = chain._probe, chain._rotvec
+            keep = [row for row, c in enumerate(active) if len(snapshots[c]) < k]
+            if not keep:
                 break
-            rows = np.array(active)
-            state = load()
+            if len(keep) < len(active):
+                state = {name: values[keep] for name, values in state.items()}
+                active = [active[row] for row in keep]
+                rows = np.array(active)
         if (steps[rows] >= a.max_steps).any():
-            store(state)
+            store(state, range(len(active)))
             for c in active:
-                chains[c].steps_this_approach = int(steps[c])
                 chains[c].step()  # raises for the chain that did not reach contact
-        if used == normals.shape[1]:
-            block = np.zeros((len(chains), GUST_BLOCK, 3))
-            for c in active:
-                block[c] = chains[c]._gusts.standard_normal((GUST_BLOCK, 3))
-            normals, used = block, 0
         # One step of every active chain: _FastChain.step, element by element.
-        before = state["_position"]
-        n = normals[rows, used]
-        used += 1
-        gust = state["_gust"] * decay + state["_sigma_kick"] * n
-        velocity = state["_velocity"] + dt * (w2 * (gust - before) - damp * state["_velocity"])
-        position = before + dt * velocity
+        before = gusts(state, rows)
+        position = state["_position"]
         r = _rotation_batch(state["_rotvec"])
         e = before - state["_probe"]
         ptd = np.stack([r[:, 0] * e[:, 0] + r[:, 3] * e[:, 1] + r[:, 6] * e[:, 2],
@@ -573,7 +595,6 @@ def simulate_chains(config: Config, seed: int, approach_indices) -> dict[int, li
                             r[:, 3] * v[:, 0] + r[:, 4] * v[:, 1] + r[:, 5] * v[:, 2],
                             r[:, 6] * v[:, 0] + r[:, 7] * v[:, 1] + r[:, 8] * v[:, 2]], axis=1)
         state["_probe"] = state["_probe"] + (position - before) + dt * closing
-        state["_gust"], state["_velocity"], state["_position"] = gust, velocity, position
         state["_rotvec"] = state["_rotvec"] * attitude_decay
         state["time_s"] = state["time_s"] + dt
         steps[rows] += 1
