@@ -518,7 +518,7 @@ def _learnable_part(view: DatasetView, lines: NDArray[np.float64]) -> dict[str, 
     b, cls = lines[:, 0].astype(np.int64), lines[:, 1].astype(np.int64)
     cx, cy, bw, bh = lines[:, 2] * k.width, lines[:, 3] * k.height, lines[:, 4] * k.width, lines[:, 5] * k.height
     xyxy = np.stack([cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2], axis=-1)
-    return {"cls": cls, "distance": view.distance_m[b], "survives": train.survives(xyxy),
+    return {"cls": cls.astype(np.int16), "distance": view.distance_m[b], "survives": train.survives(xyxy),
             "anchored": train.has_anchor(xyxy), "train_w": np.minimum(bw * train.scale[0], bh * train.scale[1])}
 
 
@@ -531,7 +531,7 @@ def _check_learnable(meta: DatasetMeta, parts: list[dict[str, NDArray]], top: fl
     check = Check("learnable", f"at least {100 * min_share:g}% of label lines survive Ultralytics' training "
                   f"transforms at imgsz {rules.train_imgsz} (both sides above 2 px) and hold an anchor centre "
                   "(strides 8/16/32)", min_pass_share=min_share)
-    cls, distance, survives, anchored, train_w = (np.concatenate([p[key] for p in parts]) for key in
+    cls, distance, survives, anchored, train_w = (np.concatenate([p.pop(key) for p in parts]) for key in
                                                   ("cls", "distance", "survives", "anchored", "train_w"))
     ok = survives & anchored
     check.checked = int(ok.size)
@@ -912,7 +912,7 @@ def _statistics_part(view: DatasetView, labels: FrameLabels, rank: NDArray[np.in
     cv = cv[np.isfinite(cv)]
     return {
         "drift": drift[inside], "distance": view.distance_m[rows], "obliqueness": oblique[inside],
-        "class": cls.astype(np.int32), "rank": rank[rows],
+        "class": cls.astype(np.int16), "rank": rank[rows].astype(np.int32),
         "exclusions": np.bincount(labels.exclusion.ravel().astype(np.int64), minlength=max(Exclusion) + 1),
         "labeled_per_class": labels.labeled.sum(axis=0),
         "labeled_per_object": np.stack([labels.labeled[:, features.object_index == j].sum(axis=1)
@@ -927,10 +927,10 @@ def _statistics_part(view: DatasetView, labels: FrameLabels, rank: NDArray[np.in
 def _statistics(meta: DatasetMeta, parts: list[dict]) -> dict:
     """The statistics of the merged :func:`_statistics_part` of every shard."""
     features = meta.features
-    order = np.argsort(np.concatenate([p["rank"] for p in parts]), kind="stable")
+    order = np.argsort(np.concatenate([p.pop("rank") for p in parts]), kind="stable")
 
-    def merged(key: str) -> NDArray:
-        return np.concatenate([p[key] for p in parts])[order]
+    def merged(key: str) -> NDArray:  # the parts' values in frame order (theirs dropped as they merge)
+        return np.concatenate([p.pop(key) for p in parts])[order]
 
     d, dist, obl = merged("drift"), merged("distance"), merged("obliqueness")
     size = np.array(features.size, dtype=object)[merged("class")] if d.size else np.zeros(0, dtype=object)
