@@ -58,7 +58,8 @@ def damaged(built, tmp_path_factory) -> Path:
             tokens[1] = f"{float(tokens[1]) + 0.01:.6f}"  # off the manifest box and the true centre
             lines[0] = " ".join(tokens)
         elif kind == 3:
-            lines += ["3 abc 0.5 0.1 0.1", "0 0.5 0.5 0.1", "77 0.5 0.5 0.1 0.1", "1 nan 0.5 0.1 0.1"]
+            lines += ["3 abc 0.5 0.1 0.1", "0 0.5 0.5 0.1", "77 0.5 0.5 0.1 0.1", "1 nan 0.5 0.1 0.1",
+                      "0 0.5-0.1 0.5 0.1 0.2"]
         elif kind == 4 and lines:
             tokens = lines[-1].split()
             tokens[3] = "1.5"  # outside [0, 1]
@@ -114,14 +115,14 @@ def test_streaming_evaluate_gives_the_loaded_views_results_for_any_worker_count(
     runs = [Run(0.0, 0), Run(1.0, 1)]
     whole = evaluate_runs(load_dataset(built), runs, split=split)
     source = open_dataset(built)
-    for workers in (1, workers):
-        streamed = evaluate_runs(source, runs, split=split, workers=workers)
+    for count in (1, workers):
+        streamed = evaluate_runs(source, runs, split=split, workers=count)
         for a, b in zip(whole, streamed, strict=True):
             assert set(a) == set(b)
             for key in a:
                 if key != "solve_s":
                     assert np.array_equal(a[key], b[key], equal_nan=True) if isinstance(a[key], np.ndarray) \
-                        else a[key] == b[key], (workers, key)
+                        else a[key] == b[key], (count, key)
     assert len(whole[0]["frame_id"]) == (600 if split is None else load_dataset(built).split.count("val"))
     assert np.all(np.diff(whole[0]["frame_id"]) > 0)
 
@@ -153,3 +154,19 @@ def _report_file(folder: Path) -> dict:
     for key in ("dataset", "files"):
         doc.pop(key)
     return doc
+
+
+@pytest.mark.parametrize("lines", [
+    ["0 0.5 0.5 0.1 0.2", "3 0.25 0.75 0.01 0.02"],
+    ["0 0.5-0.1 0.5 0.1 0.2"], ["0 0.51.2 0.5 0.1 0.2"], ["1 1e400 0.5 0.1 0.2"], ["1.5 0.5 0.5 0.1 0.2"],
+    ["7 0.5 0.5 0.1 0.2"], ["0 0.5 0.5 0.1"], ["-0 -0.5 0.5 0.1 0.2"], ["0 1_0 0.5 0.1 0.2"], ["0\t0.5  0.5 0.1 0.2 "],
+])
+def test_bulk_label_parsing_gives_what_parse_line_gives_line_by_line(lines) -> None:
+    from datagen.analysis.audit import _parse_lines
+    from datagen.dataset.yolo import parse_line
+
+    values, problems = _parse_lines(lines, 5, 5)
+    for line, row, problem in zip(lines, values, problems, strict=True):
+        expected, why = parse_line(line, 5)
+        assert problem == why
+        assert (np.isnan(row).all() if expected is None else row.tolist() == expected)

@@ -32,6 +32,8 @@ from datagen.dataset.layout import MANIFEST_NAME
 from datagen.dataset.reader import DatasetIndex, DatasetMeta, DatasetSource, DatasetView, image_size
 from datagen.dataset.yolo import YOLO_DECIMALS, parse_line
 from datagen.files import is_temporary
+from datagen.pipeline.executors import map_in_order
+from datagen.pipeline.progress import NullProgress
 
 __all__ = [
     "DRIFT_LIMIT_PX",
@@ -254,24 +256,13 @@ def _audit_shard(source: DatasetSource, name: str, rank: NDArray[np.int64]) -> _
 
 
 def _parts(source: DatasetSource, index: DatasetIndex, workers: int, progress) -> Iterator[_Part]:
-    """The audit of each shard, in manifest order: in this process, or in ``workers``
-    spawned processes (each reads and checks whole shards; only the compact results come back)."""
+    """The audit of each shard, in manifest order, in ``workers`` processes (each reads and
+    checks whole shards; only the compact results come back)."""
     names = list(source.manifests)
-    if workers <= 1 or len(names) <= 1:
-        for name in names:
-            part = _audit_shard(source, name, index.rank[name])
-            progress.advance(len(index.rank[name]))
-            yield part
-        return
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
-
-    with ProcessPoolExecutor(min(workers, len(names)), mp_context=mp.get_context("spawn")) as pool:
-        futures = [pool.submit(_audit_shard, source, name, index.rank[name]) for name in names]
-        for name, future in zip(names, futures, strict=True):
-            part = future.result()
-            progress.advance(len(index.rank[name]))
-            yield part
+    tasks = [(source, name, index.rank[name]) for name in names]
+    for name, part in zip(names, map_in_order(_audit_shard, tasks, workers), strict=True):
+        progress.advance(len(index.rank[name]))
+        yield part
 
 
 def audit(dataset: DatasetView | DatasetSource, *, min_learnable: float = MIN_LEARNABLE_SHARE, workers: int = 1,
@@ -286,7 +277,7 @@ def audit(dataset: DatasetView | DatasetSource, *, min_learnable: float = MIN_LE
     ``progress``: an object with ``start(total, done)``, ``advance(n)`` and ``close()``
     (:class:`datagen.pipeline.progress.BuildProgress`). ``index``: the source's, where the
     caller has read it."""
-    progress = progress or _NoProgress()
+    progress = progress or NullProgress()
     if isinstance(dataset, DatasetView):
         index = dataset
         progress.start(len(dataset), 0)
@@ -324,17 +315,6 @@ def audit(dataset: DatasetView | DatasetSource, *, min_learnable: float = MIN_LE
                        [c.finish() for c in checks], stats)
 
 
-class _NoProgress:
-    def start(self, total: int, done: int) -> None:
-        pass
-
-    def advance(self, n: int) -> None:
-        pass
-
-    def close(self) -> None:
-        pass
-
-
 #: Exclusion code -> the reason a manifest records (None: labeled).
 _REASONS: Final = np.array([None if e is Exclusion.NONE else Exclusion(e).reason for e in range(max(Exclusion) + 1)],
                            dtype=object)
@@ -370,8 +350,8 @@ def _check_manifest(view: DatasetView, labels: FrameLabels) -> Check:
     return check
 
 
-#: A plain decimal number; a label file of these alone is parsed in bulk (:func:`_parse_file`).
-_PLAIN_FILE: Final = re.compile(r"[ \t]*(?:-?[0-9]+(?:\.[0-9]+)?[ \t]*)*(?:\r?\n[ \t]*(?:-?[0-9]+(?:\.[0-9]+)?[ \t]*)*)*\r?\n?")
+#: A line of plain decimals separated by blanks: such lines are parsed in bulk (:func:`_parse_lines`).
+_PLAIN_LINE: Final = re.compile(r"[ \t]*-?[0-9]+(?:\.[0-9]+)?(?:[ \t]+-?[0-9]+(?:\.[0-9]+)?)*[ \t]*")
 
 
 def _parse_lines(rows: list[str], nc: int, columns: int) -> tuple[NDArray[np.float64], list[str | None]]:
@@ -379,7 +359,7 @@ def _parse_lines(rows: list[str], nc: int, columns: int) -> tuple[NDArray[np.flo
     :func:`datagen.dataset.yolo.parse_line` gives, in bulk where every token is a plain
     decimal and every line has ``columns`` of them (a line with a problem has NaN values)."""
     tokens = [line.split() for line in rows]
-    if all(len(t) == columns for t in tokens) and all(_PLAIN_FILE.fullmatch(line) for line in rows):
+    if all(len(t) == columns for t in tokens) and all(_PLAIN_LINE.fullmatch(line) for line in rows):
         values = np.array(tokens, dtype=np.float64).reshape(len(rows), columns)
         cls = values[:, 0]
         ok = np.isfinite(values).all(axis=1) & (cls == np.floor(cls)) & (cls >= 0) & (cls < nc)
@@ -449,7 +429,7 @@ def _check_label_files(view: DatasetView, labels: FrameLabels) -> tuple[list[Che
                    seq=seq(i, 1))
     # Duplicate rows (same tokens) and second lines of a class, per file: flagged on the second occurrence.
     for b_file, (rel, start, count) in files.items():
-        mine = idx[(idx >= start) & (idx < start + count)]
+        mine = idx[np.searchsorted(idx, start):np.searchsorted(idx, start + count)]  # the file's well-formed lines
         keys = [tuple(texts[i].split()) for i in mine]
         classes = values[mine, 0].astype(np.int64)
         if len(set(keys)) < len(keys):

@@ -37,6 +37,8 @@ from datagen.core.keypoints import PoseLayout
 from datagen.core.transforms import invert_rigid
 from datagen.dataset.reader import DatasetIndex, DatasetMeta, DatasetSource, DatasetView
 from datagen.dataset.yolo import parse_line
+from datagen.pipeline.executors import map_in_order
+from datagen.pipeline.progress import NullProgress
 
 __all__ = [
     "PnPSettings",
@@ -443,26 +445,14 @@ def evaluate_runs(dataset: DatasetView | DatasetSource, runs: list[Run], *, seed
     rows = index if index is not None else dataset
     attempted = np.flatnonzero(np.array([split is None or s == split for s in rows.split], dtype=bool))
     blocks = _blocks(rows, attempted, 4 * workers if workers > 1 else 1)
-    if progress is not None:
-        progress.start(len(attempted), 0)
+    progress = progress or NullProgress()
+    progress.start(len(attempted), 0)
     parts: list[list[dict[str, NDArray]]] = []
-    if workers <= 1 or len(blocks) <= 1:
-        for block in blocks:
-            parts.append(_evaluate_block(dataset, block, index, runs, seed, settings))
-            if progress is not None:
-                progress.advance(len(block))
-    else:
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
-            futures = [pool.submit(_evaluate_block, dataset, block, index, runs, seed, settings) for block in blocks]
-            for block, future in zip(blocks, futures, strict=True):
-                parts.append(future.result())
-                if progress is not None:
-                    progress.advance(len(block))
-    if progress is not None:
-        progress.close()
+    tasks = [(dataset, block, index, runs, seed, settings) for block in blocks]
+    for block, part in zip(blocks, map_in_order(_evaluate_block, tasks, workers), strict=True):
+        parts.append(part)
+        progress.advance(len(block))
+    progress.close()
     results = []
     for r, run in enumerate(runs):
         out = {c: np.concatenate([p[r][c] for p in parts]) for c in _COLUMNS}

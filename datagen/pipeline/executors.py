@@ -15,7 +15,7 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Literal
 
@@ -25,7 +25,7 @@ from datagen.pipeline.progress import ShardSummary
 from datagen.pipeline.writer import ShardWriter
 from datagen.scene.resolved import Scene
 
-__all__ = ["Executor", "cpu_count", "ctrl_c_flag", "ray_cluster", "run_local", "run_ray"]
+__all__ = ["Executor", "cpu_count", "ctrl_c_flag", "map_in_order", "ray_cluster", "run_local", "run_ray"]
 
 Executor = Literal["local", "ray"]
 Progress = Callable[[int], None]
@@ -80,6 +80,23 @@ def _bootstrap(scene: Scene, root: str, threads: int, render: bool, queue) -> No
 def _pool_run(job: ShardJob) -> ShardSummary:
     queue = _Worker.queue
     return _writer(*_Worker.args).run(job, lambda n: queue.put(n))
+
+
+def map_in_order(fn: Callable, tasks: list[tuple], workers: int) -> Iterator:
+    """``fn(*task)`` of each task, yielded in task order: in this process, or in ``workers``
+    spawned processes (for the reading commands: each task reads what it needs itself and
+    returns a compact result)."""
+    if workers <= 1 or len(tasks) <= 1:
+        for task in tasks:
+            yield fn(*task)
+        return
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(min(workers, len(tasks)), mp_context=mp.get_context("spawn")) as pool:
+        futures = [pool.submit(fn, *task) for task in tasks]
+        for future in futures:
+            yield future.result()
 
 
 @contextlib.contextmanager

@@ -12,7 +12,7 @@ from pathlib import Path
 from datagen.core.labels import Exclusion
 from datagen.dataset.layout import ShardJob
 
-__all__ = ["BuildProgress", "BuildReport", "ShardSummary"]
+__all__ = ["BuildProgress", "BuildReport", "NullProgress", "ShardSummary"]
 
 @dataclass
 class ShardSummary:
@@ -180,3 +180,16 @@ class BuildProgress:
         if self._bar is not None:
             self._bar.stop()
             self._bar = None
+
+
+class NullProgress:
+    """:class:`BuildProgress`'s interface, showing nothing (a caller that passed none)."""
+
+    def start(self, total: int, done: int) -> None:
+        pass
+
+    def advance(self, n: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
