@@ -149,3 +149,24 @@ def test_pnp_through_the_recorded_lens_recovers_the_true_vector(distorted: Path)
     ok = result["success"]
     assert ok.mean() > 0.8
     assert result["error_m"][ok].max() < 1e-3
+
+
+@pytest.mark.parametrize("seed", [0, 55, 2**31 - 1])
+def test_the_materials_drawn_in_one_call_equal_each_drawn_from_the_generator(seed: int, monkeypatch) -> None:
+    """draw_look takes the materials' uniforms in one call (look._Uniforms); each must be
+    the value the generator's own ``uniform(lo, hi)`` returns, so that the looks of every
+    dataset built before stay the same bit for bit."""
+    from datagen.core.conventions import frame_rng
+    from datagen.scene import look as look_module
+
+    config = load_config("wingcam55")
+    batched = [look_module.draw_look(config, frame_rng(seed, i)) for i in range(40)]
+
+    class OneByOne:  # every draw straight from the generator, as before the batching
+        def __init__(self, rng, n):
+            self.uniform = rng.uniform
+
+    monkeypatch.setattr(look_module, "_Uniforms", OneByOne)
+    one_by_one = [look_module.draw_look(config, frame_rng(seed, i)) for i in range(40)]
+    assert batched == one_by_one
+    assert len({lk.materials["receiver"]["paint"].base_color for lk in batched}) == 40  # the draws do vary

@@ -92,16 +92,17 @@ def solve_pose(points_model: NDArray, uv_px: NDArray, k: Intrinsics, settings: P
     n = len(points_model)
     if n < settings.min_matches:
         return None
+    camera = k.K
     obj = np.ascontiguousarray(points_model, dtype=np.float64).reshape(-1, 1, 3)
     img = np.ascontiguousarray(uv_px, dtype=np.float64).reshape(-1, 1, 2)
     if n < 4:
-        ok, rvec, tvec = cv2.solvePnP(obj, img, k.K, distortion, flags=cv2.SOLVEPNP_SQPNP)
+        ok, rvec, tvec = cv2.solvePnP(obj, img, camera, distortion, flags=cv2.SOLVEPNP_SQPNP)
         return (rvec.ravel(), tvec.ravel()) if ok else None
     use_guess = guess is not None
     rvec0 = np.array(guess[0], dtype=np.float64).reshape(3, 1) if use_guess else None
     tvec0 = np.array(guess[1], dtype=np.float64).reshape(3, 1) if use_guess else None
     ok, rvec, tvec, inliers = cv2.solvePnPRansac(
-        obj, img, k.K, distortion, rvec=rvec0, tvec=tvec0, useExtrinsicGuess=use_guess,
+        obj, img, camera, distortion, rvec=rvec0, tvec=tvec0, useExtrinsicGuess=use_guess,
         iterationsCount=settings.iterations, reprojectionError=settings.reprojection_px,
         confidence=settings.confidence, flags=cv2.SOLVEPNP_ITERATIVE)
     if not ok or inliers is None or len(inliers) < settings.min_matches:
@@ -111,19 +112,22 @@ def solve_pose(points_model: NDArray, uv_px: NDArray, k: Intrinsics, settings: P
     # noise-free points); the iterative refinement then stays in that minimum. SQPnP
     # on the inliers finds the global minimum: keep whichever reprojects better.
     obj_in, img_in = obj[inliers.ravel()], img[inliers.ravel()]
-    ok_sq, rvec_sq, tvec_sq = cv2.solvePnP(obj_in, img_in, k.K, distortion, flags=cv2.SOLVEPNP_SQPNP)
-    if ok_sq and _reprojection_rms(obj_in, img_in, rvec_sq, tvec_sq, k, distortion) < _reprojection_rms(
-            obj_in, img_in, rvec, tvec, k, distortion):
+    ok_sq, rvec_sq, tvec_sq = cv2.solvePnP(obj_in, img_in, camera, distortion, flags=cv2.SOLVEPNP_SQPNP)
+    if ok_sq and _reprojection_rms(obj_in, img_in, rvec_sq, tvec_sq, camera, distortion) < _reprojection_rms(
+            obj_in, img_in, rvec, tvec, camera, distortion):
         rvec, tvec = rvec_sq, tvec_sq
     return rvec.ravel(), tvec.ravel()
 
 
-def _reprojection_rms(obj: NDArray, img: NDArray, rvec: NDArray, tvec: NDArray, k: Intrinsics,
+def _reprojection_rms(obj: NDArray, img: NDArray, rvec: NDArray, tvec: NDArray, camera: NDArray,
                       distortion: NDArray | None = None) -> float:
+    """RMS pixel distance of ``obj`` projected through ``camera`` (3x3) from ``img``."""
     import cv2
 
-    projected, _ = cv2.projectPoints(obj, rvec, tvec, k.K, distortion)
-    return float(np.sqrt(np.mean(np.sum((projected - img) ** 2, axis=-1))))
+    projected, _ = cv2.projectPoints(obj, rvec, tvec, camera, distortion)
+    d = projected - img
+    squared = np.add.reduce(d * d, axis=-1)  # the mean of the squared distances, as np.mean sums it
+    return math.sqrt(float(np.add.reduce(squared, axis=None)) / squared.size)
 
 
 def ptd_from_poses(receiver: tuple[NDArray, NDArray], target: tuple[NDArray, NDArray]) -> NDArray[np.float64]:

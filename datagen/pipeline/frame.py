@@ -13,6 +13,7 @@ Everything a frame is depends on (scene, frame index) alone.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,7 +25,7 @@ from datagen.scene.approach import FrameState, FrameStates
 from datagen.scene.look import FrameLook, frame_look
 from datagen.scene.resolved import Scene
 
-__all__ = ["FrameDraws", "draw_frame", "frame_labels", "object_labels", "training_image"]
+__all__ = ["FrameDraws", "draw_frame", "frame_labels", "object_labels", "shard_labels", "training_image"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -46,27 +47,40 @@ def draw_frame(scene: Scene, states: FrameStates, i: int) -> FrameDraws:
     return FrameDraws(i, seed, render_seed(seed, i), state, frame_look(scene.config, state))
 
 
-def _camera(scene: Scene, draws: FrameDraws) -> tuple[np.ndarray, np.ndarray | None]:
-    """``(O, 4, 4)`` camera-from-object transforms (``features.objects`` order) and the lens."""
-    state, look = draws.state, draws.look
-    cam_from_objects = np.stack([state.cam_from_world @ state.world_from(o) for o in scene.features.objects])
-    return cam_from_objects, None if look.sensor_distortion is None else np.asarray(look.sensor_distortion)
+def _cameras(scene: Scene, draws: Sequence[FrameDraws]) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(N, O, 4, 4)`` camera-from-object transforms of frames ``draws`` (``features.objects``
+    order) and their lenses ``(N, 5)`` (None when no frame has one)."""
+    cam_from_objects = np.stack([np.stack([d.state.cam_from_world @ d.state.world_from(o)
+                                           for o in scene.features.objects]) for d in draws])
+    lenses = [d.look.sensor_distortion for d in draws]
+    if all(lens is None for lens in lenses):
+        return cam_from_objects, None
+    return cam_from_objects, np.array([(0.0,) * 5 if lens is None else lens for lens in lenses], dtype=np.float64)
+
+
+def shard_labels(scene: Scene, draws: Sequence[FrameDraws]) -> tuple[FrameLabels, FrameLabels]:
+    """The feature labels (before the occlusion rule) and the objects' pose boxes of frames
+    ``draws``, batched over the frames (``.frame(b)`` is frame ``b``'s; the same numbers as
+    one frame at a time: the label arithmetic is element by element). Each frame is seen
+    through its look's lens distortion where it has one."""
+    cam_from_objects, distortion = _cameras(scene, draws)
+    labels = compute_labels(scene.features, cam_from_objects, scene.intrinsics, **scene.label_options,
+                            distortion=distortion)
+    objects = object_boxes(scene.object_table, cam_from_objects, scene.intrinsics, options=scene.label_options,
+                           distortion=distortion, truncated=scene.config.labels.truncated_objects)
+    return labels, objects
 
 
 def frame_labels(scene: Scene, draws: FrameDraws) -> FrameLabels:
     """Every feature's labels in a frame's camera (before the occlusion rule), through the
     frame's lens distortion when its look has one."""
-    cam_from_objects, distortion = _camera(scene, draws)
-    return compute_labels(scene.features, cam_from_objects, scene.intrinsics, **scene.label_options,
-                          distortion=distortion)
+    return shard_labels(scene, [draws])[0].frame(0)
 
 
 def object_labels(scene: Scene, draws: FrameDraws) -> FrameLabels:
     """Every labeled object's pose box in a frame's camera (:mod:`datagen.core.keypoints`):
     the box of its projected convex hull under the feature boxes' size and edge rules."""
-    cam_from_objects, distortion = _camera(scene, draws)
-    return object_boxes(scene.object_table, cam_from_objects, scene.intrinsics, options=scene.label_options,
-                        distortion=distortion, truncated=scene.config.labels.truncated_objects)
+    return shard_labels(scene, [draws])[1].frame(0)
 
 
 def training_image(result, look: FrameLook) -> tuple[np.ndarray, dict]:

@@ -20,11 +20,12 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 from datagen.core.keypoints import pose_rows
+from datagen.core.labels import FrameLabels
 from datagen.dataset.layout import Layout, ShardJob
 from datagen.dataset.schema import feature_records, manifest_row, object_records, write_manifest
 from datagen.dataset.yolo import pose_lines, yolo_lines
 from datagen.files import write_exr, write_image, write_text
-from datagen.pipeline.frame import FrameDraws, draw_frame, frame_labels, object_labels, training_image
+from datagen.pipeline.frame import FrameDraws, draw_frame, shard_labels, training_image
 from datagen.pipeline.progress import ShardSummary
 from datagen.scene.approach import FrameStates
 from datagen.scene.resolved import Scene
@@ -77,10 +78,12 @@ class ShardWriter:
         rows, excluded, labels = [], Counter(), 0
         rendered, render_s, denoise_s, frame_s = 0, 0.0, 0.0, 0.0
         self.states.prefetch(job.frames)  # the shard's approach chains, simulated together
-        for frame in job.frames:
+        draws = [draw_frame(self.scene, self.states, i) for i in job.frames]
+        labels_all, objects_all = shard_labels(self.scene, draws)  # every frame's labels at once
+        for b, frame_draws in enumerate(draws):
             if self._stop():
                 raise KeyboardInterrupt
-            row = self.frame(job, frame)
+            row = self.frame(job, frame_draws, labels_all.frame(b), objects_all.frame(b))
             rows.append(row)
             labels += row["n_labeled"]
             excluded.update(row["features"].exclusion_counts())
@@ -98,13 +101,13 @@ class ShardWriter:
         summary.wall_s = time.perf_counter() - start
         return summary
 
-    def frame(self, job: ShardJob, i: int) -> dict:
-        """Render, label and write frame ``i``; return its manifest row."""
+    def frame(self, job: ShardJob, draws: FrameDraws, labels: FrameLabels, objects: FrameLabels) -> dict:
+        """Render (when rendering) and write frame ``draws`` with its feature ``labels``
+        (before the occlusion rule) and pose boxes ``objects``; return its manifest row."""
         started = time.perf_counter()
         scene, layout = self.scene, self.layout
         k, features = scene.intrinsics, scene.features
-        draws = draw_frame(scene, self.states, i)
-        labels = frame_labels(scene, draws)
+        i = draws.index
         image_rel = exr_rel = None
         fraction = center_visible = render_s = denoise_s = None
         rendered: dict = {}
@@ -116,7 +119,6 @@ class ShardWriter:
             fraction, center_visible = self.renderer.feature_visibility(draws.state, features)
             labels = labels.with_visibility(fraction, scene.config.labels.min_visible_fraction)
         records = feature_records(labels, features.class_id, fraction, center_visible)
-        objects = object_labels(scene, draws)
         label_rel = layout.label_rel(job.split, job.shard, i)
         pose_rel = layout.pose_label_rel(job.split, job.shard, i)
         if label_rel is not None:

@@ -124,9 +124,21 @@ class FrameLook:
         return cox_munk_roughness(self.sea_wind_speed_mps, resolved=self.sea_wave_slope_variance)
 
 
-def _uniform(rng: np.random.Generator, bounds) -> float:
+def _uniform(rng: np.random.Generator | _Uniforms, bounds) -> float:
     lo, hi = bounds
     return float(rng.uniform(lo, hi))
+
+
+class _Uniforms:
+    """``n`` uniform draws of a generator taken in one call and handed out in order:
+    ``uniform(lo, hi)`` is what the generator's own ``uniform(lo, hi)`` would have
+    returned next (numpy computes it as ``lo + (hi - lo) * random()``, as here)."""
+
+    def __init__(self, rng: np.random.Generator, n: int) -> None:
+        self._next = iter(rng.random(n).tolist()).__next__
+
+    def uniform(self, lo: float, hi: float) -> float:
+        return lo + (hi - lo) * self._next()
 
 
 def _levels(rng: np.random.Generator, bounds) -> float:
@@ -140,9 +152,14 @@ def _levels(rng: np.random.Generator, bounds) -> float:
     return lo + (hi - lo) * step / (SKY_SCALE_LEVELS - 1)
 
 
-def _hsv(rng: np.random.Generator, saturation, value) -> tuple[float, float, float]:
+def _hsv(rng: np.random.Generator | _Uniforms, saturation, value) -> tuple[float, float, float]:
     h = float(rng.uniform(0.0, 1.0))
     return tuple(float(c) for c in colorsys.hsv_to_rgb(h, _uniform(rng, saturation), _uniform(rng, value)))
+
+
+#: Uniform draws of one object's materials in :func:`draw_look`: seven parts, each a hue,
+#: a saturation, a value and a roughness.
+MATERIAL_DRAWS: Final = 7 * 4
 
 
 def draw_look(config: Config, rng: np.random.Generator) -> FrameLook:
@@ -165,6 +182,7 @@ def draw_look(config: Config, rng: np.random.Generator) -> FrameLook:
         look.update(sea_roughness=_uniform(rng, r.sea.roughness), sea_wind_speed_mps=None)
     haze = _uniform(rng, HAZE_VISIBILITY_M) if r.haze else None
     materials: dict[str, dict[str, Material]] = {}
+    rng = _Uniforms(rng, MATERIAL_DRAWS * len(OBJECT_NAMES))  # the materials' draws in one call
     for obj in OBJECT_NAMES:
         materials[obj] = {
             "paint": Material(_hsv(rng, mat.paint_saturation, mat.paint_value), _uniform(rng, mat.paint_roughness)),
