@@ -303,12 +303,22 @@ def test_chains_simulated_together_equal_each_chain_simulated_alone(sampling: st
                     assert np.array_equal(getattr(x, name), getattr(y, name)), (a, name)
     if sampling == "time":  # chains that reach contact and begin another approach mid-batch
         assert any(s.approach_number > 0 for snapshots in alone.values() for s in snapshots)
+    upto = {20: 1, 23: 5, 31: 9}  # chains stopped early hold at least their wanted first snapshots, the same
+    partial = ap.simulate_chains(config, 11, range(20, 32), upto)
+    for a, snapshots in partial.items():
+        assert upto.get(a, len(alone[a])) <= len(snapshots) <= len(alone[a])
+        for x, y in zip(snapshots, alone[a], strict=False):
+            assert x.time_s == y.time_s and np.array_equal(x.probe_tanker, y.probe_tanker)
+    assert len(partial[20]) < len(alone[20])
 
 
 def test_prefetched_frame_states_equal_frame_states_made_alone() -> None:
+    """Prefetching simulates each chain only up to its last frame asked for; a later frame
+    of such a chain is simulated again, the same."""
     states = ap.FrameStates(BASE, 5)
     states.prefetch(range(3, 300, 7))
-    for i in (3, 10, 150, 297):
+    k = BASE.approach.frames_per_approach
+    for i in (3, 10, 150, 297, k - 1, 290 // k * k + k - 1):
         alone = ap.frame_state(BASE, i, 5)
         assert np.array_equal(states(i).world_from_cam, alone.world_from_cam)
         assert np.array_equal(states(i).hose_points_world, alone.hose_points_world)

@@ -476,17 +476,22 @@ def simulate_chain(config: Config, seed: int, approach_index: int) -> list[_Snap
         step += 1
 
 
-def simulate_chains(config: Config, seed: int, approach_indices) -> dict[int, list[_Snapshot]]:
+def simulate_chains(config: Config, seed: int, approach_indices,
+                    upto: dict[int, int] | None = None) -> dict[int, list[_Snapshot]]:
     """:func:`simulate_chain` of many chains. With approach model 2 they step together,
     each step one numpy operation over every chain instead of one Python step per chain:
     the same arithmetic in the same order, element by element (sines and cosines per
     chain, through :mod:`math`), so each chain's snapshots are bit for bit those it has
-    alone, whichever chains it is simulated with."""
+    alone, whichever chains it is simulated with.
+
+    ``upto``: per chain, how many of its first snapshots are wanted; a chain stops once it
+    has them (model 2; the rest are not simulated), others run to their last frame."""
     indices = list(dict.fromkeys(int(i) for i in approach_indices))
     a = config.approach
     if a.model == 1 or len(indices) < 2:
         return {i: simulate_chain(config, seed, i) for i in indices}
     k = a.frames_per_approach
+    wanted = np.array([min(max(int((upto or {}).get(i, k)), 1), k) for i in indices])
     chains = [_FastChain(config, approach_rng(seed, i), gust_rng(seed, i), warm=False) for i in indices]
     snapshots: list[list[_Snapshot]] = [[] for _ in indices]
     first = chains[0]
@@ -571,7 +576,7 @@ def simulate_chains(config: Config, seed: int, approach_indices) -> dict[int, li
                         chain.new_approach(float(chain.rng.uniform(*a.range_m)))
                         steps[c] = chain.steps_this_approach
                         state["_probe"][row], state["_rotvec"][row] = chain._probe, chain._rotvec
-            keep = [row for row, c in enumerate(active) if len(snapshots[c]) < k]
+            keep = [row for row, c in enumerate(active) if len(snapshots[c]) < wanted[c]]
             if not keep:
                 break
             if len(keep) < len(active):
@@ -708,18 +713,22 @@ class FrameStates:
 
     def prefetch(self, frame_indices) -> None:
         """Simulate the chains of ``frame_indices`` that are not held, together
-        (:func:`simulate_chains`), and hold every chain of them."""
+        (:func:`simulate_chains`), each only as far as its last frame here, and hold
+        every chain of them."""
         k = self.config.approach.frames_per_approach
-        wanted = list(dict.fromkeys(int(i) // k for i in frame_indices))
-        self._keep = max(self._keep, len(wanted))
-        missing = [a for a in wanted if a not in self._chains]
-        for a, snapshots in simulate_chains(self.config, self.seed, missing).items():
+        upto: dict[int, int] = {}
+        for i in frame_indices:
+            a, j = divmod(int(i), k)
+            upto[a] = max(upto.get(a, 0), j + 1)
+        self._keep = max(self._keep, len(upto))
+        missing = [a for a in upto if a not in self._chains or len(self._chains[a]) < upto[a]]
+        for a, snapshots in simulate_chains(self.config, self.seed, missing, upto).items():
             self._add(a, snapshots)
 
     def __call__(self, frame_index: int) -> FrameState:
         k = self.config.approach.frames_per_approach
         a, j = divmod(frame_index, k)
-        if a not in self._chains:
+        if a not in self._chains or j >= len(self._chains[a]):  # not held, or held only up to an earlier frame
             self._add(a, simulate_chain(self.config, self.seed, a))
         chain = self._chains[a]
         if isinstance(chain[j], _Snapshot):
