@@ -322,3 +322,20 @@ def test_prefetched_frame_states_equal_frame_states_made_alone() -> None:
         alone = ap.frame_state(BASE, i, 5)
         assert np.array_equal(states(i).world_from_cam, alone.world_from_cam)
         assert np.array_equal(states(i).hose_points_world, alone.hose_points_world)
+
+
+def test_the_earlier_state_is_made_on_first_use_motion_dt_before_and_kept() -> None:
+    """FrameState.earlier (motion blur's finite difference) is made only when asked for:
+    MOTION_DT_S before the frame, without an earlier state of its own, the same object on
+    every use, and it survives pickling (a state sent to another process)."""
+    import pickle
+
+    state = ap.FrameStates(BASE, 5)(20)
+    assert "earlier" not in vars(state)  # not made until it is asked for
+    earlier = state.earlier
+    assert earlier is state.earlier and earlier.earlier_from is None and earlier.earlier is None
+    assert earlier.time_s == pytest.approx(state.time_s - ap.MOTION_DT_S, abs=1e-9)
+    moved = np.linalg.norm(earlier.world_from_receiver[:3, 3] - state.world_from_receiver[:3, 3])
+    assert 0.0 < moved < 5.0
+    copy = pickle.loads(pickle.dumps(ap.FrameStates(BASE, 5)(20)))
+    np.testing.assert_array_equal(copy.earlier.world_from_cam, earlier.world_from_cam)

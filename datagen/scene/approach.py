@@ -36,7 +36,9 @@ regenerated alone on any worker.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -107,7 +109,13 @@ class FrameState:
     mount: str
     turbulence_intensity: float
     bank_deg: float
-    earlier: FrameState | None = None  # this state MOTION_DT_S earlier (relative motion: motion blur)
+    #: Makes :attr:`earlier` when it is first asked for (only motion blur does); None: no earlier state.
+    earlier_from: Callable[[], FrameState] | None = field(default=None, repr=False)
+
+    @functools.cached_property
+    def earlier(self) -> FrameState | None:
+        """This state MOTION_DT_S earlier (relative motion: motion blur), made on first use."""
+        return None if self.earlier_from is None else self.earlier_from()
 
     @property
     def cam_from_world(self) -> FloatArray:
@@ -686,8 +694,13 @@ def _state(config: Config, frame_index: int, approach_index: int, snap: _Snapsho
         mount=config.camera.mount,
         turbulence_intensity=snap.intensity,
         bank_deg=math.degrees(snap.tanker.bank),
-        earlier=_state(config, frame_index, approach_index, snap.earlier(MOTION_DT_S), False) if earlier else None,
+        earlier_from=functools.partial(_earlier_state, config, frame_index, approach_index, snap) if earlier else None,
     )
+
+
+def _earlier_state(config: Config, frame_index: int, approach_index: int, snap: _Snapshot) -> FrameState:
+    """The state of ``snap`` MOTION_DT_S earlier (:attr:`FrameState.earlier`)."""
+    return _state(config, frame_index, approach_index, snap.earlier(MOTION_DT_S), False)
 
 
 class FrameStates:
