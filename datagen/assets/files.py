@@ -30,17 +30,18 @@ import functools
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
-from scipy.optimize import nnls
 
 from datagen.config.inputs import parse_json, read_text
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import ConfigError, Problem
 from datagen.core.features import SIZE_SCALE
+
+if TYPE_CHECKING:  # trimesh takes most of a second to import: only where meshes are read
+    import trimesh
 
 __all__ = [
     "BUILTIN_DIR",
@@ -114,6 +115,8 @@ class ObjectMesh:
 
     @functools.cached_property
     def combined(self) -> trimesh.Trimesh:
+        import trimesh
+
         return trimesh.util.concatenate(list(self.parts.values()))
 
 
@@ -125,6 +128,8 @@ def builtin_paths(object_name: str, root: Path = BUILTIN_DIR) -> tuple[Path, Pat
 # --- meshes ---------------------------------------------------------------------------
 def load_mesh(path: Path, object_name: str) -> ObjectMesh:
     """Read a mesh file into parts; raises :class:`ConfigError` naming the file on bad input."""
+    import trimesh
+
     path = Path(path)
 
     def fail(message: str) -> ConfigError:
@@ -333,6 +338,8 @@ def hull_distance(points: NDArray[np.float64], center: NDArray[np.float64]) -> f
     weight = 1e3
     a = np.vstack([(points - origin).T / scale, np.full(len(points), weight)])
     b = np.concatenate([(center - origin) / scale, [weight]])
+    from scipy.optimize import nnls
+
     w, _ = nnls(a, b, maxiter=50 * len(points))
     if w.sum() <= 0:
         return float(np.linalg.norm(points - center, axis=1).min())

@@ -21,7 +21,6 @@ from datagen.assets.files import (
     load_mesh,
     read_feature_file,
 )
-from datagen.assets.generate import random_features
 from datagen.core.conventions import RIGID_OBJECTS, random_features_rng
 from datagen.core.errors import ConfigError, Problem
 from datagen.core.features import SIZE_SCALE, FeatureTable
@@ -66,6 +65,8 @@ def load_object_features(object_name: str, variant: str, *, mesh_path: Path | No
         return load_features(features_path, object_name, variant)
     mesh = load_mesh(mesh_path, object_name)
     radius = _random_radius(features_path, mesh)
+    from datagen.assets.generate import random_features  # trimesh: only when random features are asked for
+
     features = random_features(mesh, random_count, random_features_rng(seed, object_name), radius)
     bad = [(f, why) for f in features if (why := degenerate(f.points_m))]
     if bad:

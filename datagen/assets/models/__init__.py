@@ -9,10 +9,12 @@ around the mounts and hose port of :mod:`datagen.assets.rig`.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Final, Literal
+from typing import TYPE_CHECKING, Final, Literal
 
 import numpy as np
-import trimesh
+
+if TYPE_CHECKING:  # trimesh takes most of a second to import: only where meshes are made
+    import trimesh
 
 __all__ = [
     "MATERIAL_CLASSES",
@@ -96,4 +98,6 @@ class Model:
 
     def combined(self) -> trimesh.Trimesh:
         """All parts as one mesh."""
+        import trimesh
+
         return trimesh.util.concatenate(list(self.parts.values()))
