@@ -84,14 +84,10 @@ def cloud_opacity(rng: np.random.Generator, coverage: float, opacity: float,
     return (opacity * ramp * ramp * (3.0 - 2.0 * ramp))[..., None].astype(np.float32)
 
 
-@functools.lru_cache(maxsize=8)
-def _wave_spectrum_parts(direction_rad: float, n: int, tile: float) -> tuple[NDArray, ...]:
-    """What :func:`_wave_variance` computes on the FFT grid before the wind enters, for the
-    bins the spreading keeps (``cos > 0``), each distinct bin once: the angular frequency,
-    Pierson-Moskowitz's ``alpha g^2 omega^-5`` factor, ``2 omega``, the spreading and the
-    wavenumber; then the kept bins' flat indices and, per kept bin, its distinct bin.
-    Bins mirrored about the wind have the same inputs, so the same variance: computing
-    each once gives the same numbers, bit for bit, for a quarter of the work."""
+def _spectrum_grid(direction_rad: float, n: int, tile: float) -> tuple[NDArray[np.float64], ...]:
+    """What the sea's variance needs of every bin of the FFT grid before the wind enters:
+    the angular frequency, Pierson-Moskowitz's ``alpha g^2 omega^-5`` factor, ``2 omega``,
+    the spreading (0 against the wind) and the wavenumber."""
     g = GRAVITY_MPS2
     kx, ky = _wavenumbers(n, tile)
     k = np.hypot(kx, ky)
@@ -100,8 +96,35 @@ def _wave_spectrum_parts(direction_rad: float, n: int, tile: float) -> tuple[NDA
         alpha = 8.1e-3 * g**2 * omega**-5.0
         cos = (kx * math.cos(direction_rad) + ky * math.sin(direction_rad)) / k
         spread = np.where(cos > 0.0, 2.0 / np.pi * cos**2, 0.0)
+    return omega, alpha, 2.0 * omega, spread, k
+
+
+def _bin_variance(omega: NDArray, alpha: NDArray, two_omega: NDArray, spread: NDArray, k: NDArray,
+                  wind_mps: float, tile: float) -> NDArray[np.float64]:
+    """Each bin's height variance (m^2) at ``wind_mps`` from its :func:`_spectrum_grid` values
+    (element by element: any selection of bins gives those bins' numbers).
+
+    S(omega) = alpha g^2 omega^-5 exp(-0.74 (omega_0 / omega)^4), alpha = 8.1e-3, omega_0 = g / W;
+    deep water omega^2 = g k; spreading 2/pi cos^2 of the angle to the wind (waves running
+    with it); the variance of a bin is F(kx, ky) dkx dky with F = S(omega) (d omega / dk) D / k."""
+    g = GRAVITY_MPS2
+    dk = 2.0 * np.pi / tile
+    with np.errstate(divide="ignore", invalid="ignore"):
+        omega0 = g / max(wind_mps, 0.5)
+        s = alpha * np.exp(-0.74 * (omega0 / omega) ** 4)
+        s_k = s * g / two_omega
+        return np.nan_to_num(s_k * spread / k) * dk * dk
+
+
+@functools.lru_cache(maxsize=8)
+def _wave_spectrum_parts(direction_rad: float, n: int, tile: float) -> tuple[NDArray, ...]:
+    """:func:`_spectrum_grid` for the bins the spreading keeps (``cos > 0``), each distinct
+    bin once; then the kept bins' flat indices and, per kept bin, its distinct bin. Bins
+    mirrored about the wind have the same inputs, so the same variance: computing each
+    once gives the same numbers, bit for bit, for a quarter of the work."""
+    omega, alpha, two_omega, spread, k = _spectrum_grid(direction_rad, n, tile)
     kept = np.flatnonzero(spread.ravel() > 0.0)
-    inputs = np.stack([omega, alpha, 2.0 * omega, spread, k], axis=-1).reshape(-1, 5)[kept]
+    inputs = np.stack([omega, alpha, two_omega, spread, k], axis=-1).reshape(-1, 5)[kept]
     distinct, bin_of = np.unique(inputs, axis=0, return_inverse=True)
     parts = (*np.ascontiguousarray(distinct.T), kept, bin_of.ravel())
     for part in parts:
@@ -111,22 +134,12 @@ def _wave_spectrum_parts(direction_rad: float, n: int, tile: float) -> tuple[NDA
 
 @functools.lru_cache(maxsize=64)
 def _wave_variance(wind_mps: float, direction_rad: float, n: int, tile: float) -> NDArray[np.float64]:
-    """Per-bin height variance (m^2) of a directional Pierson-Moskowitz sea on the FFT grid.
-
-    S(omega) = alpha g^2 omega^-5 exp(-0.74 (omega_0 / omega)^4), alpha = 8.1e-3, omega_0 = g / W;
-    deep water omega^2 = g k; spreading 2/pi cos^2 of the angle to the wind (waves running
-    with it); the variance of a bin is F(kx, ky) dkx dky with F = S(omega) (d omega / dk) D / k.
-    Bins against the wind (and the mean) hold 0."""
-    g = GRAVITY_MPS2
-    omega, alpha, two_omega, spread, k, kept, bin_of = _wave_spectrum_parts(direction_rad, n, tile)
-    dk = 2.0 * np.pi / tile
-    with np.errstate(divide="ignore", invalid="ignore"):
-        omega0 = g / max(wind_mps, 0.5)
-        s = alpha * np.exp(-0.74 * (omega0 / omega) ** 4)
-        s_k = s * g / two_omega
-        distinct = np.nan_to_num(s_k * spread / k) * dk * dk
+    """Per-bin height variance (m^2) of a directional Pierson-Moskowitz sea on the FFT grid
+    (:func:`_bin_variance`, computed once per distinct bin). Bins against the wind (and the
+    mean) hold 0."""
+    *inputs, kept, bin_of = _wave_spectrum_parts(direction_rad, n, tile)
     variance = np.zeros(n * n)
-    variance[kept] = distinct[bin_of]
+    variance[kept] = _bin_variance(*inputs, wind_mps, tile)[bin_of]
     variance = variance.reshape(n, n)
     variance[0, 0] = 0.0
     return variance
