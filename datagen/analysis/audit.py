@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import heapq
+import itertools
 import math
 import os
 import re
@@ -25,6 +26,15 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from datagen.analysis.exact import (
+    OrderedSum,
+    Spill,
+    median,
+    median_positions,
+    order_statistics,
+    percentile,
+    percentile_positions,
+)
 from datagen.core.camera import Intrinsics
 from datagen.core.keypoints import KEYPOINT_RANGE, keypoint_flags, mirror_name
 from datagen.core.labels import Exclusion, FrameLabels
@@ -178,17 +188,6 @@ def obliqueness_deg(cam_from_model: NDArray[np.float64], normal_model: NDArray[n
     return np.degrees(np.arccos(np.clip(cos, 0.0, 1.0)))
 
 
-def _binned(values: NDArray, keys: NDArray, edges: NDArray) -> list[dict]:
-    """Count, mean, median, p95 and max of ``values`` per bin of ``keys``."""
-    out = []
-    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
-        v = values[(keys >= lo) & (keys < hi)]
-        out.append({"lo": float(lo), "hi": float(hi), "count": int(v.size),
-                    **({"mean": float(v.mean()), "median": float(np.median(v)), "p95": float(np.percentile(v, 95)),
-                        "max": float(v.max())} if v.size else {})})
-    return out
-
-
 # --- label files --------------------------------------------------------------------------
 def _read_label_file(path: Path) -> tuple[list[str], str | None]:
     """The non-blank lines of a label file, or why there are none."""
@@ -288,28 +287,32 @@ def audit(dataset: DatasetView | DatasetSource, *, min_learnable: float = MIN_LE
         progress.start(len(index), 0)
         parts = _parts(dataset, index, workers, progress)
     merged: dict[str, Check] = {}
-    stat_parts, line_parts, pose_parts = [], [], []
-    for part in parts:
-        for c in part.checks:
-            merged[c.name] = merged[c.name].merge(c) if c.name in merged else c
-        stat_parts.append(part.stats)
-        if part.lines is not None:
-            line_parts.append(part.lines)
-        if part.pose_learnable is not None:
-            pose_parts.append(part.pose_learnable)
-    progress.close()
-    stats = _statistics(dataset, stat_parts)
-    checks = [merged["manifest_boxes"], merged["manifest_objects"]]
-    if dataset.label_format != "pose":
-        learnable, stats["learnable"] = _check_learnable(dataset, line_parts, stats["_top_m"], min_learnable)
-        checks += [merged[n] for n in ("label_lines", "centre_drift", "edge_margin_and_front", "ultralytics_rules")]
-        checks += [learnable, _check_names(dataset)]
-    if dataset.pose_yaml is not None:
-        checks += [merged[n] for n in ("pose_lines", "keypoint_flags", "ultralytics_pose_rules")]
-        checks += [_check_pose_names(dataset)]
-        stats["learnable_pose"] = _pose_learnable(dataset, pose_parts)
+    with Spill() as spill:  # the per-feature and per-line values, on disk until the statistics
+        totals = _Totals()
+        pose = np.zeros(2, dtype=np.int64)  # pose instances, learnable ones
+        for part in parts:
+            for c in part.checks:
+                merged[c.name] = merged[c.name].merge(c) if c.name in merged else c
+            totals.add(spill, part.stats)
+            if part.lines is not None:
+                spill.add("lines", None, **part.lines)
+            if part.pose_learnable is not None:
+                pose += (part.pose_learnable.size, part.pose_learnable.sum())
+            del part
+        progress.close()
+        stats = _statistics(dataset, spill, totals)
+        checks = [merged["manifest_boxes"], merged["manifest_objects"]]
+        if dataset.label_format != "pose":
+            learnable, stats["learnable"] = _check_learnable(dataset, spill, stats["_top_m"], min_learnable)
+            checks += [merged[n] for n in ("label_lines", "centre_drift", "edge_margin_and_front",
+                                           "ultralytics_rules")]
+            checks += [learnable, _check_names(dataset)]
+        if dataset.pose_yaml is not None:
+            checks += [merged[n] for n in ("pose_lines", "keypoint_flags", "ultralytics_pose_rules")]
+            checks += [_check_pose_names(dataset)]
+            stats["learnable_pose"] = _pose_learnable(dataset, pose)
+        stats["appearance"] = _appearance_finish(spill, totals.appearance)
     checks += [_check_files(index), _check_images(index, dataset.intrinsics)]
-    stats["appearance"] = _appearance_finish([p["appearance"] for p in stat_parts])
     del stats["_top_m"]
     return AuditResult(dataset.root, str(dataset.doc.get("name", dataset.root.name)), len(index),
                        [c.finish() for c in checks], stats)
@@ -502,54 +505,84 @@ def _learnable_part(view: DatasetView, lines: NDArray[np.float64]) -> dict[str, 
             "anchored": train.has_anchor(xyxy), "train_w": np.minimum(bw * train.scale[0], bh * train.scale[1])}
 
 
-def _check_learnable(meta: DatasetMeta, parts: list[dict[str, NDArray]], top: float,
-                     min_share: float) -> tuple[Check, dict]:
+def _check_learnable(meta: DatasetMeta, spill: Spill, top: float, min_share: float) -> tuple[Check, dict]:
     """Which label lines Ultralytics' trainer keeps at ``labels.train_imgsz`` and can assign
-    to an anchor (:func:`_learnable_part` of every shard); the check passes while at least
-    ``min_share`` can. ``top``: the upper end of the distance bins."""
+    to an anchor (:func:`_learnable_part` of every shard, in ``spill``'s stream ``lines``);
+    the check passes while at least ``min_share`` can. ``top``: the upper end of the
+    distance bins."""
     rules = meta.label_rules
     check = Check("learnable", f"at least {100 * min_share:g}% of label lines survive Ultralytics' training "
                   f"transforms at imgsz {rules.train_imgsz} (both sides above 2 px) and hold an anchor centre "
                   "(strides 8/16/32)", min_pass_share=min_share)
-    cls, distance, survives, anchored, train_w = (np.concatenate([p.pop(key) for p in parts]) for key in
-                                                  ("cls", "distance", "survives", "anchored", "train_w"))
-    ok = survives & anchored
-    check.checked = int(ok.size)
-    check.worst = None if not ok.size else float(1.0 - ok.mean())
     names = meta.features.name
-    by_class = {}
-    for c in np.unique(cls):
-        mine = ok[cls == c]
-        by_class[names[c]] = {"lines": int(mine.size), "share": float(mine.mean())}
-        if not mine.all():
-            check.fail(f"class {c} {names[c]}", f"{mine.mean():.1%} of {mine.size} lines learnable",
-                       float(1.0 - mine.mean()))
-    check.failures = int((~ok).sum())  # offenders are the classes above; the count is of label lines
-
-    def share(mask: NDArray[np.bool_]) -> dict:
-        return {"lines": int(mask.sum()), "share": float(ok[mask].mean()) if mask.any() else None}
-
     edges = np.arange(0.0, top + 10.0, 10.0)
-    size = np.array(meta.features.size, dtype=object)[cls] if cls.size else np.zeros(0, dtype=object)
+    # per class and per distance bin: lines, learnable ones; and the lines' survivors, anchored ones
+    per_class = np.zeros((len(names), 2), dtype=np.int64)
+    per_bin = np.zeros((len(edges) - 1, 2), dtype=np.int64)
+    survived = anchored_ = 0
+    low = math.inf
+    for part in spill.parts("lines", "cls", "distance", "survives", "anchored", "train_w"):
+        ok = part["survives"] & part["anchored"]
+        cls = part["cls"].astype(np.int64)
+        per_class += np.stack([np.bincount(cls, minlength=len(names)),
+                               np.bincount(cls, weights=ok, minlength=len(names)).astype(np.int64)], axis=1)
+        k = np.searchsorted(edges, part["distance"], side="right") - 1
+        inside = (k >= 0) & (k < len(edges) - 1)
+        per_bin += np.stack([np.bincount(k[inside], minlength=len(edges) - 1),
+                             np.bincount(k[inside], weights=ok[inside], minlength=len(edges) - 1).astype(np.int64)],
+                            axis=1)
+        survived += int(part["survives"].sum())
+        anchored_ += int(part["anchored"].sum())
+        low = min(low, float(part["train_w"].min()))
+    lines, good = (int(v) for v in per_class.sum(axis=0))
+    check.checked = lines
+    check.worst = None if not lines else float(1.0 - good / lines)
+    by_class = {}
+    for c in np.flatnonzero(per_class[:, 0]):
+        n, ok_n = (int(v) for v in per_class[c])
+        by_class[names[c]] = {"lines": n, "share": ok_n / n}
+        if ok_n < n:
+            check.fail(f"class {c} {names[c]}", f"{ok_n / n:.1%} of {n} lines learnable", float(1.0 - ok_n / n))
+    check.failures = lines - good  # offenders are the classes above; the count is of label lines
+
+    def share(counts: NDArray[np.int64]) -> dict:
+        n, ok_n = (int(v) for v in counts)
+        return {"lines": n, "share": ok_n / n if n else None}
+
+    sizes = np.array(meta.features.size, dtype=object)
     stats = {
         "train_imgsz": rules.train_imgsz,
         "min_box_px": rules.min_box_px,
         "small_boxes": rules.small_boxes,
         "threshold": min_share,
-        "lines": int(ok.size),
-        "share": float(ok.mean()) if ok.size else None,
-        "share_survive_2px": float(survives.mean()) if ok.size else None,
-        "share_with_anchor": float(anchored.mean()) if ok.size else None,
-        "min_side_train_px": {"median": float(np.median(train_w)) if ok.size else None,
-                              "min": float(train_w.min()) if ok.size else None},
-        "by_distance_m": [{"lo": float(lo), "hi": float(hi), **share((distance >= lo) & (distance < hi))}
-                          for lo, hi in zip(edges[:-1], edges[1:], strict=True)],
-        "by_size": {(tag or "untagged"): share(size == tag) for tag in sorted(set(meta.features.size))},
+        "lines": lines,
+        "share": good / lines if lines else None,
+        "share_survive_2px": survived / lines if lines else None,
+        "share_with_anchor": anchored_ / lines if lines else None,
+        "min_side_train_px": {"median": _median_of(spill, "lines", "train_w") if lines else None,
+                              "min": low if lines else None},
+        "by_distance_m": [{"lo": float(lo), "hi": float(hi), **share(per_bin[k])}
+                          for k, (lo, hi) in enumerate(itertools.pairwise(edges))],
+        "by_size": {(tag or "untagged"): share(per_class[sizes == tag].sum(axis=0))
+                    for tag in sorted(set(meta.features.size))},
         "by_class": by_class,
         "worst_classes": [{"class": n, **v} for n, v in sorted(by_class.items(), key=lambda kv: kv[1]["share"])
                           if v["share"] < 1.0][:10],
     }
     return check, stats
+
+
+def _median_of(spill: Spill, stream: str, column: str) -> float:
+    """``np.median`` of a spilled column (no NaNs)."""
+    n = spill.rows[stream]
+    wanted = set(median_positions(n))
+
+    def chunks():
+        for part in spill.parts(stream, column):
+            yield np.zeros(len(part[column]), dtype=np.int64), part[column]
+
+    found = order_statistics(chunks, {0: wanted})
+    return median(n, lambda k: found[(0, k)])
 
 
 def _nan_error(stored: NDArray[np.float64], fresh: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -711,12 +744,11 @@ def _pose_learnable_part(view: DatasetView, instances: NDArray[np.float64]) -> N
     return view.train_view.learnable(xyxy)
 
 
-def _pose_learnable(meta: DatasetMeta, parts: list[NDArray[np.bool_]]) -> dict:
-    """The share of pose instances that are learnable (:func:`_pose_learnable_part`)."""
-    learnable = np.concatenate(parts)
-    return {"instances": len(learnable), "learnable": int(learnable.sum()),
-            "share": float(learnable.mean()) if len(learnable) else None,
-            "imgsz": meta.train_view.imgsz}
+def _pose_learnable(meta: DatasetMeta, counts: NDArray[np.int64]) -> dict:
+    """The share of pose instances that are learnable (:func:`_pose_learnable_part`;
+    ``counts``: instances, learnable ones)."""
+    n, good = (int(v) for v in counts)
+    return {"instances": n, "learnable": good, "share": good / n if n else None, "imgsz": meta.train_view.imgsz}
 
 
 def _check_files(view: DatasetIndex | DatasetView) -> Check:
@@ -904,64 +936,213 @@ def _statistics_part(view: DatasetView, labels: FrameLabels, rank: NDArray[np.in
     }
 
 
-def _statistics(meta: DatasetMeta, parts: list[dict]) -> dict:
-    """The statistics of the merged :func:`_statistics_part` of every shard."""
+class _Totals:
+    """What the statistics keep in memory of every :func:`_statistics_part`: counts; the
+    per-feature, per-frame and per-draw values go to the spill."""
+
+    def __init__(self) -> None:
+        self.exclusions = self.per_class = None
+        self.visible = np.zeros(10, dtype=np.int64)  # histogram of labeled features' visible fractions
+        self.visible_n = self.visible_full = self.cv_count = self.cv_ones = 0
+        self.appearance: dict[str, dict] = {}  # column -> frames, and counts per value (names, flags)
+
+    def add(self, spill: Spill, part: dict) -> None:
+        spill.add("drift", part["rank"], drift=part["drift"], distance=part["distance"],
+                  obliqueness=part["obliqueness"], cls=part["class"])
+        spill.add("frames", None, distance=part["frame_distance"], labeled=part["labeled_per_object"])
+        self.exclusions = part["exclusions"] if self.exclusions is None else self.exclusions + part["exclusions"]
+        self.per_class = part["labeled_per_class"] if self.per_class is None else \
+            self.per_class + part["labeled_per_class"]
+        vis = part["visible_fraction"]
+        self.visible += np.histogram(vis, bins=10, range=(0.0, 1.0))[0]
+        self.visible_n += vis.size
+        self.visible_full += int((vis >= 1.0).sum())
+        self.cv_count += part["centre_visible"][0]
+        self.cv_ones += part["centre_visible"][1]
+        for name, column in part["appearance"].items():
+            mine = self.appearance.setdefault(name, {"frames": 0})
+            mine["frames"] += column["frames"]
+            if "values" in column:
+                mine["values"] = mine.get("values", Counter()) + column["values"]
+            elif column["frames"]:
+                spill.add(f"appearance.{name}", column["rank"], value=column["numbers"])
+
+
+#: Drift groups (:func:`_drift_groups`): all features, then per distance bin, size tag and
+#: obliqueness bin from these offsets.
+_ALL, _BY_DISTANCE, _BY_SIZE, _BY_OBLIQUENESS = 0, 1, 100_000, 200_000
+#: Bins of the drift by view obliqueness, degrees.
+OBLIQUENESS_EDGES_DEG: Final = np.arange(0.0, 91.0, 15.0)
+
+
+def _bin_of(values: NDArray[np.float64], edges: NDArray[np.float64]) -> NDArray[np.int64]:
+    """The bin ``k`` with ``edges[k] <= value < edges[k + 1]`` of each value; -1 outside."""
+    k = np.searchsorted(edges, values, side="right") - 1
+    return np.where((k >= 0) & (k < len(edges) - 1), k, -1)
+
+
+def _drift_groups(part: dict, distance_edges: NDArray, size_of_class: NDArray[np.int64]) -> list[NDArray[np.int64]]:
+    """Each drift value's group in each grouping (-1: none): all, its distance bin, its
+    feature's size tag, its obliqueness bin."""
+    def offset(k: NDArray[np.int64], base: int) -> NDArray[np.int64]:
+        return np.where(k >= 0, k + base, -1)
+
+    return [np.full(len(part["drift"]), _ALL, dtype=np.int64),
+            offset(_bin_of(part["distance"], distance_edges), _BY_DISTANCE),
+            size_of_class[part["cls"].astype(np.int64)] + _BY_SIZE,
+            offset(_bin_of(part["obliqueness"], OBLIQUENESS_EDGES_DEG), _BY_OBLIQUENESS)]
+
+
+#: Drift values the report's scatter plot shows at most (every k-th in frame order).
+SCATTER_POINTS: Final = 20000
+
+
+def _drift_statistics(spill: Spill, distance_edges: NDArray, size_of_class: NDArray[np.int64]) -> dict:
+    """Per drift group: count, mean, median, p95 and max, exactly as numpy gives them on the
+    group's values in frame order, and what the plots need (quartiles and whiskers per size
+    tag, every k-th feature's distance and drift): from the spilled ``drift`` stream."""
+    columns = ("drift", "distance", "obliqueness", "cls")
+    count: Counter = Counter()
+    nans: Counter = Counter()
+    top: dict[int, float] = {}
+    for part in spill.parts("drift", *columns):
+        d = part["drift"]
+        for groups in _drift_groups(part, distance_edges, size_of_class):
+            for g in np.unique(groups[groups >= 0]).tolist():
+                mine = d[groups == g]
+                count[g] += mine.size
+                nans[g] += int(np.isnan(mine).sum())
+                top[g] = float(np.maximum(top[g], mine.max())) if g in top else float(mine.max())
+    sums = {g: OrderedSum(n) for g, n in count.items()}
+    n_all = count[_ALL]
+    pick = np.linspace(0, n_all - 1, min(n_all, SCATTER_POINTS)).astype(int) if n_all else np.zeros(0, dtype=int)
+    scatter, seen = [], 0
+    for part in spill.ordered("drift", *columns):
+        d = part["drift"]
+        for groups in _drift_groups(part, distance_edges, size_of_class):
+            order = np.argsort(groups, kind="stable")
+            bounds = np.searchsorted(groups[order], np.unique(groups))
+            for g, piece in zip(np.unique(groups).tolist(), np.split(order, bounds[1:]), strict=True):
+                if g >= 0:
+                    sums[g].feed(d[piece])
+        mine = pick[(pick >= seen) & (pick < seen + d.size)] - seen
+        scatter.append(np.stack([part["distance"][mine], d[mine]], axis=1))
+        seen += d.size
+    quartiles = {g for g in count if _BY_SIZE <= g < _BY_OBLIQUENESS}
+    wanted = {g: set(median_positions(n)) | set(percentile_positions(n, 95))
+              | (set(percentile_positions(n, 25)) | set(percentile_positions(n, 75)) if g in quartiles else set())
+              for g, n in count.items() if not nans[g]}
+
+    def chunks():
+        for part in spill.parts("drift", *columns):
+            for groups in _drift_groups(part, distance_edges, size_of_class):
+                yield groups, part["drift"]
+
+    found = order_statistics(chunks, wanted)
+    out = {}
+    for g, n in count.items():
+        def stat(k: int, g: int = g) -> float:
+            return found[(g, k)]
+
+        nan = bool(nans[g])
+        out[g] = {"count": n, "mean": sums[g].mean(), "median": math.nan if nan else median(n, stat),
+                  "p95": math.nan if nan else percentile(n, 95, stat), "max": top[g]}
+        if g in quartiles and not nan:
+            out[g]["box"] = {"q1": percentile(n, 25, stat), "med": out[g]["median"], "q3": percentile(n, 75, stat)}
+    _whiskers(spill, out, distance_edges, size_of_class)
+    return {"groups": out, "scatter": np.concatenate(scatter) if scatter else np.zeros((0, 2))}
+
+
+def _whiskers(spill: Spill, groups: dict[int, dict], distance_edges: NDArray, size_of_class: NDArray) -> None:
+    """Matplotlib's box whiskers (the extreme values within 1.5 IQR of the quartiles) of the
+    size groups' boxes."""
+    boxes = {g: v["box"] for g, v in groups.items() if "box" in v}
+    for box in boxes.values():
+        iqr = box["q3"] - box["q1"]
+        box["lo"], box["hi"] = box["q1"] - 1.5 * iqr, box["q3"] + 1.5 * iqr
+        box["whislo"], box["whishi"] = math.inf, -math.inf
+    for part in spill.parts("drift", "drift", "distance", "obliqueness", "cls") if boxes else ():
+        d = part["drift"]
+        size_group = _drift_groups(part, distance_edges, size_of_class)[2]
+        for g, box in boxes.items():
+            mine = d[size_group == g]
+            low, high = mine[mine >= box["lo"]], mine[mine <= box["hi"]]
+            if low.size:
+                box["whislo"] = min(box["whislo"], float(low.min()))
+            if high.size:
+                box["whishi"] = max(box["whishi"], float(high.max()))
+    for box in boxes.values():
+        box["whislo"], box["whishi"] = min(box["whislo"], box["q1"]), max(box["whishi"], box["q3"])
+        del box["lo"], box["hi"]
+
+
+def _statistics(meta: DatasetMeta, spill: Spill, totals: _Totals) -> dict:
+    """The statistics of every shard's :func:`_statistics_part` (``totals`` and ``spill``),
+    the same numbers numpy gives on the whole dataset's values in frame order."""
     features = meta.features
-    order = np.argsort(np.concatenate([p.pop("rank") for p in parts]), kind="stable")
+    frames = spill.rows["frames"]
+    far = np.max([p["distance"].max() for p in spill.parts("frames", "distance")]) if frames else 0.0
+    top = max(10.0, float(np.ceil(far / 10.0) * 10.0)) if frames else 10.0
+    tags = sorted(set(features.size))
+    size_of_class = np.array([tags.index(t) for t in features.size], dtype=np.int64)
+    distance_edges = np.arange(0.0, top + 10.0, 10.0)
+    drift = _drift_statistics(spill, distance_edges, size_of_class)
+    groups = drift["groups"]
 
-    def merged(key: str) -> NDArray:  # the parts' values in frame order (theirs dropped as they merge)
-        return np.concatenate([p.pop(key) for p in parts])[order]
+    def summary(g: int) -> dict:
+        v = groups.get(g)
+        return {"count": 0} if v is None else {"count": v["count"], "mean": v["mean"], "median": v["median"],
+                                               "p95": v["p95"], "max": v["max"]}
 
-    d, dist, obl = merged("drift"), merged("distance"), merged("obliqueness")
-    size = np.array(features.size, dtype=object)[merged("class")] if d.size else np.zeros(0, dtype=object)
-    frame_distance = np.concatenate([p["frame_distance"] for p in parts])
-    frames = len(frame_distance)
-    top = max(10.0, float(np.ceil(frame_distance.max() / 10.0) * 10.0)) if frames else 10.0
-    by_size = {}
-    for tag in sorted(set(features.size)):
-        v = d[size == tag]
-        by_size[tag or "untagged"] = {"count": int(v.size), **({"mean": float(v.mean()), "median": float(np.median(v)),
-                                                                 "p95": float(np.percentile(v, 95)),
-                                                                 "max": float(v.max())} if v.size else {})}
-    exclusions = np.sum([p["exclusions"] for p in parts], axis=0)
-    per_class = np.sum([p["labeled_per_class"] for p in parts], axis=0)
-    per_object = np.concatenate([p["labeled_per_object"] for p in parts])
-    pnp = {}
-    for j, obj in enumerate(features.objects):
-        count = per_object[:, j]
-        pnp[obj] = {"frames_below_3": int((count < PNP_MIN_FEATURES).sum()),
-                    "share_below_3": float((count < PNP_MIN_FEATURES).mean()) if frames else 0.0,
-                    "median_labeled": float(np.median(count)) if frames else 0.0}
-    vis = np.concatenate([p["visible_fraction"] for p in parts])
-    cv_count = sum(p["centre_visible"][0] for p in parts)
-    cv_ones = sum(p["centre_visible"][1] for p in parts)
+    def binned(base: int, edges: NDArray) -> list[dict]:
+        return [{"lo": float(lo), "hi": float(hi), **summary(base + k)}
+                for k, (lo, hi) in enumerate(itertools.pairwise(edges))]
+
     coverage_edges = np.arange(0.0, top + 5.0, 5.0)
+    coverage = np.zeros(len(coverage_edges) - 1, dtype=np.int64)
+    labeled: list[NDArray[np.int64]] = [np.zeros(1, dtype=np.int64) for _ in features.objects]
+    for part in spill.parts("frames", "distance", "labeled"):
+        coverage += np.histogram(part["distance"], bins=coverage_edges)[0]
+        for j, counts in enumerate(labeled):
+            mine = np.bincount(part["labeled"][:, j])
+            labeled[j] = np.pad(counts, (0, max(0, mine.size - counts.size))) + np.pad(mine, (0, max(0, counts.size
+                                                                                                    - mine.size)))
+    pnp = {}
+    for obj, counts in zip(features.objects, labeled, strict=True):
+        cum = np.cumsum(counts)
+        below = int(counts[:PNP_MIN_FEATURES].sum())
+        pnp[obj] = {"frames_below_3": below, "share_below_3": below / frames if frames else 0.0,
+                    "median_labeled": median(frames, lambda k, cum=cum: float(np.searchsorted(cum, k, side="right")))
+                    if frames else 0.0}
+    per_class = np.zeros(len(features), dtype=np.int64) if totals.per_class is None else totals.per_class
+    exclusions = np.zeros(max(Exclusion) + 1, dtype=np.int64) if totals.exclusions is None else totals.exclusions
+    whole = summary(_ALL)
     return {
         "tight_drift_px": {
-            "features": int(d.size),
-            "mean": float(d.mean()) if d.size else None,
-            "median": float(np.median(d)) if d.size else None,
-            "p95": float(np.percentile(d, 95)) if d.size else None,
-            "max": float(d.max()) if d.size else None,
-            "by_distance_m": _binned(d, dist, np.arange(0.0, top + 10.0, 10.0)),
-            "by_size": by_size,
-            "by_obliqueness_deg": _binned(d, obl, np.arange(0.0, 91.0, 15.0)),
+            "features": whole["count"],
+            "mean": whole.get("mean"),
+            "median": whole.get("median"),
+            "p95": whole.get("p95"),
+            "max": whole.get("max"),
+            "by_distance_m": binned(_BY_DISTANCE, distance_edges),
+            "by_size": {(tag or "untagged"): summary(_BY_SIZE + i) for i, tag in enumerate(tags)},
+            "by_obliqueness_deg": binned(_BY_OBLIQUENESS, OBLIQUENESS_EDGES_DEG),
         },
         "labels_per_class": {features.name[i]: int(per_class[i]) for i in range(len(features))},
         "exclusions": {r.reason or "labeled": int(exclusions[r]) for r in Exclusion},
         "visibility": {
-            "labeled_features_rendered": int(vis.size),
-            "visible_fraction_histogram": np.histogram(vis, bins=10, range=(0.0, 1.0))[0].tolist(),
-            "share_fully_visible": float((vis >= 1.0).mean()) if vis.size else None,
+            "labeled_features_rendered": totals.visible_n,
+            "visible_fraction_histogram": totals.visible.tolist(),
+            "share_fully_visible": totals.visible_full / totals.visible_n if totals.visible_n else None,
             # centre_visible is 1 or 0 where rendered: the mean is the share of ones
-            "share_centre_visible": cv_ones / cv_count if cv_count else None,
+            "share_centre_visible": totals.cv_ones / totals.cv_count if totals.cv_count else None,
         },
         "pnp_below_3_features": pnp,
-        "distance_coverage": {"edges_m": coverage_edges.tolist(),
-                              "frames": np.histogram(frame_distance, bins=coverage_edges)[0].tolist()},
+        "distance_coverage": {"edges_m": coverage_edges.tolist(), "frames": coverage.tolist()},
         "_top_m": top,
-        "_arrays": {"drift": d, "distance": dist, "obliqueness": obl, "size": size,
-                    "visible_fraction": vis},
+        "_plot": {"drift_scatter": drift["scatter"],
+                  "drift_boxes": [((tag or "untagged"), groups[_BY_SIZE + i]["box"]) for i, tag in enumerate(tags)
+                                  if "box" in groups.get(_BY_SIZE + i, {})]},
     }
 
 
@@ -985,33 +1166,45 @@ def _appearance_part(columns: dict[str, list], rank: NDArray[np.int64]) -> dict[
     return out
 
 
-def _appearance_finish(parts: list[dict[str, dict]]) -> dict:
+def _appearance_finish(spill: Spill, columns: dict[str, dict]) -> dict:
     """The appearance section: per dimension (:data:`datagen.dataset.schema.APPEARANCE`) and
     column, how many frames drew it and the distribution of the draws (a histogram of
     :data:`APPEARANCE_BINS` bins for numbers, counts per value for names and flags). A
-    column no frame drew (its randomizer off) has ``frames`` 0."""
+    column no frame drew (its randomizer off) has ``frames`` 0. ``columns``: the counts
+    (:class:`_Totals`); the numbers are in ``spill``'s streams ``appearance.<column>``."""
     from datagen.dataset.schema import APPEARANCE
 
     out: dict[str, dict] = {}
     for dimension, names in APPEARANCE.items():
         section = {}
         for name in names:
-            mine = [p[name] for p in parts if name in p]
-            if not mine:
+            if name not in columns:
                 continue
-            entry: dict = {"frames": sum(m["frames"] for m in mine)}
-            counts = [m["values"] for m in mine if "values" in m]
-            if counts:
-                entry["values"] = dict(sorted(sum(counts, Counter()).items()))
+            entry: dict = {"frames": columns[name]["frames"]}
+            if "values" in columns[name]:
+                entry["values"] = dict(sorted(columns[name]["values"].items()))
             elif entry["frames"]:
-                values = np.concatenate([m["numbers"] for m in mine])
-                values = values[np.argsort(np.concatenate([m["rank"] for m in mine]), kind="stable")]
-                values = values[np.isfinite(values)]
-                if values.size:
-                    lo, hi = float(values.min()), float(values.max())
-                    counts_, edges = np.histogram(values, bins=APPEARANCE_BINS, range=(lo, hi if hi > lo else lo + 1.0))
-                    entry.update(min=lo, max=hi, mean=float(values.mean()), edges=edges.tolist(),
-                                 histogram=counts_.tolist())
+                entry.update(_number_summary(spill, f"appearance.{name}"))
             section[name] = entry
         out[dimension] = section
     return out
+
+
+def _number_summary(spill: Spill, stream: str) -> dict:
+    """Min, max, mean (in frame order) and a histogram of a spilled stream's finite values."""
+    n, lo, hi = 0, math.inf, -math.inf
+    for part in spill.parts(stream, "value"):
+        v = part["value"][np.isfinite(part["value"])]
+        if v.size:
+            n, lo, hi = n + v.size, min(lo, float(v.min())), max(hi, float(v.max()))
+    if not n:
+        return {}
+    total = OrderedSum(n)
+    for part in spill.ordered(stream, "value"):
+        total.feed(part["value"][np.isfinite(part["value"])])
+    counts = np.zeros(APPEARANCE_BINS, dtype=np.int64)
+    for part in spill.parts(stream, "value"):
+        v = part["value"][np.isfinite(part["value"])]
+        counts_, edges = np.histogram(v, bins=APPEARANCE_BINS, range=(lo, hi if hi > lo else lo + 1.0))
+        counts += counts_
+    return {"min": lo, "max": hi, "mean": total.mean(), "edges": edges.tolist(), "histogram": counts.tolist()}

@@ -60,18 +60,17 @@ def plot_audit(stats: dict, folder: Path) -> dict[str, Path]:
     """The audit's figures as PNGs in ``folder``; returns {name: path}."""
     import numpy as np
 
-    arrays = stats["_arrays"]
+    plot = stats["_plot"]
     out: dict[str, Path] = {}
 
     def save(fig, name: str) -> None:
         out[name] = _save_png(fig, Path(folder) / f"{name}.png")
 
-    drift, distance = arrays["drift"], arrays["distance"]
+    scatter = plot["drift_scatter"]  # every k-th feature in frame order: (distance, drift)
     floor = 1e-4  # a drift of exactly 0 (a symmetric view) still shows on the log axis
     fig, ax = _figure(figsize=(8, 4.5))
-    if drift.size:
-        pick = np.linspace(0, drift.size - 1, min(drift.size, 20000)).astype(int)  # every k-th: no RNG
-        ax.scatter(distance[pick], np.maximum(drift[pick], floor), s=3, alpha=0.25, label="a feature in a frame")
+    if len(scatter):
+        ax.scatter(scatter[:, 0], np.maximum(scatter[:, 1], floor), s=3, alpha=0.25, label="a feature in a frame")
         bins = [b for b in stats["tight_drift_px"]["by_distance_m"] if b["count"]]
         mid = [(b["lo"] + b["hi"]) / 2 for b in bins]
         ax.plot(mid, [max(b["median"], floor) for b in bins], "o-", color="C3", label="median per 10 m")
@@ -83,10 +82,10 @@ def plot_audit(stats: dict, folder: Path) -> dict[str, Path]:
     save(fig, "drift_vs_distance")
 
     fig, axes = _figure(1, 2, figsize=(11, 4.2))
-    sizes = sorted(set(arrays["size"].tolist()))
-    if drift.size:
-        axes[0].boxplot([np.maximum(drift[arrays["size"] == s], floor) for s in sizes], showfliers=False)
-        axes[0].set_xticks(range(1, len(sizes) + 1), [s or "untagged" for s in sizes])
+    boxes = plot["drift_boxes"]  # (size tag, quartiles and whiskers) per tag with features
+    if boxes:
+        axes[0].bxp([{"label": tag, **{k: max(v, floor) for k, v in box.items()}} for tag, box in boxes],
+                    showfliers=False)
     axes[0].set(yscale="log", xlabel="feature size", ylabel="tight-box centre drift (px)", title="by feature size")
     bins = [b for b in stats["tight_drift_px"]["by_obliqueness_deg"] if b["count"]]
     mid = [(b["lo"] + b["hi"]) / 2 for b in bins]
