@@ -4,7 +4,8 @@ A reader (or a crash) never sees a half-written file. A temporary is named
 ``.NAME.PID.datagen-tmp``: a name only datagen uses, so that sweeping the
 temporaries an interrupted writer left can never touch a user's own files.
 The dataset writer and the report writers call these functions; no other
-module opens a file for writing (a test checks).
+module opens a file for writing (a test checks). The one file written in place is a
+scratch file in a private temporary folder (:func:`scratch_file`), never a user's.
 
 Image formats live here too: 8-bit PNG (zlib level 1, no row filter) or JPEG
 for training images, overlays and sheets, and the linear EXR of a frame
@@ -17,14 +18,16 @@ import contextlib
 import os
 import re
 import shutil
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Final
+from typing import BinaryIO, Final
 
 __all__ = [
     "TEMPORARY_SUFFIX",
     "atomic_path",
     "is_temporary",
+    "scratch_file",
     "write_bytes",
     "write_exr",
     "write_figure",
@@ -154,3 +157,13 @@ def symlink_folder(link: str | Path, target: str) -> Path:
     link.parent.mkdir(parents=True, exist_ok=True)
     link.symlink_to(target, target_is_directory=True)
     return link
+
+
+def scratch_file(folder: str | Path, name: str) -> BinaryIO:
+    """A new binary file ``name``, open for reading and writing, in ``folder``, which must be
+    a private temporary folder (made by :func:`tempfile.mkdtemp`): the audit's spilled
+    values (:class:`datagen.analysis.exact.Spill`), removed with the folder."""
+    folder = Path(folder)
+    if folder.parent != Path(tempfile.gettempdir()):
+        raise ValueError(f"{folder}: a scratch file belongs in a temporary folder")
+    return open(folder / name, "x+b")

@@ -59,7 +59,8 @@ def test_only_the_render_package_imports_mitsuba_or_drjit() -> None:
 #: Calls that write a file (or create one), wherever they appear.
 WRITE_CALLS = {"write_text", "write_bytes", "savefig", "imwrite", "write_table", "write_to_dataset"}
 #: The functions of datagen.files that write.
-WRITERS = {"atomic_path", "write_bytes", "write_text", "write_parquet", "write_exr", "write_image", "write_figure"}
+WRITERS = {"atomic_path", "write_bytes", "write_text", "write_parquet", "write_exr", "write_image", "write_figure",
+           "scratch_file"}
 
 
 def writes(tree: ast.Module) -> list[str]:
@@ -86,7 +87,8 @@ def writes(tree: ast.Module) -> list[str]:
 def test_every_file_write_goes_through_one_module_called_by_the_writers() -> None:
     """``datagen/files.py`` writes (and ``dataset/folder.py`` creates the lock); the modules
     that call its writers are the dataset writer (``dataset/``, ``pipeline/writer.py``), the
-    report writers (``report/``) and the asset writer (``assets/generate.py``)."""
+    report writers (``report/``), the asset writer (``assets/generate.py``) and the audit's
+    spill of values into a private temporary folder (``analysis/exact.py``)."""
     primitives = {path: found for path, tree in modules().items() if (found := writes(tree))}
     assert set(primitives) == {"files.py", "dataset/folder.py"}, primitives
     assert primitives["dataset/folder.py"] == ["os.open"]  # the lock file
@@ -96,7 +98,8 @@ def test_every_file_write_goes_through_one_module_called_by_the_writers() -> Non
             if isinstance(node, ast.ImportFrom) and node.module == "datagen.files" and \
                     {a.name for a in node.names} & WRITERS:
                 callers.add(path)
-    allowed = {p for p in callers if p.startswith(("dataset/", "report/"))} | {"pipeline/writer.py", "assets/generate.py"}
+    allowed = {p for p in callers if p.startswith(("dataset/", "report/"))} | {"pipeline/writer.py", "assets/generate.py",
+                                                                                     "analysis/exact.py"}
     assert callers <= allowed, callers - allowed
     assert {"pipeline/writer.py", "dataset/metadata.py", "report/plots.py"} <= callers
 

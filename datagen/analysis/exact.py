@@ -27,6 +27,8 @@ from typing import BinaryIO, Final, Self
 import numpy as np
 from numpy.typing import NDArray
 
+from datagen.files import scratch_file
+
 __all__ = ["PAIRWISE_BLOCK", "OrderedSum", "Spill", "median", "order_statistics", "percentile"]
 
 #: numpy sums at most this many values with its 8-accumulator loop before it splits (PW_BLOCKSIZE).
@@ -313,7 +315,7 @@ class Spill:
     def _file(self, stream: str, column: str) -> BinaryIO:
         key = (stream, column)
         if key not in self._files:
-            self._files[key] = open(self.folder / f"{stream}.{column}.bin", "w+b")  # noqa: SIM115 (closed by close)
+            self._files[key] = scratch_file(self.folder, f"{stream}.{column}.bin")
         return self._files[key]
 
     def _append(self, stream: str, column: str, values: NDArray) -> None:
