@@ -202,3 +202,18 @@ def test_the_overlay_draws_the_true_centre_where_it_is(labels_only) -> None:
              for name in ("tight_xyxy", "corrected_xyxy", "label_xyxy")}
     image = draw_overlay(view, b, dataclasses.replace(labels, exclusion=only, **boxes), names=False)
     np.testing.assert_allclose(crosshair_centre(image, centre, radius=10), centre, atol=0.1)
+
+
+def test_write_bytes_makes_its_folder_replaces_atomically_and_leaves_no_temporary(tmp_path) -> None:
+    from datagen.files import is_temporary, write_bytes, write_text
+
+    target = tmp_path / "a" / "b" / "labels.txt"
+    assert write_text(target, "0 0.5 0.5 0.1 0.1\n") == target
+    assert target.read_text() == "0 0.5 0.5 0.1 0.1\n"
+    write_bytes(str(target), b"replaced")
+    assert target.read_bytes() == b"replaced"
+    (tmp_path / "a" / "b" / "dir.txt").mkdir()
+    with pytest.raises(IsADirectoryError) as info:  # the rename fails: the error names the target
+        write_bytes(tmp_path / "a" / "b" / "dir.txt", b"x")
+    assert not any(is_temporary(p.name) for p in (tmp_path / "a" / "b").iterdir())
+    assert str(info.value.filename).endswith("dir.txt")

@@ -186,3 +186,15 @@ def test_the_sea_variance_from_distinct_bins_equals_the_whole_grid_bit_for_bit(w
     whole[0, 0] = 0.0  # the mean
     np.testing.assert_array_equal(fast, whole)
     assert np.array_equal(np.signbit(fast), np.signbit(whole)) and fast.sum() > 0
+
+
+def test_looks_drawn_with_a_shared_approach_dict_equal_looks_drawn_alone() -> None:
+    """The writer keeps each chain's weather and liveries for its other frames: the looks
+    are those each frame gets alone, with every world randomizer on, in any frame order."""
+    config = wingcam(**{"randomization.sensor.enabled": True})
+    states = FrameStates(config)
+    frames = [int(i) for i in np.random.default_rng(2).permutation(300)[:120]]
+    approaches: dict = {}
+    shared = [frame_look(config, states(i), approaches) for i in frames]
+    assert shared == [frame_look(config, states(i)) for i in frames]
+    assert len(approaches) == len({states(i).approach_index for i in frames}) < len(frames)

@@ -39,12 +39,13 @@ class FrameDraws:
     look: FrameLook
 
 
-def draw_frame(scene: Scene, states: FrameStates, i: int) -> FrameDraws:
+def draw_frame(scene: Scene, states: FrameStates, i: int, approaches: dict | None = None) -> FrameDraws:
     """Frame ``i``'s state (from ``states``, the scene's approach chains), look and
-    Mitsuba sampler seed, all from the scene's root seed."""
+    Mitsuba sampler seed, all from the scene's root seed (``approaches``: a dict keeping
+    each approach chain's weather and liveries for its other frames)."""
     seed = scene.config.dataset.seed
     state = states(i)
-    return FrameDraws(i, seed, render_seed(seed, i), state, frame_look(scene.config, state))
+    return FrameDraws(i, seed, render_seed(seed, i), state, frame_look(scene.config, state, approaches))
 
 
 def _cameras(scene: Scene, draws: Sequence[FrameDraws]) -> tuple[np.ndarray, np.ndarray | None]:

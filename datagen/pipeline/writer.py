@@ -78,7 +78,8 @@ class ShardWriter:
         rows, excluded, labels = [], Counter(), 0
         rendered, render_s, denoise_s, frame_s = 0, 0.0, 0.0, 0.0
         self.states.prefetch(job.frames)  # the shard's approach chains, simulated together
-        draws = [draw_frame(self.scene, self.states, i) for i in job.frames]
+        approaches: dict = {}  # the shard's approach chains' weather and liveries, drawn once each
+        draws = [draw_frame(self.scene, self.states, i, approaches) for i in job.frames]
         labels_all, objects_all = shard_labels(self.scene, draws)  # every frame's labels at once
         for b, frame_draws in enumerate(draws):
             if self._stop():

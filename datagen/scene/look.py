@@ -211,16 +211,18 @@ def monahan_whitecap_fraction(wind_speed_mps: float) -> float:
     return float(min(3.84e-6 * max(float(wind_speed_mps), 0.0) ** 3.41, 1.0))
 
 
-def frame_look(config: Config, state: FrameState) -> FrameLook:
+def frame_look(config: Config, state: FrameState, approaches: dict | None = None) -> FrameLook:
     """The whole look of the frame ``state`` poses: :func:`draw_look` from the frame's own
-    stream, then :func:`draw_world` (what a build renders it with)."""
+    stream, then :func:`draw_world` (what a build renders it with). ``approaches``: a dict
+    that keeps each approach chain's weather and liveries for its other frames."""
     from datagen.core.conventions import frame_rng
 
     seed = config.dataset.seed
-    return draw_world(config, draw_look(config, frame_rng(seed, state.frame_index)), seed, state)
+    return draw_world(config, draw_look(config, frame_rng(seed, state.frame_index)), seed, state, approaches)
 
 
-def draw_world(config: Config, look: FrameLook, seed: int, state: FrameState) -> FrameLook:
+def draw_world(config: Config, look: FrameLook, seed: int, state: FrameState,
+               approaches: dict | None = None) -> FrameLook:
     """``look`` with the frame's world drawn onto it: a backlit sun, clouds, sea state,
     liveries and the sensor, each from its own stream (:func:`datagen.core.conventions.world_rng`)
     and only where its randomizer is on, so that one switch changes no other draw.
@@ -229,27 +231,60 @@ def draw_world(config: Config, look: FrameLook, seed: int, state: FrameState) ->
     (streams keyed by ``state.approach_index``): the frames of one approach see the same
     clouds, sea and aircraft, as a camera flying it would. The sun's backlit draw and the
     sensor's are the frame's own. Cloud altitudes are relative to the tanker's, which is
-    constant over an approach, so that the clouds stay where they are as the camera moves."""
+    constant over an approach, so that the clouds stay where they are as the camera moves.
+    ``approaches``: a dict keeping each chain's draws (:func:`frame_look`)."""
     from datagen.assets.rig import MOUNTS
-    from datagen.assets.textures import wave_slope_variance
     from datagen.core.conventions import world_rng
 
     r = config.randomization
     world: dict = {}
     sky = r.sky
-    frame_index, approach_index = state.frame_index, state.approach_index
     if sky.backlit_fraction > 0.0:
-        rng = world_rng(seed, frame_index, "sun")
+        rng = world_rng(seed, state.frame_index, "sun")
         backlit = bool(rng.random() < sky.backlit_fraction)
         offset = float(rng.uniform(-sky.backlit_azimuth_deg, sky.backlit_azimuth_deg))
         world["sun_backlit"] = backlit
         if backlit:
             d = MOUNTS[config.camera.mount].direction
             world["sun_azimuth_deg"] = math.degrees(math.atan2(d[1], d[0])) % 360.0 + offset
+    base = float(state.world_from_tanker[2, 3])  # the tanker flies level: one weather per approach
+    key = (state.approach_index, base)
+    chain = approaches.get(key) if approaches is not None else None
+    if chain is None:
+        chain = _approach_world(config, seed, state.approach_index, base)
+        if approaches is not None:
+            approaches[key] = chain
+    world.update(chain)
+    s = r.sensor
+    if s.enabled:
+        rng = world_rng(seed, state.frame_index, "sensor")
+        k1, k2 = _uniform(rng, s.k1), _uniform(rng, s.k2)
+        p1, p2 = _uniform(rng, s.tangential), _uniform(rng, s.tangential)
+        quality = int(rng.integers(s.jpeg_quality[0], s.jpeg_quality[1] + 1))
+        iso, exposure = _log_uniform(rng, s.iso), _log_uniform(rng, s.exposure_time_s)
+        world.update(
+            sensor_iso=iso if s.noise else None,
+            sensor_exposure_time_s=exposure if s.motion_blur else None,
+            sensor_vignetting=_uniform(rng, s.vignetting),
+            sensor_glare=_uniform(rng, s.glare),
+            sensor_distortion=(k1, k2, p1, p2, 0.0) if s.distortion else None,
+            sensor_jpeg_quality=quality if s.jpeg else None,
+            sensor_seed=_seed(rng),
+        )
+    return dataclasses.replace(look, **world) if world else look
+
+
+def _approach_world(config: Config, seed: int, approach_index: int, base: float) -> dict:
+    """An approach chain's clouds (their altitudes about the tanker's, ``base``), sea state
+    and liveries, each where its randomizer is on (:func:`draw_world`)."""
+    from datagen.assets.textures import wave_slope_variance
+    from datagen.core.conventions import world_rng
+
+    r = config.randomization
+    world: dict = {}
     c = r.clouds
     if c.enabled:
         rng = world_rng(seed, approach_index, "clouds")
-        base = float(state.world_from_tanker[2, 3])  # the tanker flies level: one weather per approach
         side = 1.0 if rng.random() < 0.5 else -1.0
         world.update(
             cloud_deck_coverage=_uniform(rng, c.deck_coverage),
@@ -286,23 +321,7 @@ def draw_world(config: Config, look: FrameLook, seed: int, state: FrameState) ->
             livery_weathering=_uniform(rng, lv.weathering),
             livery_seed=_seed(rng),
         )
-    s = r.sensor
-    if s.enabled:
-        rng = world_rng(seed, frame_index, "sensor")
-        k1, k2 = _uniform(rng, s.k1), _uniform(rng, s.k2)
-        p1, p2 = _uniform(rng, s.tangential), _uniform(rng, s.tangential)
-        quality = int(rng.integers(s.jpeg_quality[0], s.jpeg_quality[1] + 1))
-        iso, exposure = _log_uniform(rng, s.iso), _log_uniform(rng, s.exposure_time_s)
-        world.update(
-            sensor_iso=iso if s.noise else None,
-            sensor_exposure_time_s=exposure if s.motion_blur else None,
-            sensor_vignetting=_uniform(rng, s.vignetting),
-            sensor_glare=_uniform(rng, s.glare),
-            sensor_distortion=(k1, k2, p1, p2, 0.0) if s.distortion else None,
-            sensor_jpeg_quality=quality if s.jpeg else None,
-            sensor_seed=_seed(rng),
-        )
-    return dataclasses.replace(look, **world) if world else look
+    return world
 
 
 def neutral_look(config: Config) -> FrameLook:
