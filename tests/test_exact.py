@@ -150,3 +150,21 @@ def test_box_quartiles_and_whiskers_match_matplotlibs(tmp_path) -> None:
         want = matplotlib.cbook.boxplot_stats(mine)[0]
         assert {k: box[k] for k in ("q1", "med", "q3", "whislo", "whishi")} == \
             {k: float(want[k]) for k in ("q1", "med", "q3", "whislo", "whishi")}
+
+
+def test_a_full_disk_names_the_spill_file_and_tmpdir_and_the_folder_goes(monkeypatch) -> None:
+    """Writing to /dev/full fails as a full disk does (ENOSPC)."""
+    import errno
+    import os
+
+    from datagen.analysis import exact
+
+    if not os.path.exists("/dev/full"):
+        pytest.skip("needs /dev/full")
+    monkeypatch.setattr(exact, "scratch_file", lambda folder, name: open("/dev/full", "r+b"))  # noqa: SIM115
+    spill = Spill()
+    with pytest.raises(OSError) as info, spill:
+        spill.add("s", np.arange(3), value=np.ones(3))
+    assert info.value.errno == errno.ENOSPC and info.value.filename == "/dev/full"
+    assert "TMPDIR" in info.value.strerror
+    assert not spill.folder.exists()

@@ -16,6 +16,7 @@ computed from values spilled to disk (:class:`Spill`) and read back in bounded p
 
 from __future__ import annotations
 
+import contextlib
 import math
 import shutil
 import tempfile
@@ -308,7 +309,8 @@ class Spill:
 
     def close(self) -> None:
         for f in self._files.values():
-            f.close()
+            with contextlib.suppress(OSError):  # a full disk: the folder goes all the same
+                f.close()
         self._files.clear()
         shutil.rmtree(self.folder, ignore_errors=True)
 
@@ -323,8 +325,13 @@ class Spill:
         if self._kinds.setdefault((stream, column), kind) != kind:
             raise ValueError(f"{stream}.{column}: {kind} values after {self._kinds[(stream, column)]}")
         f = self._file(stream, column)
-        f.seek(0, 2)
-        f.write(np.ascontiguousarray(values).tobytes())
+        try:
+            f.seek(0, 2)
+            f.write(np.ascontiguousarray(values).tobytes())
+            f.flush()  # a full disk shows here, naming the file, not at a later read
+        except OSError as exc:
+            raise OSError(exc.errno, f"{exc.strerror} (values spilled while reading the dataset: "
+                          "set TMPDIR to a folder with room)", f.name) from exc
 
     def add(self, stream: str, rank: NDArray[np.int64] | None, **columns: NDArray) -> None:
         """One part's rows of ``stream``: their ``rank`` and columns (stored ordered by rank,
