@@ -526,8 +526,8 @@ def _check_learnable(meta: DatasetMeta, spill: Spill, top: float, min_share: flo
         cls = part["cls"].astype(np.int64)
         per_class += np.stack([np.bincount(cls, minlength=len(names)),
                                np.bincount(cls, weights=ok, minlength=len(names)).astype(np.int64)], axis=1)
-        k = np.searchsorted(edges, part["distance"], side="right") - 1
-        inside = (k >= 0) & (k < len(edges) - 1)
+        k = _bin_of(part["distance"], edges)
+        inside = k >= 0
         per_bin += np.stack([np.bincount(k[inside], minlength=len(edges) - 1),
                              np.bincount(k[inside], weights=ok[inside], minlength=len(edges) - 1).astype(np.int64)],
                             axis=1)
