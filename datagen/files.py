@@ -46,19 +46,30 @@ def is_temporary(name: str) -> bool:
     return _TEMPORARY.fullmatch(name) is not None
 
 
+def _temporary(target: str) -> str:
+    """The hidden temporary beside ``target`` that this process writes it through."""
+    folder, name = os.path.split(target)
+    return os.path.join(folder, f".{name}.{os.getpid()}{TEMPORARY_SUFFIX}")
+
+
+def _name_target(exc: OSError, tmp: str | Path, target: str | Path) -> None:
+    """A full disk mid-write names no file, or the temporary: name the file being written."""
+    if exc.filename is None or Path(os.fsdecode(exc.filename)) == Path(tmp):
+        exc.filename = str(target)
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a hidden temporary path beside ``path``; rename it into place on success,
     remove it on failure."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}{TEMPORARY_SUFFIX}")
+    tmp = Path(_temporary(str(path)))
     try:
         yield tmp
         os.replace(tmp, path)
-    except OSError as exc:  # a full disk mid-write names no file: name the one being written
-        if exc.filename is None or Path(os.fsdecode(exc.filename)) == tmp:
-            exc.filename = str(path)
+    except OSError as exc:
+        _name_target(exc, tmp, path)
         raise
     finally:
         with contextlib.suppress(FileNotFoundError):
@@ -101,13 +112,12 @@ def write_bytes(path: str | Path, data: bytes) -> Path:
     naming ``path``), in plain system calls: a labels-only build writes a small file per
     frame, and the path objects and the folder check cost as much as the writing."""
     target = os.fspath(path)
-    folder, name = os.path.split(target)
-    tmp = os.path.join(folder, f".{name}.{os.getpid()}{TEMPORARY_SUFFIX}")
+    tmp = _temporary(target)
     try:
         try:
             fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
         except FileNotFoundError:  # a folder not made yet
-            os.makedirs(folder or ".", exist_ok=True)
+            os.makedirs(os.path.dirname(target) or ".", exist_ok=True)
             fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
         try:
             view = memoryview(data)
@@ -116,15 +126,11 @@ def write_bytes(path: str | Path, data: bytes) -> Path:
         finally:
             os.close(fd)
         os.replace(tmp, target)
-    except OSError as exc:  # a full disk mid-write names no file: name the one being written
+    except BaseException as exc:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
-        if exc.filename is None or os.fsdecode(exc.filename) == tmp:
-            exc.filename = target
-        raise
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
+        if isinstance(exc, OSError):
+            _name_target(exc, tmp, target)
         raise
     return Path(path)
 

@@ -288,7 +288,7 @@ def audit(dataset: DatasetView | DatasetSource, *, min_learnable: float = MIN_LE
         parts = _parts(dataset, index, workers, progress)
     merged: dict[str, Check] = {}
     with Spill() as spill:  # the per-feature and per-line values, on disk until the statistics
-        totals = _Totals()
+        totals = _Totals(len(dataset.features))
         pose = np.zeros(2, dtype=np.int64)  # pose instances, learnable ones
         for part in parts:
             for c in part.checks:
@@ -940,8 +940,9 @@ class _Totals:
     """What the statistics keep in memory of every :func:`_statistics_part`: counts; the
     per-feature, per-frame and per-draw values go to the spill."""
 
-    def __init__(self) -> None:
-        self.exclusions = self.per_class = None
+    def __init__(self, classes: int) -> None:
+        self.exclusions = np.zeros(max(Exclusion) + 1, dtype=np.int64)
+        self.per_class = np.zeros(classes, dtype=np.int64)
         self.visible = np.zeros(10, dtype=np.int64)  # histogram of labeled features' visible fractions
         self.visible_n = self.visible_full = self.cv_count = self.cv_ones = 0
         self.appearance: dict[str, dict] = {}  # column -> frames, and counts per value (names, flags)
@@ -950,9 +951,8 @@ class _Totals:
         spill.add("drift", part["rank"], drift=part["drift"], distance=part["distance"],
                   obliqueness=part["obliqueness"], cls=part["class"])
         spill.add("frames", None, distance=part["frame_distance"], labeled=part["labeled_per_object"])
-        self.exclusions = part["exclusions"] if self.exclusions is None else self.exclusions + part["exclusions"]
-        self.per_class = part["labeled_per_class"] if self.per_class is None else \
-            self.per_class + part["labeled_per_class"]
+        self.exclusions += part["exclusions"]
+        self.per_class += part["labeled_per_class"]
         vis = part["visible_fraction"]
         self.visible += np.histogram(vis, bins=10, range=(0.0, 1.0))[0]
         self.visible_n += vis.size
@@ -989,8 +989,13 @@ def _drift_groups(part: dict, distance_edges: NDArray, size_of_class: NDArray[np
 
     return [np.full(len(part["drift"]), _ALL, dtype=np.int64),
             offset(_bin_of(part["distance"], distance_edges), _BY_DISTANCE),
-            size_of_class[part["cls"].astype(np.int64)] + _BY_SIZE,
+            _size_group(part["cls"], size_of_class),
             offset(_bin_of(part["obliqueness"], OBLIQUENESS_EDGES_DEG), _BY_OBLIQUENESS)]
+
+
+def _size_group(cls: NDArray, size_of_class: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Each drift value's size-tag group (:func:`_drift_groups`)."""
+    return size_of_class[cls.astype(np.int64)] + _BY_SIZE
 
 
 #: Drift values the report's scatter plot shows at most (every k-th in frame order).
@@ -1049,11 +1054,11 @@ def _drift_statistics(spill: Spill, distance_edges: NDArray, size_of_class: NDAr
                   "p95": math.nan if nan else percentile(n, 95, stat), "max": top[g]}
         if g in quartiles and not nan:
             out[g]["box"] = {"q1": percentile(n, 25, stat), "med": out[g]["median"], "q3": percentile(n, 75, stat)}
-    _whiskers(spill, out, distance_edges, size_of_class)
+    _whiskers(spill, out, size_of_class)
     return {"groups": out, "scatter": np.concatenate(scatter) if scatter else np.zeros((0, 2))}
 
 
-def _whiskers(spill: Spill, groups: dict[int, dict], distance_edges: NDArray, size_of_class: NDArray) -> None:
+def _whiskers(spill: Spill, groups: dict[int, dict], size_of_class: NDArray[np.int64]) -> None:
     """Matplotlib's box whiskers (the extreme values within 1.5 IQR of the quartiles) of the
     size groups' boxes."""
     boxes = {g: v["box"] for g, v in groups.items() if "box" in v}
@@ -1061,9 +1066,9 @@ def _whiskers(spill: Spill, groups: dict[int, dict], distance_edges: NDArray, si
         iqr = box["q3"] - box["q1"]
         box["lo"], box["hi"] = box["q1"] - 1.5 * iqr, box["q3"] + 1.5 * iqr
         box["whislo"], box["whishi"] = math.inf, -math.inf
-    for part in spill.parts("drift", "drift", "distance", "obliqueness", "cls") if boxes else ():
+    for part in spill.parts("drift", "drift", "cls") if boxes else ():
         d = part["drift"]
-        size_group = _drift_groups(part, distance_edges, size_of_class)[2]
+        size_group = _size_group(part["cls"], size_of_class)
         for g, box in boxes.items():
             mine = d[size_group == g]
             low, high = mine[mine >= box["lo"]], mine[mine <= box["hi"]]
@@ -1100,13 +1105,12 @@ def _statistics(meta: DatasetMeta, spill: Spill, totals: _Totals) -> dict:
 
     coverage_edges = np.arange(0.0, top + 5.0, 5.0)
     coverage = np.zeros(len(coverage_edges) - 1, dtype=np.int64)
-    labeled: list[NDArray[np.int64]] = [np.zeros(1, dtype=np.int64) for _ in features.objects]
+    # per object: how many frames have each count of labeled features (at most every feature)
+    labeled = np.zeros((len(features.objects), len(features) + 1), dtype=np.int64)
     for part in spill.parts("frames", "distance", "labeled"):
         coverage += np.histogram(part["distance"], bins=coverage_edges)[0]
         for j, counts in enumerate(labeled):
-            mine = np.bincount(part["labeled"][:, j])
-            labeled[j] = np.pad(counts, (0, max(0, mine.size - counts.size))) + np.pad(mine, (0, max(0, counts.size
-                                                                                                    - mine.size)))
+            counts += np.bincount(part["labeled"][:, j], minlength=counts.size)
     pnp = {}
     for obj, counts in zip(features.objects, labeled, strict=True):
         cum = np.cumsum(counts)
@@ -1114,8 +1118,7 @@ def _statistics(meta: DatasetMeta, spill: Spill, totals: _Totals) -> dict:
         pnp[obj] = {"frames_below_3": below, "share_below_3": below / frames if frames else 0.0,
                     "median_labeled": median(frames, lambda k, cum=cum: float(np.searchsorted(cum, k, side="right")))
                     if frames else 0.0}
-    per_class = np.zeros(len(features), dtype=np.int64) if totals.per_class is None else totals.per_class
-    exclusions = np.zeros(max(Exclusion) + 1, dtype=np.int64) if totals.exclusions is None else totals.exclusions
+    per_class, exclusions = totals.per_class, totals.exclusions
     whole = summary(_ALL)
     return {
         "tight_drift_px": {

@@ -30,7 +30,17 @@ from numpy.typing import NDArray
 
 from datagen.files import scratch_file
 
-__all__ = ["PAIRWISE_BLOCK", "OrderedSum", "Spill", "median", "order_statistics", "percentile"]
+__all__ = [
+    "PAIRWISE_BLOCK",
+    "SELECT_GATHER",
+    "OrderedSum",
+    "Spill",
+    "median",
+    "median_positions",
+    "order_statistics",
+    "percentile",
+    "percentile_positions",
+]
 
 #: numpy sums at most this many values with its 8-accumulator loop before it splits (PW_BLOCKSIZE).
 PAIRWISE_BLOCK: Final = 128
@@ -166,7 +176,7 @@ def order_statistics(chunks: Chunks, wanted: dict[int, set[int]], *, gather: int
             keep = np.isin(group, groups) & ~np.isnan(values)
             yield (np.searchsorted(groups, group[keep]).astype(np.uint64), _keys(values[keep]), values[keep])
 
-    def matches(prefixes: dict[int, list[int]], slot, keys):
+    def matches(prefixes: dict[int, NDArray[np.uint64]], slot, keys):
         """Per prefix length: which values lie under one of ``prefixes`` (slot, prefix) codes,
         and the index of that code among the sorted ones."""
         for shift, codes in prefixes.items():
