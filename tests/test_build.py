@@ -3,6 +3,7 @@ workers and executors, atomic resumption, locking and refusal."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -12,6 +13,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 import cv2
@@ -29,9 +31,12 @@ from datagen.core.errors import ConfigError, DatagenError
 from datagen.core.labels import compute_labels
 from datagen.core.training import label_options
 from datagen.dataset.folder import DatasetLock
-from datagen.dataset.layout import SPLITS, frame_split, plan_shards
+from datagen.dataset.layout import SPLITS, Layout, frame_split, plan_shards
 from datagen.dataset.schema import MANIFEST_VERSION, features_schema, manifest_schema, read_features
+from datagen.pipeline.executors import PROGRESS_EVERY_S, _run_group
 from datagen.pipeline.run import build_dataset
+from datagen.pipeline.writer import MAX_GROUP_SHARDS, ShardWriter, shard_groups
+from datagen.scene.resolved import Scene
 
 from .support import (
     ROOT,
@@ -66,6 +71,66 @@ def test_shards_partition_the_frames(tmp_path_factory, frames, shard_size, val, 
     if by == "approach":
         k = config.approach.frames_per_approach
         assert all(frame_split(config, i) == frame_split(config, i - i % k) for i in range(frames))
+
+
+@given(frames=st.integers(1, 3000), shard_size=st.integers(1, 200), val=st.floats(0.0, 0.9),
+       by=st.sampled_from(["frame", "approach"]), workers=st.integers(1, 8), together=st.booleans())
+def test_shard_groups_cut_the_shards_in_frame_order_only_before_a_second_rare_shard_or_at_the_cap(
+        frames, shard_size, val, by, workers, together) -> None:
+    config = override_config(load_config(ROOT / "scenes/wingcam55.yaml"), {
+        "dataset.frames": frames, "dataset.shard_size": shard_size, "dataset.val_fraction": val,
+        "dataset.split_by": by})
+    jobs = plan_shards(config)
+    groups = shard_groups(jobs, workers, together)
+    assert [job for group in groups for job in group] == sorted(jobs, key=lambda job: job.frames[0])
+    assert all(groups)
+    counts = Counter(job.split for job in jobs)
+    cap = min(MAX_GROUP_SHARDS, len(jobs) // (2 * workers))
+    if not together or len(counts) < 2 or cap < 2:
+        assert all(len(group) == 1 for group in groups)
+        return
+    rare = min(counts, key=lambda split: (counts[split], split))
+    assert all(len(group) <= cap for group in groups)
+    assert all(sum(job.split == rare for job in group) <= 1 for group in groups)
+    for group, following in itertools.pairwise(groups):
+        assert len(group) == cap or (following[0].split == rare and any(job.split == rare for job in group))
+
+
+def test_labels_only_builds_in_shard_groups_write_what_each_shard_writes_alone(tmp_path: Path) -> None:
+    config = override_config(load_config(ROOT / "scenes/wingcam55.yaml"),
+                             {"dataset.frames": 600, "dataset.shard_size": 80})
+    jobs = plan_shards(config)
+    assert max(len(group) for group in shard_groups(jobs, 1)) > 1  # the build below runs groups
+    build_dataset(config, tmp_path / "grouped", render=False)
+    alone = tmp_path / "alone"
+    layout = Layout.of(alone, config)
+    (alone / "manifests").mkdir(parents=True)
+    scene = Scene.resolve(config)
+    for job in jobs:  # each shard by a writer of its own: nothing simulated or drawn for another shard
+        for folder in layout.shard_dirs(job):
+            folder.mkdir(parents=True, exist_ok=True)
+        ShardWriter(scene, alone, render=False).run(job)
+    assert label_files(alone) == label_files(tmp_path / "grouped")
+    assert comparable(alone) == comparable(tmp_path / "grouped")
+
+
+def test_a_worker_sends_its_frames_in_few_messages_and_all_of_them_at_each_shards_end(tmp_path: Path) -> None:
+    config = override_config(load_config(ROOT / "scenes/wingcam55.yaml"),
+                             {"dataset.frames": 600, "dataset.shard_size": 80})
+    group = max(shard_groups(plan_shards(config), 1), key=len)
+    layout = Layout.of(tmp_path, config)
+    (tmp_path / "manifests").mkdir()
+    for job in group:
+        for folder in layout.shard_dirs(job):
+            folder.mkdir(parents=True, exist_ok=True)
+    sent: list[int] = []
+    start = time.monotonic()
+    summaries = _run_group(ShardWriter(Scene.resolve(config), tmp_path, render=False), group, sent.append)
+    elapsed = time.monotonic() - start
+    assert [s.name for s in summaries] == [job.name for job in group]
+    ends = set(itertools.accumulate(len(job.frames) for job in group))
+    assert ends <= set(itertools.accumulate(sent)) and sum(sent) == max(ends)  # flushed at each shard's end
+    assert len(sent) <= len(group) + elapsed / PROGRESS_EVERY_S + 1  # not a message per frame
 
 
 def test_split_fraction_and_independence_from_sharding() -> None:

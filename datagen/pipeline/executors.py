@@ -18,6 +18,7 @@ import functools
 import itertools
 import os
 import signal
+import time
 from collections import deque
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -26,7 +27,7 @@ from typing import Final, Literal
 from datagen.core.errors import DatagenError
 from datagen.dataset.layout import ShardJob
 from datagen.pipeline.progress import ShardSummary
-from datagen.pipeline.writer import ShardWriter
+from datagen.pipeline.writer import ShardWriter, shard_groups
 from datagen.scene.resolved import Scene
 
 __all__ = ["Executor", "cpu_count", "ctrl_c_flag", "fixed_mmap_threshold", "map_in_order", "ray_cluster", "run_local", "run_ray"]
@@ -81,9 +82,46 @@ def _bootstrap(scene: Scene, root: str, threads: int, render: bool, queue) -> No
     _Worker.args = (scene, root, threads, render)
 
 
-def _pool_run(job: ShardJob) -> ShardSummary:
-    queue = _Worker.queue
-    return _writer(*_Worker.args).run(job, lambda n: queue.put(n))
+#: A worker sends its frame count to the parent at most this often (and after each shard).
+PROGRESS_EVERY_S: Final = 0.25
+
+
+class _Counts:
+    """A worker's progress callback: frames added up and sent on by ``send`` at most every
+    :data:`PROGRESS_EVERY_S` (a message per frame cost the parent of a labels-only build
+    a core's share of time, 100,000 queue reads)."""
+
+    def __init__(self, send: Callable[[int], None]) -> None:
+        self.send, self.frames, self.last = send, 0, time.monotonic()
+
+    def __call__(self, n: int) -> None:
+        self.frames += n
+        if time.monotonic() - self.last >= PROGRESS_EVERY_S:
+            self.flush()
+
+    def flush(self) -> None:
+        if self.frames:
+            self.send(self.frames)
+            self.frames = 0
+        self.last = time.monotonic()
+
+
+def _run_group(writer: ShardWriter, group: list[ShardJob], send: Callable[[int], None]) -> list[ShardSummary]:
+    """A task of :func:`shard_groups` in a worker: its shards' summaries, the frames done
+    sent on as they go."""
+    counts = _Counts(send)
+    summaries = []
+    try:
+        for summary in writer.run_group(group, counts):
+            counts.flush()
+            summaries.append(summary)
+    finally:
+        counts.flush()
+    return summaries
+
+
+def _pool_run(group: list[ShardJob]) -> list[ShardSummary]:
+    return _run_group(_writer(*_Worker.args), group, _Worker.queue.put)
 
 
 #: Tasks :func:`map_in_order` keeps submitted per worker: enough to keep the workers busy
@@ -164,14 +202,17 @@ def ctrl_c_flag():
 def run_local(scene: Scene, root: Path, jobs: list[ShardJob], workers: int, render: bool,
               progress: Progress, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
     """Run ``jobs`` in ``workers`` processes (one: in this process), ``threads`` Mitsuba
-    threads each; report frames to ``progress`` and finished shards to ``done``."""
+    threads each, as the tasks of :func:`shard_groups`; report frames to ``progress`` and
+    finished shards to ``done``."""
     workers = min(workers, len(jobs))
     threads = threads or max(1, cpu_count() // workers)
+    groups = shard_groups(jobs, workers, together=not render)
     if workers == 1:
         writer = _writer(scene, str(root), threads, render)
         with ctrl_c_flag() as stop:
-            for job in jobs:
-                done(writer.run(job, progress, stop))
+            for group in groups:
+                for summary in writer.run_group(group, progress, stop):
+                    done(summary)
         return
     import multiprocessing as mp
     import queue as queue_module
@@ -189,17 +230,21 @@ def run_local(scene: Scene, root: Path, jobs: list[ShardJob], workers: int, rend
     executor = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_bootstrap,
                                    initargs=(scene, str(root), threads, render, queue))
     try:
-        pending = {executor.submit(_pool_run, job): job for job in jobs}
+        pending = {executor.submit(_pool_run, group): group for group in groups}
         while pending:
             finished, _ = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
             drain()
             for future in finished:
-                job = pending.pop(future)
+                group = pending.pop(future)
                 try:
-                    done(future.result())  # re-raises a worker's exception here
+                    summaries = future.result()  # re-raises a worker's exception here
                 except BrokenProcessPool:
-                    raise DatagenError(f"shard {job.name}: a worker process died (out of memory, or killed); "
-                                       "rerun the same command to finish the missing shards") from None
+                    names = ", ".join(job.name for job in group)
+                    raise DatagenError(f"shard{'s' if len(group) > 1 else ''} {names}: a worker process died (out "
+                                       "of memory, or killed); rerun the same command to finish the missing "
+                                       "shards") from None
+                for summary in summaries:
+                    done(summary)
         drain()
     except BaseException:
         # Ctrl-C or a failed shard: stop every worker now (their files are atomic, the
@@ -211,9 +256,11 @@ def run_local(scene: Scene, root: Path, jobs: list[ShardJob], workers: int, rend
     executor.shutdown(wait=True)
 
 
-def _ray_run(scene: Scene, root: str, job: ShardJob, threads: int, render: bool, queue) -> ShardSummary:
-    """A Ray task (the entry point of its worker process for this dataset)."""
-    return _writer(scene, root, threads, render).run(job, lambda n: queue.put_nowait(n))
+def _ray_run(scene: Scene, root: str, group: list[ShardJob], threads: int, render: bool,
+             queue) -> list[ShardSummary]:
+    """A Ray task (the entry point of its worker process for this dataset): a task of
+    :func:`shard_groups`."""
+    return _run_group(_writer(scene, root, threads, render), group, queue.put_nowait)
 
 
 @contextlib.contextmanager
@@ -258,7 +305,8 @@ def run_ray(scene: Scene, root: Path, jobs: list[ShardJob], workers: int | None,
     per_task = max(1, min(cpus // workers, largest))
     task = ray.remote(num_cpus=per_task, max_retries=0)(_ray_run)
     queue = Queue()
-    refs = {task.remote(scene, str(root), job, threads or per_task, render, queue): job for job in jobs}
+    groups = shard_groups(jobs, workers, together=not render)
+    refs = {task.remote(scene, str(root), group, threads or per_task, render, queue): group for group in groups}
     pending = list(refs)
     try:
         while pending:
@@ -266,7 +314,8 @@ def run_ray(scene: Scene, root: Path, jobs: list[ShardJob], workers: int | None,
             for n in queue.get_nowait_batch(queue.qsize()) if queue.qsize() else []:
                 progress(n)
             for ref in ready:
-                done(ray.get(ref))
+                for summary in ray.get(ref):
+                    done(summary)
         for n in queue.get_nowait_batch(queue.qsize()) if queue.qsize() else []:
             progress(n)
     except BaseException:

@@ -15,7 +15,7 @@ import os
 import platform
 import time
 from collections import Counter, deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
@@ -30,7 +30,7 @@ from datagen.pipeline.progress import ShardSummary
 from datagen.scene.approach import FrameStates
 from datagen.scene.resolved import Scene
 
-__all__ = ["MAX_PENDING_WRITES", "ShardWriter"]
+__all__ = ["MAX_GROUP_SHARDS", "MAX_PENDING_WRITES", "ShardWriter", "shard_groups"]
 
 Progress = Callable[[int], None]
 
@@ -45,6 +45,38 @@ def _rss_mib() -> float:
 
 #: Frames whose images may still be in the writer thread while the next one renders.
 MAX_PENDING_WRITES = 1
+
+#: The most shards :func:`shard_groups` puts in one task.
+MAX_GROUP_SHARDS = 8
+
+
+def shard_groups(jobs: list[ShardJob], workers: int, together: bool = True) -> list[list[ShardJob]]:
+    """``jobs`` as tasks for ``workers`` workers, each task a list of shards that one worker
+    runs with :meth:`ShardWriter.run_group`.
+
+    With ``together``, the shards that share approach chains go in one task, so that a
+    worker simulates each chain, and draws its weather, once instead of once per shard:
+    with ``split_by: frame`` a val shard's frames are spread over the frames of several
+    train shards, and both would simulate the same chains. The shards in order of their
+    first frame are cut before each shard of the split that has fewer shards (the train
+    shards that start in a val shard's frame range join it), and a task holds at most
+    :data:`MAX_GROUP_SHARDS` shards and at most a ``2 * workers``-th of them. Without
+    ``together`` (rendering, where the simulation is negligible and a shard takes
+    minutes), or with one split, each shard is a task of its own. What a shard holds does
+    not depend on its task."""
+    ordered = sorted(jobs, key=lambda job: job.frames[0])
+    counts = Counter(job.split for job in jobs)
+    cap = min(MAX_GROUP_SHARDS, len(jobs) // (2 * max(1, workers)))
+    if not together or len(counts) < 2 or cap < 2:
+        return [[job] for job in ordered]
+    rare = min(counts, key=lambda split: (counts[split], split))
+    groups: list[list[ShardJob]] = [[]]
+    for job in ordered:
+        group = groups[-1]
+        if len(group) == cap or (job.split == rare and any(other.split == rare for other in group)):
+            groups.append(group := [])
+        group.append(job)
+    return groups
 
 
 class ShardWriter:
@@ -65,20 +97,31 @@ class ShardWriter:
 
             self.renderer = Renderer(scene)
 
+    def run_group(self, jobs: list[ShardJob], progress: Progress | None = None,
+                  stop: Callable[[], bool] | None = None) -> Iterator[ShardSummary]:
+        """:meth:`run` each of ``jobs`` (a task of :func:`shard_groups`), yielding each
+        shard's summary once its manifest is written; the approach chains of all of them
+        are simulated together first, and each chain's weather and liveries drawn once."""
+        self.states.prefetch([i for job in jobs for i in job.frames])
+        worlds: dict = {}
+        for job in jobs:
+            yield self.run(job, progress, stop, worlds)
+
     def run(self, job: ShardJob, progress: Progress | None = None,
-            stop: Callable[[], bool] | None = None) -> ShardSummary:
+            stop: Callable[[], bool] | None = None, worlds: dict | None = None) -> ShardSummary:
         """Write every frame of ``job``, then its manifest; return its summary.
 
         ``stop`` is polled between frames and right after each render: when it
         turns true the shard is abandoned with :class:`KeyboardInterrupt` before
         anything of the current frame is written (a render cut short by Ctrl-C
-        never becomes a training image)."""
+        never becomes a training image). ``worlds``: a dict keeping each approach
+        chain's weather and liveries for the next shards (:meth:`run_group`)."""
         start = time.perf_counter()
         self._stop = stop or (lambda: False)
         rows, excluded, labels = [], Counter(), 0
         rendered, render_s, denoise_s, frame_s = 0, 0.0, 0.0, 0.0
         self.states.prefetch(job.frames)  # the shard's approach chains, simulated together
-        approaches: dict = {}  # the shard's approach chains' weather and liveries, drawn once each
+        approaches = {} if worlds is None else worlds  # each chain's weather and liveries, drawn once
         draws = [draw_frame(self.scene, self.states, i, approaches) for i in job.frames]
         labels_all, objects_all = shard_labels(self.scene, draws)  # every frame's labels at once
         for b, frame_draws in enumerate(draws):
