@@ -1026,8 +1026,9 @@ def _drift_statistics(spill: Spill, distance_edges: NDArray, size_of_class: NDAr
         d = part["drift"]
         for groups in _drift_groups(part, distance_edges, size_of_class):
             order = np.argsort(groups, kind="stable")
-            bounds = np.searchsorted(groups[order], np.unique(groups))
-            for g, piece in zip(np.unique(groups).tolist(), np.split(order, bounds[1:]), strict=True):
+            present = np.unique(groups)
+            bounds = np.searchsorted(groups[order], present)
+            for g, piece in zip(present.tolist(), np.split(order, bounds[1:]), strict=True):
                 if g >= 0:
                     sums[g].feed(d[piece])
         mine = pick[(pick >= seen) & (pick < seen + d.size)] - seen

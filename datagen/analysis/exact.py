@@ -265,9 +265,10 @@ def median_positions(n: int) -> tuple[int, ...]:
 
 def median(n: int, stat: Callable[[int], float]) -> float:
     """``np.median`` of ``n`` values from their order statistics ``stat(k)``."""
-    if n % 2:
-        return float(stat((n - 1) // 2))
-    return (stat(n // 2 - 1) + stat(n // 2)) / 2
+    positions = median_positions(n)
+    if len(positions) == 1:
+        return float(stat(positions[0]))
+    return (stat(positions[0]) + stat(positions[1])) / 2
 
 
 def _virtual_index(n: int, q: float) -> tuple[float, int, int]:
@@ -287,8 +288,8 @@ def percentile_positions(n: int, q: float) -> tuple[int, int]:
 def percentile(n: int, q: float, stat: Callable[[int], float]) -> float:
     """``np.percentile(values, q)`` (method ``linear``) of ``n`` values from their order
     statistics ``stat(k)``, with numpy's interpolation arithmetic."""
-    virtual, below, origin = _virtual_index(n, q)
-    above = min(below + 1, n - 1)
+    virtual, _, origin = _virtual_index(n, q)
+    below, above = percentile_positions(n, q)
     a, b = stat(below), stat(above)
     gamma = virtual - origin
     diff = b - a

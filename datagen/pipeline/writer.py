@@ -103,25 +103,26 @@ class ShardWriter:
         shard's summary once its manifest is written; the approach chains of all of them
         are simulated together first, and each chain's weather and liveries drawn once."""
         self.states.prefetch([i for job in jobs for i in job.frames])
-        worlds: dict = {}
+        approaches: dict = {}
         for job in jobs:
-            yield self.run(job, progress, stop, worlds)
+            yield self.run(job, progress, stop, approaches)
 
     def run(self, job: ShardJob, progress: Progress | None = None,
-            stop: Callable[[], bool] | None = None, worlds: dict | None = None) -> ShardSummary:
+            stop: Callable[[], bool] | None = None, approaches: dict | None = None) -> ShardSummary:
         """Write every frame of ``job``, then its manifest; return its summary.
 
         ``stop`` is polled between frames and right after each render: when it
         turns true the shard is abandoned with :class:`KeyboardInterrupt` before
         anything of the current frame is written (a render cut short by Ctrl-C
-        never becomes a training image). ``worlds``: a dict keeping each approach
-        chain's weather and liveries for the next shards (:meth:`run_group`)."""
+        never becomes a training image). ``approaches``: a dict keeping each approach
+        chain's weather and liveries for the next shards (:meth:`run_group`; by default,
+        for this shard's frames only)."""
         start = time.perf_counter()
         self._stop = stop or (lambda: False)
         rows, excluded, labels = [], Counter(), 0
         rendered, render_s, denoise_s, frame_s = 0, 0.0, 0.0, 0.0
         self.states.prefetch(job.frames)  # the shard's approach chains, simulated together
-        approaches = {} if worlds is None else worlds  # each chain's weather and liveries, drawn once
+        approaches = {} if approaches is None else approaches  # each chain's weather and liveries, drawn once
         draws = [draw_frame(self.scene, self.states, i, approaches) for i in job.frames]
         labels_all, objects_all = shard_labels(self.scene, draws)  # every frame's labels at once
         for b, frame_draws in enumerate(draws):
