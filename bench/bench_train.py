@@ -1,7 +1,9 @@
-"""Labels a detector can learn, end to end through Ultralytics (issue 13).
+"""Labels a detector can learn, end to end through Ultralytics.
 
     python bench/bench_train.py [--frames 24] [--spp 4] [--epochs 3] [--batch 4] [--seed 2024]
     python bench/bench_train.py --sweep [--sweep-frames 1000]
+    python bench/bench_train.py --memorize [--epochs 100] [--min-box-px 48] [--optimizer SGD]
+        [--nbs 4] [--model yolo11n.yaml]
 
 Needs the ``train`` extra (``pip install -e '.[train]'``). Default run:
 
@@ -16,13 +18,22 @@ Needs the ``train`` extra (``pip install -e '.[train]'``). Default run:
    sees per epoch and reading its box loss;
 4. predicts ``val.txt`` and scores the detections with ``datagen evaluate --predictions``.
 
+``--memorize`` is the first test of training data: every frame in the train split (val
+is the same frames), trained from scratch for ``--epochs`` with the dataset's own
+data.yaml and hyp.yaml (``--min-box-px``, ``--optimizer`` and ``--nbs`` vary the recipe
+against it), then predicted and scored by ``datagen evaluate --predictions``: the share
+of label lines found (right class, conf >= 0.25, centre within 3 px at full resolution).
+On a 2-core CPU with one thread an epoch of 24 frames takes about 18 s.
+
 ``--sweep`` chooses ``labels.min_box_px``: labels-only builds of ``--sweep-frames``
 frames for several minimum sizes, and per size the learnable share (datagen's rule,
 which equals Ultralytics' dataloader line for line: tests/test_train.py), the share
 of learnable boxes whose every anchor centre also lies in another box of the frame
 (the assigner then gives those anchors to one box only), edge-margin exclusions,
-labels per frame, and the share of label lines to which Ultralytics' own
-detection loss gives a positive anchor on an untrained yolo11n (``datagen.analysis.ultralytics``).
+labels per frame, and what Ultralytics' own detection loss gives the label lines on
+an untrained yolo11n and yolo26n (``datagen.analysis.ultralytics.assigner_positives``):
+positive anchors, and the targets that weigh them (a label box much smaller than the
+untrained head's first guesses gets a target near zero and teaches nothing).
 """
 
 from __future__ import annotations
@@ -98,13 +109,15 @@ def sweep(args) -> None:
     from datagen.analysis.audit import audit
     from datagen.analysis.ultralytics import assigner_positives
 
+    models = ("yolo11n.yaml", "yolo26n.yaml")
     print(f"min_box_px sweep: wingcam55, {args.sweep_frames} labels-only frames, seed {args.seed}, imgsz 864, "
-          f"{platform.machine()} {platform.node()}; assigner: untrained yolo11n.yaml (torch seed 0) on the first "
-          f"{args.assigner_images} train images")
+          f"{platform.machine()} {platform.node()}; assigner: untrained {' and '.join(models)} (torch seed 0) on "
+          f"the first {args.assigner_images} train images: instances with a positive anchor, the median "
+          "instance's best target, instances whose best target is at least 0.01")
     print("| min_box_px | label lines | per frame | edge_margin excluded | learnable | all anchors shared | "
-          "positive from the assigner |")
-    print("|---|---|---|---|---|---|---|")
-    for size in (0.0, 2.0, 4.0, 8.0, 12.0, 16.0, 24.0):
+          + " | ".join(f"{m}: positive, median target, target >= 0.01" for m in models) + " |")
+    print("|---|---|---|---|---|---|" + "---|" * len(models))
+    for size in (0.0, 8.0, 16.0, 24.0, 32.0, 48.0, 64.0):
         with tempfile.TemporaryDirectory() as tmp:
             config = config_for(args.seed, args.sweep_frames, **{"labels.min_box_px": size})
             report = build_dataset(config, Path(tmp) / "ds", render=False)
@@ -112,16 +125,22 @@ def sweep(args) -> None:
             share = audit(view).stats["learnable"]["share"]
             learnable, shared = contested(view)
             blank_images(Path(tmp) / "ds", config)
-            assigned = assigner_positives(Path(tmp) / "ds", "train", images=args.assigner_images)
+            cells = []
+            for model in models:
+                a = assigner_positives(Path(tmp) / "ds", "train", images=args.assigner_images, model=model)
+                n = max(1, a["instances"])
+                cells.append(f"{100 * a['positive'] / n:.1f}%, {a['target_median']:.2g}, "
+                             f"{100 * a['targeted'] / n:.1f}%")
             print(f"| {size:g} | {report.labels} | {report.labels / report.frames:.1f} | "
                   f"{report.excluded['edge_margin']} | {100 * share:.1f}% | "
-                  f"{100 * shared / max(1, learnable):.1f}% | "
-                  f"{100 * assigned['positive'] / max(1, assigned['label_lines']):.1f}% |", flush=True)
+                  f"{100 * shared / max(1, learnable):.1f}% | " + " | ".join(cells) + " |", flush=True)
 
 
 # --- the end-to-end run ---------------------------------------------------------------------------
-def train_and_count(root: Path, runs: Path, epochs: int, batch: int) -> dict:
-    """Train yolo11n.yaml with the dataset's recipe; instances per epoch and box loss per epoch."""
+def train_and_count(root: Path, runs: Path, epochs: int, batch: int, *, model_name: str = "yolo11n.yaml",
+                    nbs: int | None = None, optimizer: str | None = None) -> dict:
+    """Train ``model_name`` with the dataset's recipe (``nbs`` and ``optimizer`` override it);
+    instances per epoch and losses per epoch."""
     import yaml
     from ultralytics import YOLO
 
@@ -141,13 +160,14 @@ def train_and_count(root: Path, runs: Path, epochs: int, batch: int) -> dict:
 
         trainer.preprocess_batch = wrapped
 
-    model = YOLO("yolo11n.yaml")
+    model = YOLO(model_name)
     model.add_callback("on_train_start", count)
     model.add_callback("on_train_epoch_end", epoch_end)
     hyp = yaml.safe_load((root / "hyp.yaml").read_text())
     start = time.perf_counter()
+    recipe = {"nbs": nbs or batch, **({"optimizer": optimizer} if optimizer else {})}
     model.train(data=str(root / "data.yaml"), cfg=str(root / "hyp.yaml"), epochs=epochs, batch=batch, workers=0,
-                device="cpu", project=str(runs), name="train", exist_ok=True, plots=False, verbose=False)
+                device="cpu", project=str(runs), name="train", exist_ok=True, plots=False, verbose=False, **recipe)
     wall = time.perf_counter() - start
     with open(runs / "train" / "results.csv") as f:
         rows = list(csv.DictReader(f))
@@ -180,19 +200,46 @@ def end_to_end(args) -> None:
     assigned = assigner_positives(root, "train")
     print(f"Ultralytics' detection-loss assigner, untrained yolo11n.yaml: {assigned['positive']} of "
           f"{assigned['label_lines']} train label lines get a positive anchor "
-          f"({100 * assigned['positive'] / max(1, assigned['label_lines']):.1f}%)")
+          f"({100 * assigned['positive'] / max(1, assigned['label_lines']):.1f}%), {assigned['targeted']} a target of "
+          f"at least 0.01 (median best target {assigned['target_median']:.2g}, sum {assigned['target_sum']:.3g})")
     trained = train_and_count(root, out / "runs", args.epochs, args.batch)
     print(f"train yolo11n.yaml, imgsz {trained['imgsz']}, {args.epochs} epochs in {trained['seconds']:.0f} s (CPU): "
           f"instances per epoch {trained['instances']}, box loss per epoch "
           f"{', '.join(f'{x:.3g}' for x in trained['box_loss'])}, cls loss per epoch "
           f"{', '.join(f'{x:.3g}' for x in trained['cls_loss'])}")
+    predict_and_evaluate(root, out, trained, "val")
+
+
+def memorize(args) -> None:
+    out = Path(args.out or tempfile.mkdtemp(prefix="bench-memorize-"))
+    root = out / "w55"
+    config = config_for(args.seed, args.frames, **{"render.spp": args.spp, "dataset.val_fraction": 0.0,
+                                                   "labels.min_box_px": args.min_box_px})
+    build_dataset(config, root)  # resumes; the training below resumes too
+    view = load_dataset(root)
+    print(f"memorize: {len(view)} wingcam55 frames (seed {args.seed}, {args.spp} spp), min_box_px "
+          f"{args.min_box_px:g}, {int(view.labeled.sum())} label lines; {args.model}, {args.epochs} epochs, batch "
+          f"{args.batch}, nbs {args.nbs or args.batch}, optimizer {args.optimizer or 'from hyp.yaml'}; "
+          f"{platform.machine()} {platform.node()}, torch threads from OMP_NUM_THREADS")
+    trained = train_and_count(root, out / "runs", args.epochs, args.batch, model_name=args.model, nbs=args.nbs,
+                              optimizer=args.optimizer)
+    print(f"trained in {trained['seconds']:.0f} s; box loss first/last {trained['box_loss'][0]:.3g} / "
+          f"{trained['box_loss'][-1]:.3g}, cls loss first/last {trained['cls_loss'][0]:.3g} / "
+          f"{trained['cls_loss'][-1]:.3g}")
+    predict_and_evaluate(root, out, trained, "train")
+
+
+def predict_and_evaluate(root: Path, out: Path, trained: dict, split: str) -> None:
+    """``yolo detect predict`` on the split's images, scored by ``datagen evaluate --predictions``."""
     yolo = str(Path(sys.executable).parent / "yolo")
-    subprocess.run([yolo, "detect", "predict", f"model={trained['weights']}", f"source={root / 'val.txt'}",
+    subprocess.run([yolo, "detect", "predict", f"model={trained['weights']}", f"source={root / f'{split}.txt'}",
                     f"imgsz={trained['imgsz']}", "conf=0.001", "save_txt=True", "save_conf=True", "save=False",
                     f"project={out / 'runs'}", "name=predict", "exist_ok=True"], check=True, capture_output=True)
-    evaluation = subprocess.run([sys.executable, "-m", "datagen", "evaluate", str(root), "--predictions",
-                                 str(out / "runs" / "predict" / "labels")], capture_output=True, text=True)
-    print("datagen evaluate --predictions:")
+    (out / "runs" / "predict" / "labels").mkdir(parents=True, exist_ok=True)  # none when nothing was detected
+    evaluation = subprocess.run([sys.executable, "-m", "datagen", "evaluate", str(root), "--split", split,
+                                 "--predictions", str(out / "runs" / "predict" / "labels"), "--conf", "0.25",
+                                 "--out", str(out / "evaluation")], check=False, capture_output=True, text=True)
+    print(f"datagen evaluate --predictions ({split} frames):")
     print("  " + (evaluation.stdout + evaluation.stderr).strip().replace("\n", "\n  "))
 
 
@@ -205,10 +252,15 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=2024, help="held out: no shipped config uses it")
     parser.add_argument("--out", type=str, default=None)
     parser.add_argument("--sweep", action="store_true", help="choose labels.min_box_px instead")
+    parser.add_argument("--memorize", action="store_true", help="train on the frames, find their features")
+    parser.add_argument("--min-box-px", type=float, default=48.0, help="--memorize: labels.min_box_px")
+    parser.add_argument("--optimizer", default=None, help="--memorize: instead of hyp.yaml's (e.g. auto)")
+    parser.add_argument("--nbs", type=int, default=None, help="nominal batch (default: --batch)")
+    parser.add_argument("--model", default="yolo11n.yaml", help="--memorize: the network, from scratch")
     parser.add_argument("--sweep-frames", type=int, default=1000)
     parser.add_argument("--assigner-images", type=int, default=128)
     args = parser.parse_args()
-    sweep(args) if args.sweep else end_to_end(args)
+    sweep(args) if args.sweep else memorize(args) if args.memorize else end_to_end(args)
 
 
 if __name__ == "__main__":

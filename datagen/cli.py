@@ -24,6 +24,7 @@ from datagen.config import find_config, load_config
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import ConfigError, DatagenError
 from datagen.core.features import FEATURE_VARIANTS
+from datagen.core.training import MATCH_PX
 
 app = typer.Typer(
     name="datagen",
@@ -317,10 +318,17 @@ def evaluate(
     out: Annotated[Path | None, typer.Option("--out", help="Output folder (default: DATASET/evaluation).")] = None,
     workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="Processes that solve approaches "
                                          "(results do not depend on it).")] = 1,
+    match_px: Annotated[float, typer.Option("--match-px", min=0.0, max=1000.0, help="With --predictions: a "
+                                            "detection within this many px of the true centre is a match.")]
+    = MATCH_PX,
 ) -> None:
     """PtD vectors by dual-object PnP from true centres (with noise) or detections;
-    accuracy and reliability against distance (paper 3.3-3.6)."""
-    from datagen.analysis.evaluate import Run, covered_splits, evaluate_runs, parse_predictions, summarize
+    accuracy and reliability against distance (paper 3.3-3.6). With --predictions, also
+    the detector itself against the true centres: per class and distance, features
+    matched, mislocated and missed, spurious detections and the centre error."""
+    from datagen.analysis.detections import score_detections, summarize_detections
+    from datagen.analysis.evaluate import (DISTANCE_EDGES, Run, covered_splits, evaluate_runs, parse_predictions,
+                                           summarize)
     from datagen.dataset.reader import open_dataset
     from datagen.pipeline.progress import BuildProgress
     from datagen.report.evaluation_report import write_evaluation
@@ -365,8 +373,17 @@ def evaluate(
     only = None if split == "all" else split
     results = evaluate_runs(source, plan, seed=seed, split=only, workers=workers, progress=progress, index=index)
     runs = list(zip(sources, results, strict=True))
+    detector = None
+    if predictions is not None:
+        detector = score_detections(source, found, split=only, match_px=match_px)
     written = write_evaluation(index, runs, output_path(out if out is not None else Path(dataset) / "evaluation",
-                                                        "--out"))
+                                                        "--out"), detector=detector)
+    if detector is not None:
+        d = summarize_detections(detector, DISTANCE_EDGES)["overall"]
+        typer.echo(f"detector: {d['matched']} of {d['labeled']} labeled features found within {match_px:g} px "
+                   f"of the true centre ({100 * (d['recall'] or 0):.1f}%), {d['mislocated']} further away, "
+                   f"{d['missed']} missed, {d['spurious']} spurious detections; centre error median "
+                   f"{_px(d['error_median_px'])}, 95th percentile {_px(d['error_p95_px'])}")
     for source, result in runs:
         s = summarize(result)
         what = f"noise {source['noise_px']:g} px" if source["source"] == "truth" else "predictions"
@@ -414,6 +431,10 @@ def export(
 
 def _m(value: float | None) -> str:
     return "-" if value is None else f"{value * 100:.2f} cm"
+
+
+def _px(value: float | None) -> str:
+    return "-" if value is None else f"{value:.2f} px"
 
 
 @app.command()

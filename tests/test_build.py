@@ -182,6 +182,7 @@ def test_features_parquet_round_trips(tmp_path: Path) -> None:
 ULTRALYTICS_KEYS = {
     "imgsz", "epochs", "batch", "rect", "close_mosaic", "hsv_h", "hsv_s", "hsv_v", "degrees", "translate",
     "scale", "shear", "perspective", "flipud", "fliplr", "mosaic", "mixup", "cutmix", "copy_paste",
+    "optimizer", "lr0", "nbs",
 }
 
 
@@ -199,14 +200,15 @@ def test_labels_only_build_and_its_metadata(tmp_path: Path) -> None:
     assert set(hyp) <= ULTRALYTICS_KEYS
     assert hyp["fliplr"] == 0.0 and hyp["mosaic"] == 0.0 and hyp["translate"] == 0.0 and hyp["scale"] == 0.0
     assert hyp["imgsz"] == config.labels.train_imgsz == 864
+    assert hyp["optimizer"] == "SGD" and hyp["nbs"] == hyp["batch"]  # a step per batch, no 'auto' AdamW
     doc = json.loads((root / "dataset.json").read_text())
     assert doc["image_width"] == 128 and doc["image_height"] == 68
     assert doc["edge_margin_px"] == 2.0 and doc["corrected"] is True and doc["pixel_convention"] == "continuous"
     assert [o["name"] for o in doc["objects"]] == ["tanker", "receiver", "drogue", "hose"]
     assert [o["id"] for o in doc["objects"]] == [1, 2, 3, 4]
     assert doc["config"]["dataset"]["frames"] == 8 and doc["manifest_version"] == MANIFEST_VERSION
-    assert doc["label_size"]["train_imgsz"] == 864 and doc["label_size"]["min_box_px"] == 8.0
-    np.testing.assert_allclose(doc["label_size"]["min_label_size_px"], [8 / 6.75, 8 / 6.75], rtol=1e-12)
+    assert doc["label_size"]["train_imgsz"] == 864 and doc["label_size"]["min_box_px"] == 48.0
+    np.testing.assert_allclose(doc["label_size"]["min_label_size_px"], [48 / 6.75, 48 / 6.75], rtol=1e-12)
     assert doc["schema"] == "datagen.dataset" and doc["schema_version"] == 1
     assert {"datagen", "mitsuba", "drjit", "numpy", "pyarrow"} <= set(doc["versions"])
     assert sum(s["frames"] for s in doc["splits"].values()) == 8

@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from datagen.analysis.evaluate import evaluate, parse_predictions, ptd_from_points, summarize
+from datagen.analysis.evaluate import PnPSettings, evaluate, parse_predictions, ptd_from_points, solve_pose, summarize
 from datagen.assets.table import feature_table
 from datagen.config import load_config, override_config
 from datagen.core.camera import Intrinsics, project_points
@@ -64,6 +64,22 @@ def test_the_drogue_vector_is_the_manifests_true_ptd(podcam) -> None:
     assert ok.sum() >= 32
     np.testing.assert_allclose(result["truth_m"], podcam.ptd_receiver_m, atol=1e-9)
     assert result["error_to_drogue_m"][ok].max() < 1e-3
+
+
+def test_a_pose_that_epnp_sqpnp_and_ransac_all_miss_is_still_found() -> None:
+    """Five noise-free receiver points of a wingcam55 frame through a distorting lens (a
+    labels-only build's frame 107): EPnP, SQPnP and RANSAC each return a pose 150 px RMS off."""
+    points_model = np.array([[0.0, 0.0, 0.0], [-0.33949, 0.011759, 0.051578], [-1.875001, 0.065006, -0.029961],
+                             [-0.9, 0.6, -0.6], [-7.02, 1.7, -0.405]])
+    uv_px = np.array([[388.43838564331907, 381.162498430361], [359.2969919153867, 360.72207792840857],
+                      [190.14706634613242, 333.0138871794457], [162.84189555236105, 504.9445451222356],
+                      [1223.4060202455196, 549.2083341593636]])
+    k = Intrinsics(2048, 1080, 1967.085698018474, 1967.085698018474, 1024.0, 540.0)
+    distortion = np.array([-0.06771153366742941, -0.008843625624141538, -0.00086459420919736,
+                           -0.0002554725282707035, 0.0])
+    pose = solve_pose(points_model, uv_px, k, PnPSettings(), distortion=distortion)
+    assert pose is not None
+    np.testing.assert_allclose(pose[1], [-2.82798079123435, -0.7059709522174049, 8.688478933667705], atol=1e-4)
 
 
 def test_error_grows_with_the_noise_radius(wingcam) -> None:

@@ -295,16 +295,17 @@ def test_strategy_rotations_are_proper(rot) -> None:
 # --- the minimum label size (labels.min_box_px) ------------------------------------------
 @given(k=intrinsics(), points=point_sets(), cam_from_model=cam_from_model_in_front(),
        min_w=st.floats(0.0, 60.0, **finite), min_h=st.floats(0.0, 60.0, **finite), corrected=st.booleans())
-def test_grow_widens_small_sides_to_the_minimum_about_the_unmoved_centre(k, points, cam_from_model, min_w, min_h,
-                                                                        corrected) -> None:
+def test_grow_widens_small_sides_to_the_minimum_or_the_border_about_the_unmoved_centre(
+        k, points, cam_from_model, min_w, min_h, corrected) -> None:
     table = one_feature(points)
     plain = compute_labels(table, cam_from_model[None], k, edge_margin_px=0.0, corrected=corrected)
     grown = compute_labels(table, cam_from_model[None], k, edge_margin_px=0.0, corrected=corrected,
                            min_size_px=(min_w, min_h), small_boxes="grow")
     base, box = plain.label_xyxy[0], grown.label_xyxy[0]
-    # The paper's boxes and the true centre do not change.
+    # The paper's boxes, the true centre and what is labeled do not change.
     np.testing.assert_array_equal(grown.corrected_xyxy, plain.corrected_xyxy)
     np.testing.assert_array_equal(grown.center_px, plain.center_px)
+    np.testing.assert_array_equal(grown.exclusion, plain.exclusion)
     # The label box contains the paper's box and keeps its centre (the true centre when corrected).
     assert box[0] <= base[0] and box[1] <= base[1] and box[2] >= base[2] and box[3] >= base[3]
     centre = 0.5 * (box[:2] + box[2:])
@@ -312,12 +313,14 @@ def test_grow_widens_small_sides_to_the_minimum_about_the_unmoved_centre(k, poin
     np.testing.assert_allclose(centre, 0.5 * (base[:2] + base[2:]), rtol=0, atol=1e-12 * scale)
     if corrected:
         np.testing.assert_array_equal(grown.label_center_px, grown.center_px)
-    for axis, need in ((0, min_w), (1, min_h)):
+    for axis, need, size in ((0, min_w, k.width), (1, min_h, k.height)):
         side, old = box[axis + 2] - box[axis], base[axis + 2] - base[axis]
+        c = 0.5 * (base[axis] + base[axis + 2])
+        room = 2 * min(c, size - c)  # the widest box about c that stays in the image
         if old >= need:
             assert side == old  # a side already long enough is left alone
-        else:
-            assert abs(side - need) <= 1e-12 * scale  # a short side becomes exactly the minimum
+        else:  # a short side becomes exactly the minimum, or reaches the nearer border
+            assert abs(side - max(old, min(need, room))) <= 1e-12 * scale
 
 
 @given(side=st.floats(0.01, 150.0, **finite), aspect=st.floats(0.2, 5.0, **finite),
@@ -340,17 +343,22 @@ def test_exclude_drops_a_box_exactly_when_a_side_is_under_the_minimum(side, aspe
     assert grown.exclusion[0] == Exclusion.NONE
 
 
-def test_the_edge_rule_applies_to_the_grown_box() -> None:
-    """A 2 px feature 12 px from the left border is inside a 10 px margin; grown to 20 px it is not."""
+def test_a_box_near_the_border_grows_only_to_the_edge_margin_and_stays_labeled() -> None:
+    """A 2 px feature 12 px from the left border with a 10 px margin: grown to 20 px it would
+    cross the margin, so it grows to 6 px across (3 px each side of its centre) and keeps its line;
+    the other axis, far from a border, grows to the full 20 px."""
     corners = np.array([[12.0, 500.0], [14.0, 500.0], [14.0, 502.0], [12.0, 502.0]])
     centre = corners.mean(0)
     args = dict(width=2048, height=1080, edge_margin_px=10.0)
     small = boxes_from_uv(corners[None], centre[None], np.array([True]), **args)
     assert small.exclusion[0] == Exclusion.NONE
     grown = boxes_from_uv(corners[None], centre[None], np.array([True]), min_size_px=20.0, **args)
-    np.testing.assert_allclose(grown.label_xyxy[0], [3.0, 491.0, 23.0, 511.0])
-    assert grown.exclusion[0] == Exclusion.EDGE_MARGIN
-    assert grown.exclusion[0] != Exclusion.TOO_SMALL
+    np.testing.assert_array_equal(grown.label_xyxy[0], [10.0, 491.0, 16.0, 511.0])
+    assert grown.exclusion[0] == Exclusion.NONE
+    # A box already inside the margin before growing is excluded as before.
+    near = corners - [5.0, 0.0]
+    assert boxes_from_uv(near[None], near.mean(0)[None], np.array([True]), min_size_px=20.0,
+                         **args).exclusion[0] == Exclusion.EDGE_MARGIN
 
 
 def test_uncorrected_labels_grow_about_the_tight_box_centre() -> None:

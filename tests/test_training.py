@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from datagen.core.training import ANCHOR_STRIDES, TrainView
+from datagen.core.training import ANCHOR_STRIDES, ASSIGNABLE_SIDE_PX, TrainView
 
 from .strategies import finite
 
@@ -64,11 +64,34 @@ def test_has_anchor_equals_a_brute_force_search_of_the_anchor_grid(x, y, w, h) -
 
 @given(x=st.floats(30.0, 2000.0, **finite), y=st.floats(30.0, 1030.0, **finite),
        extra=st.tuples(st.floats(0.0, 40.0, **finite), st.floats(0.0, 40.0, **finite)))
-def test_a_box_of_at_least_8_training_px_is_always_learnable(x, y, extra) -> None:
+def test_a_box_of_at_least_8_training_px_reaches_the_loss(x, y, extra) -> None:
     """8 px (the finest stride) at the training size: over 2 px, and an anchor centre inside."""
     mw, mh = TABLE1.min_label_size_px(8.0 * (1 + 1e-9))
     box = np.array([x - mw / 2 - extra[0], y - mh / 2 - extra[1], x + mw / 2 + extra[0], y + mh / 2 + extra[1]])
-    assert TABLE1.survives(box) and TABLE1.has_anchor(box) and TABLE1.learnable(box)
+    assert TABLE1.survives(box) and TABLE1.has_anchor(box) and TABLE1.reaches_loss(box)
+
+
+@given(x=st.floats(60.0, 1980.0, **finite), y=st.floats(60.0, 1020.0, **finite),
+       extra=st.tuples(st.floats(0.0, 40.0, **finite), st.floats(0.0, 40.0, **finite)))
+def test_a_box_grown_to_the_assignable_side_is_learnable(x, y, extra) -> None:
+    """A box grown to exactly ASSIGNABLE_SIDE_PX at the training size (as labels.min_box_px grows
+    it, in original pixels) or larger is learnable: the ulps lost on the way do not count."""
+    mw, mh = TABLE1.min_label_size_px(ASSIGNABLE_SIDE_PX)
+    box = np.array([x - mw / 2 - extra[0], y - mh / 2 - extra[1], x + mw / 2 + extra[0], y + mh / 2 + extra[1]])
+    assert TABLE1.assignable(box) and TABLE1.learnable(box)
+
+
+@given(x=st.floats(60.0, 1980.0, **finite), y=st.floats(60.0, 1020.0, **finite),
+       short=st.floats(2.5, ASSIGNABLE_SIDE_PX * (1 - 1e-6), **finite), other=st.floats(2.5, 200.0, **finite),
+       axis=st.integers(0, 1))
+def test_a_side_under_the_assignable_side_is_not_learnable_though_it_reaches_the_loss(x, y, short, other,
+                                                                                       axis) -> None:
+    """The untrained head's assigner gives such a box no target (datagen.core.training, rule 5)."""
+    sides = np.array([other, other], dtype=float)
+    sides[axis] = short
+    w, h = sides / np.array(TABLE1.scale)
+    box = np.array([x, y, x + w, y + h])
+    assert not TABLE1.assignable(box) and not TABLE1.learnable(box)
 
 
 @given(x=st.floats(30.0, 2000.0, **finite), y=st.floats(30.0, 1030.0, **finite),

@@ -38,6 +38,7 @@ from datagen.analysis.exact import (
 from datagen.core.camera import Intrinsics
 from datagen.core.keypoints import KEYPOINT_RANGE, keypoint_flags, mirror_name
 from datagen.core.labels import Exclusion, FrameLabels
+from datagen.core.training import ASSIGNABLE_SIDE_PX
 from datagen.dataset.layout import MANIFEST_NAME
 from datagen.dataset.reader import DatasetIndex, DatasetMeta, DatasetSource, DatasetView, image_size
 from datagen.dataset.yolo import YOLO_DECIMALS, parse_line
@@ -68,6 +69,8 @@ POSE_TOLERANCE: Final = 1e-6
 MAX_OFFENDERS: Final = 20
 #: PnP needs at least this many labeled features of an object in a frame.
 PNP_MIN_FEATURES: Final = 3
+#: A label box side within this of the edge margin lies on it (label lines carry ~1e-7 px).
+_ON_MARGIN_PX: Final = 1e-3
 #: The ``learnable`` check fails when a smaller share of label lines can teach the detector.
 MIN_LEARNABLE_SHARE: Final = 0.95
 #: Files Ultralytics writes into a dataset it trains on: label caches beside the label
@@ -493,36 +496,45 @@ def _check_label_files(view: DatasetView, labels: FrameLabels) -> tuple[list[Che
 
 def _learnable_part(view: DatasetView, lines: NDArray[np.float64]) -> dict[str, NDArray]:
     """Per well-formed label line (rows ``(frame row, class, cx, cy, w, h)``): its class and
-    frame distance, whether Ultralytics' trainer keeps it at ``labels.train_imgsz`` and
-    whether it holds an anchor centre (:mod:`datagen.core.training`), and its shorter side
-    there."""
+    frame distance, whether Ultralytics' trainer keeps it at ``labels.train_imgsz``, whether
+    it holds an anchor centre and whether it is large enough for the untrained head's
+    assigner (:mod:`datagen.core.training`), and its shorter side there."""
     train = view.train_view
     k = view.intrinsics
     b, cls = lines[:, 0].astype(np.int64), lines[:, 1].astype(np.int64)
     cx, cy, bw, bh = lines[:, 2] * k.width, lines[:, 3] * k.height, lines[:, 4] * k.width, lines[:, 5] * k.height
     xyxy = np.stack([cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2], axis=-1)
+    # A box short of the assigner's size because it reached the edge margin (labels grow only
+    # that far: datagen.core.labels) is as large as its feature's line can be.
+    m = view.label_rules.edge_margin_px
+    on = np.isclose(xyxy, [m, m, k.width - m, k.height - m], rtol=0.0, atol=_ON_MARGIN_PX)
+    short = np.stack([bw * train.scale[0], bh * train.scale[1]], axis=-1) < ASSIGNABLE_SIDE_PX * (1.0 - 1e-9)
+    border = short.any(axis=1) & ~(short & ~(on[:, :2] | on[:, 2:])).any(axis=1)  # every short side on it
     return {"cls": cls.astype(np.int16), "distance": view.distance_m[b], "survives": train.survives(xyxy),
-            "anchored": train.has_anchor(xyxy), "train_w": np.minimum(bw * train.scale[0], bh * train.scale[1])}
+            "anchored": train.has_anchor(xyxy), "assignable": train.assignable(xyxy), "border": border,
+            "train_w": np.minimum(bw * train.scale[0], bh * train.scale[1])}
 
 
 def _check_learnable(meta: DatasetMeta, spill: Spill, top: float, min_share: float) -> tuple[Check, dict]:
-    """Which label lines Ultralytics' trainer keeps at ``labels.train_imgsz`` and can assign
-    to an anchor (:func:`_learnable_part` of every shard, in ``spill``'s stream ``lines``);
-    the check passes while at least ``min_share`` can. ``top``: the upper end of the
-    distance bins."""
+    """Which label lines Ultralytics' trainer keeps at ``labels.train_imgsz``, can assign to an
+    anchor and gives a target at the start of training (:func:`_learnable_part` of every
+    shard, in ``spill``'s stream ``lines``); the check passes while at least ``min_share``
+    can. ``top``: the upper end of the distance bins."""
     rules = meta.label_rules
     check = Check("learnable", f"at least {100 * min_share:g}% of label lines survive Ultralytics' training "
-                  f"transforms at imgsz {rules.train_imgsz} (both sides above 2 px) and hold an anchor centre "
-                  "(strides 8/16/32)", min_pass_share=min_share)
+                  f"transforms at imgsz {rules.train_imgsz} (both sides above 2 px), hold an anchor centre "
+                  f"(strides 8/16/32) and have both sides of at least {ASSIGNABLE_SIDE_PX:g} px there (smaller "
+                  "boxes get no target from the untrained head's assigner) unless a short side reached the "
+                  "edge margin", min_pass_share=min_share)
     names = meta.features.name
     edges = np.arange(0.0, top + 10.0, 10.0)
     # per class and per distance bin: lines, learnable ones; and the lines' survivors, anchored ones
     per_class = np.zeros((len(names), 2), dtype=np.int64)
     per_bin = np.zeros((len(edges) - 1, 2), dtype=np.int64)
-    survived = anchored_ = 0
+    survived = anchored_ = assignable = border = 0
     low = math.inf
-    for part in spill.parts("lines", "cls", "distance", "survives", "anchored", "train_w"):
-        ok = part["survives"] & part["anchored"]
+    for part in spill.parts("lines", "cls", "distance", "survives", "anchored", "assignable", "border", "train_w"):
+        ok = part["survives"] & part["anchored"] & (part["assignable"] | part["border"])
         cls = part["cls"].astype(np.int64)
         per_class += np.stack([np.bincount(cls, minlength=len(names)),
                                np.bincount(cls, weights=ok, minlength=len(names)).astype(np.int64)], axis=1)
@@ -533,6 +545,8 @@ def _check_learnable(meta: DatasetMeta, spill: Spill, top: float, min_share: flo
                             axis=1)
         survived += int(part["survives"].sum())
         anchored_ += int(part["anchored"].sum())
+        assignable += int(part["assignable"].sum())
+        border += int(part["border"].sum())
         low = min(low, float(part["train_w"].min()))
     lines, good = (int(v) for v in per_class.sum(axis=0))
     check.checked = lines
@@ -559,6 +573,9 @@ def _check_learnable(meta: DatasetMeta, spill: Spill, top: float, min_share: flo
         "share": good / lines if lines else None,
         "share_survive_2px": survived / lines if lines else None,
         "share_with_anchor": anchored_ / lines if lines else None,
+        "share_assignable": assignable / lines if lines else None,
+        "share_at_edge_margin": border / lines if lines else None,
+        "assignable_side_px": ASSIGNABLE_SIDE_PX,
         "min_side_train_px": {"median": _median_of(spill, "lines", "train_w") if lines else None,
                               "min": low if lines else None},
         "by_distance_m": [{"lo": float(lo), "hi": float(hi), **share(per_bin[k])}
@@ -736,12 +753,13 @@ def _check_pose_names(view: DatasetMeta) -> Check:
 def _pose_learnable_part(view: DatasetView, instances: NDArray[np.float64]) -> NDArray[np.bool_]:
     """Which pose instances (rows ``(frame row, class, cx, cy, w, h)``) Ultralytics' trainer
     keeps at ``labels.train_imgsz`` and can assign to an anchor, without mosaic (as for
-    boxes: :mod:`datagen.core.training`)."""
+    boxes: :mod:`datagen.core.training`; the pose assigner weighs anchors by keypoint OKS,
+    not by box overlap, so the box size rule does not apply)."""
     k = view.intrinsics
     cx, cy = instances[:, 2] * k.width, instances[:, 3] * k.height
     bw, bh = instances[:, 4] * k.width, instances[:, 5] * k.height
     xyxy = np.stack([cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2], axis=-1)
-    return view.train_view.learnable(xyxy)
+    return view.train_view.reaches_loss(xyxy)
 
 
 def _pose_learnable(meta: DatasetMeta, counts: NDArray[np.int64]) -> dict:

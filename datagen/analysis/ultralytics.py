@@ -130,14 +130,22 @@ def pose_items(root: str | Path, split: str = "train") -> dict:
 
 def assigner_positives(root: str | Path, split: str = "train", *, images: int | None = None, batch: int = 8,
                        model: str = "yolo11n.yaml", seed: int = 0) -> dict:
-    """How many label lines Ultralytics' own detection loss gives at least one positive
-    anchor, on an untrained ``model`` (built from its YAML, seeded): the assigner of
-    ``v8DetectionLoss`` run on the trainer's own batches of ``split``.
+    """What Ultralytics' own detection loss makes of the label lines at the start of training:
+    the task-aligned assigner of the untrained ``model`` (built from its YAML, seeded) run on
+    the trainer's own batches of ``split``.
 
-    The task-aligned assigner weighs anchors by the network's predictions, so this is
-    the state at the start of training; an anchor inside several boxes goes to one of
-    them. Returns ``label_lines`` (in the label files), ``instances`` (what the
-    dataloader produced of them) and ``positive`` (instances given a positive anchor)."""
+    The assigner picks positive anchors inside each box and gives each a classification
+    target of ``score^0.5 * CIoU^6`` against the head's current prediction, normalized by the
+    box's best such metric plus 1e-9 and scaled by its best CIoU; the box loss of a positive
+    is weighted by that target. An untrained head predicts boxes of a fixed size in strides
+    (about 15 for a DFL head, 4 for YOLO26's), so a label box much smaller than that gets a
+    target near 0 however many positives it has: it teaches only "background".
+
+    Returns ``label_lines`` (in the label files), ``instances`` (what the dataloader produced
+    of them), ``positive`` (instances given at least one positive anchor), ``target_sum``
+    (the sum of every positive's target, the box loss's normalizer), ``target_median`` (the
+    median over instances of their best positive's target) and ``targeted`` (instances whose
+    best positive's target is at least 0.01)."""
     import torch
     from ultralytics.nn.tasks import DetectionModel
 
@@ -147,23 +155,37 @@ def assigner_positives(root: str | Path, split: str = "train", *, images: int | 
     network = DetectionModel(model, nc=len(dataset.data["names"]), verbose=False)
     network.args = cfg
     criterion = network.init_criterion()
+    one2many = getattr(criterion, "one2many", criterion)  # an end-to-end head: its one-to-many branch
     seen: dict = {}
-    forward = criterion.assigner.forward
+    forward = one2many.assigner.forward
 
     def capture(*args, **kwargs):
         out = forward(*args, **kwargs)
-        seen["fg"], seen["gt_idx"], seen["mask_gt"] = out[3], out[4], args[5]
+        seen["scores"], seen["fg"], seen["gt_idx"], seen["mask_gt"] = out[2], out[3], out[4], args[5]
         return out
 
-    criterion.assigner.forward = capture
+    one2many.assigner.forward = capture
     count = len(dataset) if images is None else min(images, len(dataset))
     label_lines = sum(len(dataset.labels[i]["cls"]) for i in range(count))
     lines = positive = 0
+    target_sum = 0.0
+    best: list[torch.Tensor] = []
     with torch.no_grad():
         for start in range(0, count, batch):
             items = dataset.collate_fn([dataset[i] for i in range(start, min(start + batch, count))])
             items["img"] = items["img"].float() / 255
             criterion(network(items["img"]), items)
-            lines += int(seen["mask_gt"].sum())
-            positive += sum(len(seen["gt_idx"][b][seen["fg"][b]].unique()) for b in range(seen["fg"].shape[0]))
-    return {"images": count, "label_lines": label_lines, "instances": lines, "positive": positive}
+            mask, fg, gt_idx = seen["mask_gt"], seen["fg"], seen["gt_idx"]
+            target = seen["scores"].float().sum(-1)  # (b, anchors): a positive's target, 0 elsewhere
+            lines += int(mask.sum())
+            target_sum += float(target.sum())
+            for b in range(fg.shape[0]):
+                n = int(mask[b].sum())
+                per_box = torch.zeros(mask.shape[1])
+                per_box.scatter_reduce_(0, gt_idx[b][fg[b]], target[b][fg[b]], reduce="amax")
+                positive += len(gt_idx[b][fg[b]].unique())
+                best.append(per_box[:n])
+    best_target = torch.cat(best) if best else torch.zeros(0)
+    return {"images": count, "label_lines": label_lines, "instances": lines, "positive": positive,
+            "target_sum": target_sum, "target_median": float(best_target.median()) if len(best_target) else 0.0,
+            "targeted": int((best_target >= 0.01).sum())}

@@ -658,9 +658,12 @@ class LabelsConfig(_Section):
     """Ultralytics' training image size (the recipe's imgsz; the paper trained at 864):
     label sizes are judged as the trainer sees them there (datagen.core.training)."""
 
-    min_box_px: Number = Field(8.0, ge=0.0, le=512.0)
-    """Smallest side a label box may have at train_imgsz, in the trainer's pixels (8: the
-    finest anchor stride, so every box holds an anchor centre); 0 keeps boxes as they are."""
+    min_box_px: Number = Field(48.0, ge=0.0, le=512.0)
+    """Smallest side a label box may have at train_imgsz, in the trainer's pixels; 0 keeps
+    boxes as they are. A detector learns a box only if the untrained head's assigner gives
+    it a target, which needs sides of at least ASSIGNABLE_SIDE_PX there
+    (datagen.core.training); 48 gives about six times the target of that minimum. A box
+    near a border grows only as far as the edge margin allows, so no feature is lost."""
 
     small_boxes: Literal["grow", "exclude"] = "grow"
     """A label box with a side under min_box_px: 'grow' widens it symmetrically about its

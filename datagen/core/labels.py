@@ -24,9 +24,10 @@ box, or the tight box when ``corrected`` is false (the paper's uncorrected
 ablation, model H). A detector can only learn boxes of a few pixels at its
 training size (:mod:`datagen.core.training`), so with ``small_boxes="grow"`` a side
 shorter than ``min_size_px`` is widened symmetrically about the box's centre
-(the true centre when corrected) to exactly that size: the centre does not move
-and the label box contains the corrected (or tight) box. The exclusion rules
-apply to the label box. Only features with no exclusion become YOLO lines.
+(the true centre when corrected) to exactly that size, or as far as the edge margin
+allows where the centre is closer to a border: the centre does not move and the label
+box contains the corrected (or tight) box. The exclusion rules apply to the label
+box, so growing never excludes a feature. Only features with no exclusion become YOLO lines.
 """
 
 from __future__ import annotations
@@ -198,15 +199,22 @@ def _boxes(
     box = corrected_box if corrected else tight
     with np.errstate(invalid="ignore"):
         small = (box[..., 2:] - box[..., :2]) < need  # (*B, F, 2); NaN boxes are never small
+    m = float(edge_margin_px)
     if small_boxes == "grow" and small.any():
         centre = center if corrected else 0.5 * (lo + hi)
-        grown = np.concatenate([np.minimum(box[..., :2], centre - need / 2),
-                                np.maximum(box[..., 2:], centre + need / 2)], axis=-1)
+        # Grown no further than the edge margin allows: a feature near a border keeps its
+        # line (with a smaller box) instead of becoming an unlabeled feature the detector
+        # would learn as background. A box already past the margin is excluded below.
+        far = np.array([width, height], dtype=np.float64) - m
+        with np.errstate(invalid="ignore"):
+            grow = np.maximum(np.minimum(need / 2, np.minimum(centre - m, far - centre)), 0.0)
+            # The clamps only absorb rounding: a side grown to the margin lands on it exactly.
+            grown = np.concatenate([np.minimum(box[..., :2], np.maximum(centre - grow, m)),
+                                    np.maximum(box[..., 2:], np.minimum(centre + grow, far))], axis=-1)
         box = np.where(np.concatenate([small, small], axis=-1), grown, box)
     too_small = small.any(axis=-1) if small_boxes == "exclude" else np.zeros(front.shape, dtype=bool)
 
     x0, y0, x1, y1 = np.moveaxis(box, -1, 0)
-    m = float(edge_margin_px)
     with np.errstate(invalid="ignore"):
         inside_image = (x0 >= 0.0) & (y0 >= 0.0) & (x1 <= width) & (y1 <= height)
         inside_margin = (x0 >= m) & (y0 >= m) & (x1 <= width - m) & (y1 <= height - m)

@@ -1,8 +1,9 @@
 """How Ultralytics' YOLO trainer sees a label, written down once (no Ultralytics import).
 
-A label teaches a detector only if it survives the trainer's own transforms and
-the detection head can assign it to an anchor. Ultralytics 8.4 with the recipe of
-:func:`datagen.dataset.layout.hyp_yaml` (mosaic, scale, translate, rotation, shear and
+A label teaches a detector only if it survives the trainer's own transforms, the
+detection head can assign it to an anchor, and that assignment gives it a target
+that is not zero. Ultralytics 8.4 with the recipe of
+:func:`datagen.dataset.metadata.hyp_yaml` (mosaic, scale, translate, rotation, shear and
 perspective all off) does this to a ``W x H`` image at ``imgsz``:
 
 1. **resize** (``BaseDataset.load_image``): the long side becomes ``imgsz``,
@@ -18,9 +19,22 @@ perspective all off) does this to a ``W x H`` image at ``imgsz``:
 4. **anchors** (``make_anchors``, ``TaskAlignedAssigner.select_candidates_in_gts``):
    the head's anchor centres lie at ``(i + 0.5) * s`` for strides ``s`` of 8, 16
    and 32 over the square input; a box can be assigned a positive only where
-   an anchor centre lies strictly inside it.
+   an anchor centre lies strictly inside it;
+5. **targets** (``TaskAlignedAssigner``, ``utils/tal.py``): each positive's
+   classification target, which also weighs its box loss, is ``score^0.5 * CIoU^6``
+   against the head's current prediction, divided by the box's best such value plus
+   1e-9 and scaled by its best CIoU. An untrained DFL head predicts boxes about 15
+   strides wide (120 px at stride 8), so a box a few pixels wide gets targets near
+   1e-9: it teaches "background" only, and with it the whole detector. Measured on
+   rendered wingcam55 frames with an untrained ``yolo11n.yaml``
+   (``bench/bench_train.py --sweep``): the median box's best target is about 1e-10 at
+   8 px, 2e-6 at 16 px, 0.03 at 32 px and 0.2 at 48 px. Trained from scratch to
+   memorize 24 frames, 8 px labels never gave a detection while 32 and 48 px labels
+   were found to sub-pixel centres (README, "Does it train?").
+   :data:`ASSIGNABLE_SIDE_PX` is the threshold.
 
-A label is *learnable* when it passes 3 and contains an anchor centre of 4.
+A label is *learnable* when it passes 3, contains an anchor centre of 4, and both
+its sides are at least :data:`ASSIGNABLE_SIDE_PX` at the training size (5).
 (Ultralytics 8.4.190's assigner also widens boxes under 16 px to 16 px when it
 picks candidate anchors; this module keeps the stricter rule that the box itself
 contains an anchor, so that learnability does not hang on that detail.)
@@ -41,8 +55,11 @@ from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "ANCHOR_STRIDES",
+    "ASSIGNABLE_SIDE_PX",
+    "MATCH_PX",
     "MAX_ASPECT_RATIO",
     "MIN_TRAIN_SIDE_PX",
+    "TRAIN_BATCH",
     "TrainView",
     "label_options",
 ]
@@ -53,6 +70,14 @@ ANCHOR_STRIDES: Final[tuple[int, ...]] = (8, 16, 32)
 MIN_TRAIN_SIDE_PX: Final[float] = 2.0
 #: ... or whose aspect ratio is not below this (``ar_thr``).
 MAX_ASPECT_RATIO: Final[float] = 100.0
+#: The training recipe's batch, and its nominal batch (``nbs``): one optimizer step per batch.
+TRAIN_BATCH: Final[int] = 16
+#: A detection finds a feature when its centre lies within this distance of the projection of
+#: the feature's true centre (px at the dataset's resolution; ``datagen evaluate --match-px``).
+MATCH_PX: Final[float] = 3.0
+#: The shortest side (px at the training size) for which the untrained head's task-aligned
+#: assigner gives a box a usable target (rule 5 of the module docstring).
+ASSIGNABLE_SIDE_PX: Final[float] = 32.0
 #: An anchor centre counts as inside a box when it is further than this from every side (the assigner's eps).
 _ANCHOR_EPS: Final[float] = 1e-9
 
@@ -127,9 +152,22 @@ class TrainView:
             found |= inside
         return found
 
-    def learnable(self, xyxy: ArrayLike) -> NDArray[np.bool_]:
-        """``(...)`` :meth:`survives` and :meth:`has_anchor`: the box can teach the detector."""
+    def reaches_loss(self, xyxy: ArrayLike) -> NDArray[np.bool_]:
+        """``(...)`` :meth:`survives` and :meth:`has_anchor`: the box gets positive anchors."""
         return self.survives(xyxy) & self.has_anchor(xyxy)
+
+    def assignable(self, xyxy: ArrayLike) -> NDArray[np.bool_]:
+        """``(...)`` both sides at least :data:`ASSIGNABLE_SIDE_PX` at the training size (original
+        pixels in): the untrained head's assigner gives the box a target that is not ~0."""
+        t = self.to_train(xyxy)
+        with np.errstate(invalid="ignore"):
+            # A relative tolerance: a box grown to exactly the side comes back a few ulps short.
+            side = ASSIGNABLE_SIDE_PX * (1.0 - 1e-9)
+            return (t[..., 2] - t[..., 0] >= side) & (t[..., 3] - t[..., 1] >= side)
+
+    def learnable(self, xyxy: ArrayLike) -> NDArray[np.bool_]:
+        """``(...)`` :meth:`reaches_loss` and :meth:`assignable`: the box can teach the detector."""
+        return self.reaches_loss(xyxy) & self.assignable(xyxy)
 
 
 def label_options(labels, width: int, height: int) -> dict:

@@ -205,8 +205,11 @@ def _learnable_html(stats: dict, esc) -> str:
     return f"""<h2>Learnable by the detector</h2>
 <p>{stats['lines']} label lines; {pct(stats['share'])} survive Ultralytics' training transforms at imgsz
 {stats['train_imgsz']} ({pct(stats['share_survive_2px'])} have both sides above 2 px) and hold an anchor centre
-({pct(stats['share_with_anchor'])}); the check asks for {pct(stats['threshold'])}. Label boxes are at least
-{stats['min_box_px']:g} px there ({esc(stats['small_boxes'])} smaller ones).</p>
+({pct(stats['share_with_anchor'])}), and are large enough for the untrained head's assigner (both sides at
+least {stats['assignable_side_px']:g} px: {pct(stats['share_assignable'])}) or reached the edge margin while
+growing ({pct(stats['share_at_edge_margin'])}); the check asks for {pct(stats['threshold'])}. Label boxes
+are at least {stats['min_box_px']:g} px there ({esc(stats['small_boxes'])} smaller ones, as far as the edge
+margin allows).</p>
 <table>{head.format('distance (m)')}{rows(distance)}</table>
 <table>{head.format('size')}{rows(stats['by_size'].items())}</table>
 <table>{head.format('worst classes')}{rows(worst) or '<tr><td colspan=3>every class fully learnable</td></tr>'}</table>

@@ -13,9 +13,11 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pyarrow as pa
 
-from datagen.analysis.evaluate import REASONS, PnPSettings, summarize
+from datagen.analysis.detections import DetectionScores, summarize_detections
+from datagen.analysis.evaluate import DISTANCE_EDGES, REASONS, PnPSettings, summarize
 from datagen.dataset.reader import DatasetIndex, DatasetView
 from datagen.files import write_parquet, write_text
 
@@ -23,15 +25,19 @@ __all__ = ["write_evaluation"]
 
 
 def write_evaluation(view: DatasetIndex | DatasetView, runs: list[tuple[dict, dict]], out: Path,
-                     settings: PnPSettings = PnPSettings()) -> dict[str, Path]:
+                     settings: PnPSettings = PnPSettings(), detector: DetectionScores | None = None
+                     ) -> dict[str, Path]:
     """``evaluation.json`` (settings and each run's metrics), ``results.parquet`` (one row
     per frame and run) and PNG plots in the style of the paper's Figs 14-17.
 
     Args:
         runs: ``(source, result)`` pairs; ``source`` describes the 2D points, e.g.
             ``{"source": "truth", "noise_px": 0.5}``.
+        detector: the detections scored against the true centres (with predictions):
+            ``evaluation.json`` gains a ``detector`` section, ``detections.parquet`` holds
+            its rows and two plots show it against distance and per class.
     """
-    from datagen.report.plots import plot_evaluation
+    from datagen.report.plots import plot_detector, plot_evaluation
 
     out = Path(out)
     summaries = [{**source, **summarize(result, settings)} for source, result in runs]
@@ -57,8 +63,37 @@ def write_evaluation(view: DatasetIndex | DatasetView, runs: list[tuple[dict, di
         }))
     write_parquet(out / "results.parquet", pa.concat_tables(tables), compression="zstd")
     plots = plot_evaluation(runs, summaries, out / "plots", name=str(view.doc.get("name", "")))
+    files = ["results.parquet"]
+    if detector is not None:
+        doc["detector"] = summarize_detections(detector, DISTANCE_EDGES)
+        write_parquet(out / "detections.parquet", _detections_table(detector), compression="zstd")
+        files.append("detections.parquet")
+        plots.update(plot_detector(doc["detector"], out / "plots", name=str(view.doc.get("name", ""))))
     # evaluation.json last: the record of every file the evaluation wrote (``files``, relative to
     # its folder), which --overwrite removes and nothing else.
-    doc["files"] = ["results.parquet", *(str(p.relative_to(out)) for p in plots.values())]
+    doc["files"] = [*files, *(str(p.relative_to(out)) for p in plots.values())]
     write_text(out / "evaluation.json", json.dumps(doc, indent=2) + "\n")
     return {"json": out / "evaluation.json", "parquet": out / "results.parquet", **plots}
+
+
+def _detections_table(s: DetectionScores) -> pa.Table:
+    """One row per (frame, class) labeled or detected (``datagen.analysis.detections``)."""
+    def pairs(values):  # a missing vector is a null, never NaNs
+        missing = ~np.isfinite(values).all(axis=1)
+        return pa.FixedSizeListArray.from_arrays(pa.array(np.where(missing[:, None], 0.0, values).ravel()), 2,
+                                                 mask=pa.array(missing))
+
+    return pa.table({
+        "frame_id": pa.array(s.frame_id),
+        "class_id": pa.array(s.class_id),
+        "class_name": pa.array([s.names[c] for c in s.class_id.tolist()]),
+        "distance_m": pa.array(s.distance_m),
+        "labeled": pa.array(s.labeled),
+        "detected": pa.array(s.detected),
+        "matched": pa.array(s.matched),
+        "conf": pa.array(s.conf, from_pandas=True),
+        "error_px": pa.array(s.error_px, from_pandas=True),
+        "error_uv_px": pairs(s.error_uv),
+        "parallax_uv_px": pairs(s.parallax_uv),
+        "along_parallax_px": pa.array(s.along_parallax_px, from_pandas=True),
+    })

@@ -16,7 +16,7 @@ from datagen.config.schema import Config
 from datagen.files import write_figure
 from datagen.scene.approach import trace_approach
 
-__all__ = ["plot_approaches", "plot_audit", "plot_evaluation"]
+__all__ = ["plot_approaches", "plot_audit", "plot_detector", "plot_evaluation"]
 
 
 def _figure(*shape: int, **options):
@@ -175,4 +175,44 @@ def plot_evaluation(runs, summaries, folder: Path, *, name: str = "") -> dict[st
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     out["reliability_vs_distance"] = _save_png(fig, Path(folder) / "reliability_vs_distance.png")
+    return out
+
+
+def plot_detector(summary: dict, folder: Path, *, name: str = "") -> dict[str, Path]:
+    """The detector against distance (recall within the match radius, misses and spurious
+    detections; the centre error's median and 95th percentile) and recall per class."""
+    import numpy as np
+
+    bins = [b for b in summary["by_distance"] if b["labeled"] or b["spurious"]]
+    mid = np.array([(b["lo_m"] + b["hi_m"]) / 2 for b in bins])
+    fig, axes = _figure(1, 2, figsize=(13, 4.2))
+    labeled = np.array([max(b["labeled"], 1) for b in bins])
+    for key, style in (("matched", "o-"), ("mislocated", "s--"), ("missed", "^--")):
+        axes[0].plot(mid, [100 * b[key] / n for b, n in zip(bins, labeled)], style, ms=4,
+                     label=f"{key} (% of labeled)")
+    axes[0].plot(mid, [100 * b["spurious"] / n for b, n in zip(bins, labeled)], "x:", label="spurious (% of labeled)")
+    axes[0].set(xlabel="probe-to-drogue distance (m)", ylabel="% of labeled features", ylim=(0, None),
+                title=f"found within {summary['match_px']:g} px of the true centre")
+    err = [(m, b["error_median_px"], b["error_p95_px"]) for m, b in zip(mid, bins) if b["error_median_px"] is not None]
+    if err:
+        e = np.array(err, dtype=float)
+        axes[1].plot(e[:, 0], e[:, 1], "o-", label="median")
+        axes[1].plot(e[:, 0], e[:, 2], "s--", label="95th percentile")
+    axes[1].axhline(summary["match_px"], color="k", lw=0.8, ls=":", label="match radius")
+    axes[1].set(yscale="log", xlabel="probe-to-drogue distance (m)", ylabel="detected centre - true centre (px)",
+                title="centre error of detected labeled features")
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.suptitle(f"{name}: the detector against the true feature centres")
+    out = {"detector_vs_distance": _save_png(fig, Path(folder) / "detector_vs_distance.png")}
+
+    classes = list(summary["by_class"].items())
+    fig, ax = _figure(figsize=(max(8, 0.13 * len(classes)), 4))
+    recall = [100 * (c["recall"] or 0) for _, c in classes]
+    ax.bar(range(len(classes)), recall, color=["C0" if c["labeled"] else "C7" for _, c in classes])
+    ax.set(xlabel="class id", ylabel="recall (%)", ylim=(0, 102),
+           title=f"{name}: labeled features found within {summary['match_px']:g} px, per class (grey: never labeled)")
+    ax.grid(True, axis="y", alpha=0.3)
+    out["detector_by_class"] = _save_png(fig, Path(folder) / "detector_by_class.png")
     return out
