@@ -126,7 +126,7 @@ class Renderer:
             oidn_version()  # one line saying how to install it, before any rendering
         first = neutral_look(config)
         sea_bsdf, self._sea_prefix = self.world.sea_bsdf(_principled(Material(SEA_COLOUR, 0.1, 0.0, 0.5)))
-        integrator: dict = {"type": "path", "max_depth": config.render.max_depth}
+        integrator: dict = {"type": self.world.integrator, "max_depth": config.render.max_depth}
         if self.guides:  # the beauty channels are the path tracer's own (same samples, same bytes)
             from datagen.render.denoise import guided_integrator
 
