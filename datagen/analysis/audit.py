@@ -508,10 +508,10 @@ def _learnable_part(view: DatasetView, lines: NDArray[np.float64]) -> dict[str, 
     # that far: datagen.core.labels) is as large as its feature's line can be.
     m = view.label_rules.edge_margin_px
     on = np.isclose(xyxy, [m, m, k.width - m, k.height - m], rtol=0.0, atol=_ON_MARGIN_PX)
-    short = np.stack([bw * train.scale[0], bh * train.scale[1]], axis=-1) < ASSIGNABLE_SIDE_PX * (1.0 - 1e-9)
+    short = train.short_sides(xyxy)
     border = short.any(axis=1) & ~(short & ~(on[:, :2] | on[:, 2:])).any(axis=1)  # every short side on it
     return {"cls": cls.astype(np.int16), "distance": view.distance_m[b], "survives": train.survives(xyxy),
-            "anchored": train.has_anchor(xyxy), "assignable": train.assignable(xyxy), "border": border,
+            "anchored": train.has_anchor(xyxy), "assignable": ~short.any(axis=1), "border": border,
             "train_w": np.minimum(bw * train.scale[0], bh * train.scale[1])}
 
 

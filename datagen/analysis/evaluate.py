@@ -118,18 +118,22 @@ def solve_pose(points_model: NDArray, uv_px: NDArray, k: Intrinsics, settings: P
     # noise-free receiver points through a distorting lens (150 px RMS, a 13 m error)
     # that AP3P on any four of them found. So the pose is the best of several candidates:
     # RANSAC's, SQPnP on its inliers and on every point, and for a few points AP3P on every
-    # four of them; the most inliers win, then the lowest RMS over them.
+    # four of them (only while no candidate explains every point: that search is 35 solves
+    # for seven points); the most inliers win, then the lowest RMS over them.
     candidates = [(rvec, tvec)]
-    for subset in (inliers.ravel(), slice(None)):
+    every = np.array_equal(inliers.ravel(), np.arange(n))  # then both subsets are the same points
+    for subset in (inliers.ravel(),) if every else (inliers.ravel(), slice(None)):
         ok_sq, rvec_sq, tvec_sq = cv2.solvePnP(obj[subset], img[subset], camera, distortion,
                                                flags=cv2.SOLVEPNP_SQPNP)
         candidates += [(rvec_sq, tvec_sq)] if ok_sq else []
-    if n <= _AP3P_MAX_POINTS:
+    scores = [_score(obj, img, r, t, camera, distortion, settings.reprojection_px) for r, t in candidates]
+    if n <= _AP3P_MAX_POINTS and max(scores)[0] < n:
         for four in itertools.combinations(range(n), 4):
             ok_p3, rvec_p3, tvec_p3 = cv2.solvePnP(obj[list(four)], img[list(four)], camera, distortion,
                                                    flags=cv2.SOLVEPNP_AP3P)
-            candidates += [(rvec_p3, tvec_p3)] if ok_p3 else []
-    scores = [_score(obj, img, r, t, camera, distortion, settings.reprojection_px) for r, t in candidates]
+            if ok_p3:
+                candidates.append((rvec_p3, tvec_p3))
+                scores.append(_score(obj, img, rvec_p3, tvec_p3, camera, distortion, settings.reprojection_px))
     best = max(range(len(candidates)), key=scores.__getitem__)  # the first of equals: RANSAC's
     if scores[best][0] < settings.min_matches:
         return None
@@ -531,7 +535,7 @@ def summarize(result: dict, settings: PnPSettings = PnPSettings()) -> dict:
     and the failure reasons."""
     d, e, ok = result["distance_m"], result["error_m"], result["success"]
     bins = []
-    for lo, hi in zip(DISTANCE_EDGES[:-1], DISTANCE_EDGES[1:], strict=True):
+    for lo, hi in itertools.pairwise(DISTANCE_EDGES):
         sel = (d >= lo) & (d < hi)
         bins.append({"lo_m": float(lo), "hi_m": float(hi), **_stats(e[sel], ok[sel])})
     at = {"contact": _stats(e[d < settings.contact_m], ok[d < settings.contact_m])}

@@ -156,14 +156,20 @@ class TrainView:
         """``(...)`` :meth:`survives` and :meth:`has_anchor`: the box gets positive anchors."""
         return self.survives(xyxy) & self.has_anchor(xyxy)
 
+    def short_sides(self, xyxy: ArrayLike) -> NDArray[np.bool_]:
+        """``(..., 2)`` whether the box's width, its height, is under :data:`ASSIGNABLE_SIDE_PX`
+        at the training size (original pixels in); NaN boxes have no short side."""
+        t = self.to_train(xyxy)
+        with np.errstate(invalid="ignore"):
+            # A relative tolerance: a box grown to exactly the side comes back a few ulps short.
+            return (t[..., 2:] - t[..., :2]) < ASSIGNABLE_SIDE_PX * (1.0 - 1e-9)
+
     def assignable(self, xyxy: ArrayLike) -> NDArray[np.bool_]:
         """``(...)`` both sides at least :data:`ASSIGNABLE_SIDE_PX` at the training size (original
         pixels in): the untrained head's assigner gives the box a target that is not ~0."""
         t = self.to_train(xyxy)
         with np.errstate(invalid="ignore"):
-            # A relative tolerance: a box grown to exactly the side comes back a few ulps short.
-            side = ASSIGNABLE_SIDE_PX * (1.0 - 1e-9)
-            return (t[..., 2] - t[..., 0] >= side) & (t[..., 3] - t[..., 1] >= side)
+            return np.isfinite(t).all(axis=-1) & ~self.short_sides(xyxy).any(axis=-1)
 
     def learnable(self, xyxy: ArrayLike) -> NDArray[np.bool_]:
         """``(...)`` :meth:`reaches_loss` and :meth:`assignable`: the box can teach the detector."""
