@@ -45,6 +45,9 @@ __all__ = [
 #: numpy sums at most this many values with its 8-accumulator loop before it splits (PW_BLOCKSIZE).
 PAIRWISE_BLOCK: Final = 128
 _ADD: Final = -1  # the plan's "add the last two sums"
+#: What numpy's reduction adds its tree's sum to: its identity, +0.0 (numpy 2.4: a sum of
+#: negative zeros is +0.0), or -0.0 where a version keeps their sign. Asked of numpy, not assumed.
+_REDUCE_START: Final = float(np.add.reduce(np.array([-0.0])))
 #: Bits of a value's sortable key that one selection pass resolves.
 _RADIX_BITS: Final = 16
 #: Values sharing a key prefix with a wanted order statistic that are gathered and sorted
@@ -136,7 +139,7 @@ class OrderedSum:
         """The sum (0.0 of no values); every value must have been fed."""
         if self._fed != self.n:
             raise ValueError(f"a sum of {self.n} values was fed {self._fed}")
-        return self._stack[0] if self.n else 0.0
+        return self._stack[0] + _REDUCE_START if self.n else 0.0
 
     def mean(self) -> float:
         return self.total() / self.n
