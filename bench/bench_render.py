@@ -10,7 +10,11 @@ every mode, then frame i + 1), so that a noisy machine slows every mode alike; i
 prints each mode's mean and median whole-frame time, its ratio to all-off, and the
 process's peak RSS.
 
-For each spp: seconds per frame in ``mi.render`` and in the denoiser; seconds per
+``--variant cuda_ad_rgb`` renders and denoises on the GPU where one is (nothing else
+changes: the denoiser takes the render's Dr.Jit tensors on their device).
+
+For each spp: seconds per frame in ``mi.render`` and in the denoiser; every other
+stage's seconds (:class:`datagen.render.timing.StageClock`); seconds per
 frame for the whole frame (approach state, material draws, posing through
 ``mi.traverse``, render, denoise, geometry pass, feature visibility, 8-bit PNG
 encoding); the share of frame time spent outside ``mi.render`` (and the
@@ -60,24 +64,37 @@ def main() -> None:
             renderer = Renderer(scene, spp=spp, variant=args.variant)
             states = FrameStates(config)
             render_s = denoise_s = total_s = 0.0
+            stages: dict[str, float] = {}
             for n, i in enumerate(range(args.frames + 1)):
                 start = time.perf_counter()  # the build's frame pipeline (datagen.pipeline.frame), timed whole
                 draws = draw_frame(scene, states, i)
                 frame_labels(scene, draws)
                 result = renderer.render(draws.state, draws.look, draws.render_seed)
+                clock = dict(result.stages)
+                t = time.perf_counter()
                 renderer.feature_visibility(draws.state, scene.features)
+                clock["feature visibility"] = time.perf_counter() - t
+                t = time.perf_counter()
                 write_image(Path(tmp) / f"{i}.png", training_image(result, draws.look)[0][..., ::-1])
+                clock["sRGB, statistics, PNG"] = time.perf_counter() - t
                 elapsed = time.perf_counter() - start
+                clock["other"] = elapsed - sum(clock.values())
                 if n > 0:
                     render_s += result.render_s
                     denoise_s += result.denoise_s or 0.0
                     total_s += elapsed
+                    for name, seconds in clock.items():
+                        stages[name] = stages.get(name, 0.0) + seconds
             k = args.frames
             peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
             print(f"{renderer.variant} spp {spp:3d}, denoise {renderer.denoise}: mi.render {render_s / k:6.2f} s/frame, "
                   f"denoise {denoise_s / k:5.2f} s/frame, whole frame {total_s / k:6.2f} s/frame, outside mi.render "
                   f"{100 * (1 - render_s / total_s):4.1f}% (denoise {100 * denoise_s / total_s:4.1f}%), "
                   f"peak RSS {peak:,.0f} MiB")
+            rest = sorted(((name, t) for name, t in stages.items() if name not in ("path tracing", "denoise")),
+                          key=lambda kv: -kv[1])
+            print("    stages: " + ", ".join(f"{name} {t / k:.3f} s" for name, t in rest)
+                  + f" ({sum(t for _, t in rest) / total_s:.0%} of the frame)")
 
 
 #: Every world randomizer's switch, off (today's images) and on.

@@ -307,6 +307,47 @@ def img2label(image: str) -> str:
 
 
 @pytest.mark.render
+def test_a_rendered_builds_stages_add_up_to_its_frames_and_the_summary_names_them(reference) -> None:
+    root, config = reference
+    report = build_dataset(config, root, workers=1, threads=1)  # resumed: nothing rendered, no stages
+    assert report.rendered == 0 and report.stages == {}
+    tmp = root.parent / "stages"
+    report = build_dataset(config, tmp, workers=1, threads=1)
+    stages, k = report.stages, report.rendered
+    assert k == 8 and {"pose", "path tracing", "denoise", "geometry pass", "feature visibility"} <= set(stages)
+    assert stages["path tracing"] == pytest.approx(report.render_s, rel=1e-9)
+    assert stages["denoise"] == pytest.approx(report.denoise_s, rel=1e-9)
+    assert sum(stages.values()) == pytest.approx(report.rendered_frame_s, rel=1e-6)
+    assert list(stages.values()) == sorted(stages.values(), reverse=True)
+    other = next(line for line in report.lines() if line.startswith("  other, per rendered frame: "))
+    assert f"pose {stages['pose'] / k:.2f} s" in other and "path tracing" not in other
+
+
+def test_a_build_prints_its_estimate_first_and_the_model_grows_with_the_work(tmp_path: Path) -> None:
+    import io
+
+    from datagen.pipeline.estimate import frame_cost
+    from datagen.pipeline.progress import BuildProgress
+
+    config = tiny_config(tmp_path)
+    stream = io.StringIO()
+    build_dataset(config, tmp_path / "ds", render=False,
+                  progress=BuildProgress("tiny", stream=stream, interval_s=1e9, live=False))
+    first = stream.getvalue().splitlines()[0]
+    assert re.fullmatch(r"build tiny: estimate [0-9.]+ s a frame = [0-9,]+ frames/h on \d+ cores \(labels only\), "
+                        r".* for 8 frames; measured rates follow", first), first
+    shipped = load_config("wingcam55")
+    cost = frame_cost(shipped, 2)
+    assert cost.frames_per_hour == pytest.approx(3600 / cost.seconds)
+    assert "2048x1080" in cost.setting and f"{shipped.render.spp} spp" in cost.setting
+    assert frame_cost(shipped, 1).seconds == pytest.approx(2 * cost.seconds)
+    for more in ({"render.spp": 4 * shipped.render.spp}, {"render.denoise_guides": True},
+                 {"camera.width": 4096, "camera.height": 2160}):
+        assert frame_cost(override_config(shipped, more), 2).seconds > cost.seconds, more
+    assert frame_cost(shipped, 2, render=False).seconds < cost.seconds / 100
+
+
+@pytest.mark.render
 def test_layout_is_what_ultralytics_reads(reference) -> None:
     root, config = reference
     rows = manifest_rows(root)

@@ -9,7 +9,15 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from datagen.analysis.image_quality import FIREFLY_MIN_EXCESS, fireflies, psnr, ssim
+from datagen.analysis.image_quality import (
+    FIREFLY_MIN_EXCESS,
+    SPECKLE_EXCESS,
+    fireflies,
+    noise_speckles,
+    psnr,
+    speckles,
+    ssim,
+)
 from datagen.config import load_config, override_config
 from datagen.core.conventions import frame_rng
 from datagen.scene.look import cox_munk_roughness, draw_look
@@ -24,6 +32,21 @@ def test_fireflies_are_isolated_speckles_and_a_glint_is_not_one() -> None:
     image[30, 50] = 0.2 + FIREFLY_MIN_EXCESS / 2  # too faint to be seen as one
     found = fireflies(image)
     assert found[10, 10] and found[33, 20:22].all() and found.sum() == 3
+
+
+def test_noise_speckles_are_the_speckles_two_independent_halves_do_not_share() -> None:
+    half_a = np.full((40, 60, 3), 95, np.uint8)  # a smooth grey
+    half_b = half_a.copy()
+    half_a[10, 10] = 250  # a sample's outlier: in one half only
+    half_b[20, 30] = 95 + SPECKLE_EXCESS + 20  # another, in the other half, in one channel
+    half_b[20, 30, 1:] = half_a[20, 30, 1:]
+    for half in (half_a, half_b):  # a converged bright rivet: in both halves alike
+        half[30, 45] = 240
+    half_a[5, 5] = half_b[5, 5] = 95 + SPECKLE_EXCESS  # not brighter than the median by more
+    both = speckles(half_a) | speckles(half_b)
+    assert both[10, 10] and both[20, 30] and both[30, 45] and not both[5, 5]
+    noise = noise_speckles(half_a, half_b)
+    assert noise[10, 10] and noise[20, 30] and noise.sum() == 2
 
 
 def test_psnr_and_ssim_of_an_image_against_itself_and_against_noise() -> None:

@@ -11,9 +11,10 @@ from typing import Final
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.ndimage import gaussian_filter, rank_filter
+from scipy.ndimage import gaussian_filter, median_filter, rank_filter
 
-__all__ = ["FIREFLY_MIN_EXCESS", "FIREFLY_RATIO", "fireflies", "luminance", "psnr", "ssim"]
+__all__ = ["FIREFLY_MIN_EXCESS", "FIREFLY_RATIO", "SPECKLE_EXCESS", "fireflies", "luminance", "noise_speckles", "psnr",
+           "speckles", "ssim"]
 
 #: A pixel is a firefly when its luminance exceeds the second brightest of its 8
 #: neighbours by this factor ...
@@ -21,6 +22,10 @@ FIREFLY_RATIO: Final = 4.0
 #: ... and by at least this much display-linear luminance (1 is white at the frame's
 #: exposure): an isolated speckle a viewer sees, not a dim pixel beside a black one.
 FIREFLY_MIN_EXCESS: Final = 0.25
+
+#: An 8-bit pixel is a speckle when it is brighter than the median of its 5 x 5
+#: neighbourhood by more than this many levels of 255 (in any channel).
+SPECKLE_EXCESS: Final = 32
 
 _REC709: Final = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
 
@@ -42,6 +47,25 @@ def fireflies(rgb: NDArray[np.floating]) -> NDArray[np.bool_]:
     ring[1, 1] = False
     second = rank_filter(lum, rank=-2, footprint=ring, mode="nearest")
     return (lum > FIREFLY_RATIO * second) & (lum - second > FIREFLY_MIN_EXCESS)
+
+
+def speckles(srgb8: NDArray[np.uint8]) -> NDArray[np.bool_]:
+    """Pixels of an 8-bit image brighter than their 5 x 5 median by more than
+    :data:`SPECKLE_EXCESS` in some channel. Noise makes them, and so does converged
+    detail finer than the window: a sunlit filament of cloud, a rivet, a glint's rim."""
+    a = np.asarray(srgb8, dtype=np.int16)
+    median = np.stack([median_filter(a[..., c], size=5, mode="nearest") for c in range(a.shape[-1])], axis=-1)
+    return ((a - median) > SPECKLE_EXCESS).any(axis=-1)
+
+
+def noise_speckles(half_a: NDArray[np.uint8], half_b: NDArray[np.uint8]) -> NDArray[np.bool_]:
+    """The :func:`speckles` of a reference that are noise: a speckle in either of two
+    renders of the same frame with independent samples (each half of the reference's
+    spp) that the other does not share within :data:`SPECKLE_EXCESS` levels. Converged
+    detail is a speckle in both halves alike; a sample's outlier lands in one."""
+    a, b = np.asarray(half_a, dtype=np.int16), np.asarray(half_b, dtype=np.int16)
+    apart = (np.abs(a - b) > SPECKLE_EXCESS).any(axis=-1)
+    return (speckles(half_a) | speckles(half_b)) & apart
 
 
 def _unit(image: NDArray) -> NDArray[np.float64]:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from datagen.core.labels import Exclusion
 from datagen.dataset.layout import ShardJob
+from datagen.pipeline.estimate import FrameCost
 
 __all__ = ["BuildProgress", "BuildReport", "NullProgress", "ShardSummary"]
 
@@ -27,6 +28,7 @@ class ShardSummary:
     denoise_s: float = 0.0  # seconds in the denoiser
     frame_s: float = 0.0  # seconds of the rendered frames, whole (render, denoise and the rest)
     wall_s: float = 0.0
+    stages: dict[str, float] = field(default_factory=dict)  # seconds per stage of the rendered frames
 
     def counts(self) -> dict:
         """The deterministic part, stored in the manifest's metadata."""
@@ -81,6 +83,14 @@ class BuildReport:
         return sum(s.frame_s for s in self.shards.values())
 
     @property
+    def stages(self) -> dict[str, float]:
+        """Seconds per stage of this run's rendered frames, the longest first."""
+        total: Counter = Counter()
+        for s in self.shards.values():
+            total.update(s.stages)
+        return dict(total.most_common())
+
+    @property
     def frames_this_run(self) -> int:
         return sum(s.frames for n, s in self.shards.items() if n not in self.resumed)
 
@@ -101,6 +111,9 @@ class BuildReport:
             share = (frame - render) / frame if frame > 0 else 0.0
             out.append(f"  per rendered frame: {frame:.2f} s = mi.render {render:.2f} s + denoise {denoise:.2f} s "
                        f"+ other {other:.2f} s ({share:.0%} outside mi.render)")
+            rest = [(name, s / k) for name, s in self.stages.items() if name not in ("path tracing", "denoise")]
+            if rest:
+                out.append("  other, per rendered frame: " + ", ".join(f"{name} {s:.2f} s" for name, s in rest))
         excluded = ", ".join(f"{k} {v}" for k, v in self.excluded.items())
         scope = "" if done == len(self.jobs) else f" (in the {done} finished shards)"
         out.append(f"  labels: {self.labels} boxes{scope}; excluded: {excluded}")
@@ -124,8 +137,15 @@ class BuildProgress:
         self.interval_s = interval_s
         self._bar = None
 
-    def start(self, total: int, done: int) -> None:
+    def start(self, total: int, done: int, estimate: FrameCost | None = None) -> None:
+        """Begin: ``total`` frames, ``done`` of them by an earlier run; ``estimate``, the
+        model's cost of a frame, is printed with what it predicts for the rest."""
         self.total, self.done, self.first = total, done, done
+        if estimate is not None:
+            todo = total - done
+            self._print(f"{self.verb} {self.name}: estimate {estimate.seconds:.2f} s a frame = "
+                        f"{estimate.frames_per_hour:,.0f} frames/h on {estimate.cores} cores ({estimate.setting}), "
+                        f"{_duration(todo * estimate.seconds)} for {todo} frames; measured rates follow")
         self.t0 = self._last = time.perf_counter()
         if self.live:
             from rich.console import Console
@@ -147,6 +167,7 @@ class BuildProgress:
             self._print(f"{self.verb} {self.name}: {total} frames, {done} already done")
 
     def _rate(self) -> tuple[float, float]:
+        """Frames per second so far and the seconds still to go."""
         elapsed = time.perf_counter() - self.t0
         rate = (self.done - self.first) / elapsed if elapsed > 0 else 0.0
         eta = (self.total - self.done) / rate if rate > 0 else math.inf
@@ -164,7 +185,7 @@ class BuildProgress:
         rate, eta = self._rate()
         eta_text = time.strftime("%H:%M:%S", time.gmtime(eta)) if math.isfinite(eta) and eta < 86400 * 365 else "?"
         self._print(f"{self.verb} {self.name}: {self.done}/{self.total} frames ({100 * self.done / max(1, self.total):.0f}%),"
-                    f" {rate:.3f} frames/s, ETA {eta_text}")
+                    f" {rate:.3f} frames/s = {3600 * rate:,.0f} frames/h, ETA {eta_text}")
 
     def shard_done(self, summary: ShardSummary) -> None:
         if self._bar is None:
@@ -182,10 +203,18 @@ class BuildProgress:
             self._bar = None
 
 
+def _duration(seconds: float) -> str:
+    """``seconds`` as ``1 h 05 min``, ``4 min 10 s`` or ``12 s``."""
+    s = round(seconds)
+    if s >= 3600:
+        return f"{s // 3600} h {s % 3600 // 60:02d} min"
+    return f"{s // 60} min {s % 60:02d} s" if s >= 60 else f"{s} s"
+
+
 class NullProgress:
     """:class:`BuildProgress`'s interface, showing nothing (a caller that passed none)."""
 
-    def start(self, total: int, done: int) -> None:
+    def start(self, total: int, done: int, estimate: FrameCost | None = None) -> None:
         pass
 
     def advance(self, n: int) -> None:

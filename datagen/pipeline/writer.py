@@ -27,6 +27,7 @@ from datagen.dataset.yolo import pose_lines, yolo_lines
 from datagen.files import write_exr, write_image, write_text
 from datagen.pipeline.frame import FrameDraws, draw_frame, shard_labels, training_image
 from datagen.pipeline.progress import ShardSummary
+from datagen.render.timing import StageClock
 from datagen.scene.approach import FrameStates
 from datagen.scene.resolved import Scene
 
@@ -92,6 +93,8 @@ class ShardWriter:
         # renders; at most MAX_PENDING_WRITES frames wait, so memory stays bounded.
         self._io = ThreadPoolExecutor(1, thread_name_prefix="datagen-write")
         self._writes: deque[Future] = deque()
+        self._clock = StageClock()  # the frame being written
+        self._stages: dict[str, float] = {}  # the last rendered frame's seconds per stage
         if render:
             from datagen.render.renderer import Renderer  # Mitsuba only when rendering
 
@@ -121,6 +124,7 @@ class ShardWriter:
         self._stop = stop or (lambda: False)
         rows, excluded, labels = [], Counter(), 0
         rendered, render_s, denoise_s, frame_s = 0, 0.0, 0.0, 0.0
+        stages: Counter = Counter()  # seconds per stage of the rendered frames
         self.states.prefetch(job.frames)  # the shard's approach chains, simulated together
         approaches = {} if approaches is None else approaches  # each chain's weather and liveries, drawn once
         draws = [draw_frame(self.scene, self.states, i, approaches) for i in job.frames]
@@ -137,11 +141,12 @@ class ShardWriter:
                 render_s += row["render_s"]
                 denoise_s += row["denoise_s"] or 0.0
                 frame_s += row["frame_s"]
+                stages.update(self._stages)
             if progress is not None:
                 progress(1)
         self._wait_for_writes(0)
         summary = ShardSummary(job.name, len(job.frames), labels, dict(excluded), rendered, render_s, denoise_s,
-                               frame_s)
+                               frame_s, stages=dict(stages))
         write_manifest(self.layout.manifest(job), rows, summary.counts())
         summary.wall_s = time.perf_counter() - start
         return summary
@@ -161,7 +166,8 @@ class ShardWriter:
             exr_rel = layout.exr_rel(job.split, job.shard, i) if scene.config.render.exr else None
             render_s, denoise_s, rendered = self._render(draws, layout.root / image_rel,
                                                          layout.root / exr_rel if exr_rel else None)
-            fraction, center_visible = self.renderer.feature_visibility(draws.state, features)
+            with self._clock.stage("feature visibility"):
+                fraction, center_visible = self.renderer.feature_visibility(draws.state, features)
             labels = labels.with_visibility(fraction, scene.config.labels.min_visible_fraction)
         records = feature_records(labels, features.class_id, fraction, center_visible)
         label_rel = layout.label_rel(job.split, job.shard, i)
@@ -172,7 +178,7 @@ class ShardWriter:
         if pose_rel is not None:
             rows = pose_rows(objects, labels.center_px, records.keypoint_flag, scene.pose_layout, k.width, k.height)
             write_text(layout.root / pose_rel, "".join(line + "\n" for line in pose_lines(rows)))
-        return manifest_row(
+        row = manifest_row(
             frame=i, split=job.split, shard=job.shard, image_path=image_rel, label_path=label_rel,
             pose_label_path=pose_rel, exr_path=exr_rel, intrinsics=k, state=draws.state, look=draws.look, seed=draws.seed,
             render_seed=draws.render_seed, spp=scene.config.render.spp if self.renderer is not None else None,
@@ -181,6 +187,9 @@ class ShardWriter:
             n_labeled=int(labels.labeled.sum()),
             rendered=rendered, render_s=render_s, denoise_s=denoise_s, frame_s=time.perf_counter() - started,
             worker=f"{platform.node()}:{os.getpid()}", worker_rss_mib=_rss_mib())
+        if self.renderer is not None:  # what the named stages leave of the frame's time
+            self._stages = dict(self._clock.seconds, other=row["frame_s"] - sum(self._clock.seconds.values()))
+        return row
 
     def _render(self, draws: FrameDraws, image: Path, exr: Path | None
                 ) -> tuple[float | None, float | None, dict]:
@@ -191,10 +200,13 @@ class ShardWriter:
         that run did not write, and a shard holds few frames."""
         renderer = self.renderer
         result = renderer.render(draws.state, draws.look, draws.render_seed, geometry=exr is not None)
+        self._clock = StageClock()
+        self._clock.seconds.update(result.stages or {})
         if self._stop():
             raise KeyboardInterrupt
         quality = self.scene.config.render.jpeg_quality
-        srgb, measured = training_image(result, draws.look)
+        with self._clock.stage("sRGB, JPEG round trip, statistics"):
+            srgb, measured = training_image(result, draws.look)
 
         def write() -> None:  # the image first: a frame is complete once its last file exists
             write_image(image, srgb[..., ::-1], jpeg_quality=quality)
@@ -202,7 +214,8 @@ class ShardWriter:
                 write_exr(exr, result.rgb, result.depth, result.object_id)
 
         self._writes.append(self._io.submit(write))
-        self._wait_for_writes(MAX_PENDING_WRITES)
+        with self._clock.stage("waiting for image writes"):
+            self._wait_for_writes(MAX_PENDING_WRITES)
         return result.render_s, result.denoise_s, measured
 
     def _wait_for_writes(self, keep: int) -> None:

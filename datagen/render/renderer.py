@@ -43,6 +43,7 @@ from datagen.render.mitsuba import (
     world_from_micam,
 )
 from datagen.render.runtime import use_variant
+from datagen.render.timing import StageClock
 from datagen.render.tonemap import exposure_scale, haze
 from datagen.render.world import CLOUD_LAYERS, SEA_COLOUR, SURFACES, World
 from datagen.scene.look import FrameLook, Material, neutral_look, sun_direction_world
@@ -78,6 +79,7 @@ class RenderResult:
     denoise_s: float | None = None  # seconds in the denoiser (None: not denoised)
     surface: NDArray[np.uint8] | None = None  # (H, W) datagen.render.world.SURFACES codes (geometry pass)
     measured: dict | None = None  # what the camera model measured (datagen.render.sensor.apply_sensor)
+    stages: dict[str, float] | None = None  # wall seconds per stage (datagen.render.timing.StageClock)
 
 
 def _principled(m: Material) -> dict:
@@ -200,7 +202,7 @@ class Renderer:
             self._background[int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0])] = name
 
     # -- per frame ----------------------------------------------------------------------------
-    def pose(self, state: FrameState, look: FrameLook) -> None:
+    def pose(self, state: FrameState, look: FrameLook, clock: StageClock | None = None) -> None:
         """Set every per-frame parameter of the scene from a frame's state and look.
 
         The first update after a scene is loaded leaves Mitsuba in another state than
@@ -213,9 +215,9 @@ class Renderer:
         if fresh:
             self._build(len(state.hose_points_world))
         for _ in range(2 if fresh else 1):
-            self._apply(state, look)
+            self._apply(state, look, clock or StageClock())
 
-    def _apply(self, state: FrameState, look: FrameLook) -> None:
+    def _apply(self, state: FrameState, look: FrameLook, clock: StageClock) -> None:
         mi = self._mi
         p = self.params
         cam_pos = state.world_from_cam[:3, 3]
@@ -224,8 +226,9 @@ class Renderer:
         self._world_from_cam = state.world_from_cam
         self._camera_render = cam_pos - origin
         sun_dir = [float(v) for v in sun_direction_world(state, look)]
-        irradiance = (self._sky_irradiance(sun_dir, look.turbidity, look.sun_scale, look.sky_scale)
-                      if self.world.clouds else None)
+        with clock.stage("cloud-lighting probe"):
+            irradiance = (self._sky_irradiance(sun_dir, look.turbidity, look.sun_scale, look.sky_scale)
+                          if self.world.clouds else None)
         liveries = self.world.livery_textures(look)
         for obj in RIGID_OBJECTS:
             p[f"{obj}.to_world"] = mi.Transform4f((render_from_world @ state.world_from(obj)).tolist())
@@ -324,45 +327,51 @@ class Renderer:
 
     def render(self, state: FrameState, look: FrameLook, seed: int, *, geometry: bool = False) -> RenderResult:
         """Pose the scene and render it: exposure-scaled linear RGB, plus the geometry
-        pass (depth, object ids) when ``geometry`` is asked for or haze needs it."""
-        import time
-
-        mi = self._mi
-        self.pose(state, look)
-        start = time.perf_counter()
-        image = mi.render(self.scene, seed=seed, spp=self.spp)
-        self._dr.eval(image)  # the render happens here (Dr.Jit evaluates lazily)
-        self._dr.sync_thread()
-        render_s = time.perf_counter() - start
+        pass (depth, object ids) when ``geometry`` is asked for or haze needs it. The
+        result's ``stages`` says where the time went."""
+        mi, clock = self._mi, StageClock()
+        with clock.stage("pose"):
+            self.pose(state, look, clock)
+        clock.seconds["pose"] -= clock.seconds.get("cloud-lighting probe", 0.0)  # its own stage
+        with clock.stage("path tracing"):
+            image = mi.render(self.scene, seed=seed, spp=self.spp)
+            self._dr.eval(image)  # the render happens here (Dr.Jit evaluates lazily)
+            self._dr.sync_thread()
+        render_s = clock.seconds["path tracing"]
         denoise_s = None
         if self.denoise == "off":
             rgb = np.array(image, dtype=np.float32)[..., :3]
         else:
-            start = time.perf_counter()
-            rgb = self._denoised(image)
-            denoise_s = time.perf_counter() - start
+            with clock.stage("denoise"):
+                rgb = self._denoised(image)
+            denoise_s = clock.seconds["denoise"]
         depth = ids = surface = None
-        if geometry or look.haze_visibility_m is not None:
-            depth, ids, surface = self.geometry_pass()
-        elif self.always_geometry:  # the camera model and the statistics: half resolution will do
-            depth, ids, surface = self.geometry_pass(2)
+        with clock.stage("geometry pass"):
+            if geometry or look.haze_visibility_m is not None:
+                depth, ids, surface = self.geometry_pass()
+            elif self.always_geometry:  # the camera model and the statistics: half resolution will do
+                depth, ids, surface = self.geometry_pass(2)
         if self.sensor is None:
-            rgb *= exposure_scale(look.exposure_ev)
-            if look.haze_visibility_m is not None:
-                rgb = haze(rgb, depth, ids, look.haze_visibility_m)
-            return RenderResult(rgb, depth, ids, render_s, denoise_s, surface)
+            with clock.stage("haze, exposure"):
+                rgb *= exposure_scale(look.exposure_ev)
+                if look.haze_visibility_m is not None:
+                    rgb = haze(rgb, depth, ids, look.haze_visibility_m)
+            return RenderResult(rgb, depth, ids, render_s, denoise_s, surface, stages=clock.seconds)
         from datagen.render.sensor import apply_sensor
 
-        if look.haze_visibility_m is not None:  # the atmosphere comes before the lens
-            rgb = haze(rgb, depth, ids, look.haze_visibility_m)
-        sun_world = sun_direction_world(state, look)
-        t_sun, _, _ = self.cast(self._camera_render, sun_world[None, :].astype(np.float32))
+        with clock.stage("haze, exposure"):
+            if look.haze_visibility_m is not None:  # the atmosphere comes before the lens
+                rgb = haze(rgb, depth, ids, look.haze_visibility_m)
+        with clock.stage("geometry pass"):
+            sun_world = sun_direction_world(state, look)
+            t_sun, _, _ = self.cast(self._camera_render, sun_world[None, :].astype(np.float32))
         out = apply_sensor(rgb, look, state, render=self.intrinsics, output=self.output_intrinsics,
                            margin_px=self.margin_px, depth=depth, ids=ids, surface=surface,
                            sun_cam=state.cam_from_world[:3, :3] @ sun_world,
                            sun_transmittance=float(not np.isfinite(t_sun[0])),
-                           auto_exposure=self.sensor.auto_exposure)
-        return RenderResult(out.rgb, out.depth, out.object_id, render_s, denoise_s, out.surface, out.measured)
+                           auto_exposure=self.sensor.auto_exposure, clock=clock)
+        return RenderResult(out.rgb, out.depth, out.object_id, render_s, denoise_s, out.surface, out.measured,
+                            clock.seconds)
 
     def _denoised(self, image) -> NDArray[np.float32]:
         """OIDN on the render's linear RGB, guided by its albedo and normal channels when

@@ -34,6 +34,7 @@ from datagen.core.conventions import (
     texture_rng,
 )
 from datagen.core.transforms import invert_rigid
+from datagen.render.timing import StageClock
 from datagen.render.tonemap import WHITE_RADIANCE, exposure_scale
 
 if TYPE_CHECKING:
@@ -285,30 +286,37 @@ def jpeg_round_trip(srgb8: NDArray[np.uint8], quality: int) -> NDArray[np.uint8]
 # --- the whole camera --------------------------------------------------------------------
 def apply_sensor(rgb: NDArray[np.float32], look: FrameLook, state: FrameState, *, render: Intrinsics,
                  output: Intrinsics, margin_px: int, depth, ids, surface, sun_cam: NDArray,
-                 sun_transmittance: float, auto_exposure: bool) -> SensorResult:
+                 sun_transmittance: float, auto_exposure: bool, clock: StageClock | None = None) -> SensorResult:
     """Linear radiance (the render grid, ``margin_px`` wider than ``output`` on every side)
-    to display-linear RGB on the output grid, through the frame's drawn camera."""
+    to display-linear RGB on the output grid, through the frame's drawn camera (each step
+    timed on ``clock``)."""
+    clock = clock or StageClock()
     measured: dict = {"motion_blur_px": None, "auto_exposure_ev": None, "sun_in_view": None}
     if look.sensor_exposure_time_s is not None and depth is not None:
-        displacement = image_motion(state, depth, ids, render, stride=2) * np.float32(look.sensor_exposure_time_s)
-        measured["motion_blur_px"] = float(np.sqrt((displacement**2).sum(axis=-1)).max(initial=0.0))
-        rgb = motion_blur(rgb, displacement)
+        with clock.stage("motion blur"):
+            displacement = image_motion(state, depth, ids, render, stride=2) * np.float32(look.sensor_exposure_time_s)
+            measured["motion_blur_px"] = float(np.sqrt((displacement**2).sum(axis=-1)).max(initial=0.0))
+            rgb = motion_blur(rgb, displacement)
     if look.sensor_distortion is not None:
-        warped = distort_image({"rgb": rgb, "depth": depth, "ids": ids, "surface": surface}, output, margin_px,
-                               np.asarray(look.sensor_distortion))
-        rgb, depth, ids, surface = warped["rgb"], warped["depth"], warped["ids"], warped["surface"]
-    if look.sensor_vignetting:
-        rgb = vignette(rgb, look.sensor_vignetting)
-    if look.sensor_glare is not None:
-        sun_radiance = 2.0 * WHITE_RADIANCE * look.sun_scale * sun_transmittance
-        glare, inside = sun_glare(rgb.shape[:2], output, sun_cam, look.sensor_glare, sun_radiance)
-        measured["sun_in_view"] = inside
-        if glare is not None:
-            rgb = rgb + glare
-    fixed = float(exposure_scale(0.0))
-    scale = auto_exposure_scale(rgb) if auto_exposure else fixed
-    measured["auto_exposure_ev"] = math.log2(scale / fixed) if auto_exposure else None
-    rgb = rgb * np.float32(scale * 2.0**look.exposure_ev)
-    if look.sensor_iso is not None:
-        rgb = sensor_noise(rgb, look.sensor_iso, texture_rng(look.sensor_seed))
-    return SensorResult(np.maximum(rgb, np.float32(0.0)).astype(np.float32), depth, ids, surface, measured)
+        with clock.stage("lens distortion"):
+            warped = distort_image({"rgb": rgb, "depth": depth, "ids": ids, "surface": surface}, output, margin_px,
+                                   np.asarray(look.sensor_distortion))
+            rgb, depth, ids, surface = warped["rgb"], warped["depth"], warped["ids"], warped["surface"]
+    with clock.stage("vignetting, glare, exposure"):
+        if look.sensor_vignetting:
+            rgb = vignette(rgb, look.sensor_vignetting)
+        if look.sensor_glare is not None:
+            sun_radiance = 2.0 * WHITE_RADIANCE * look.sun_scale * sun_transmittance
+            glare, inside = sun_glare(rgb.shape[:2], output, sun_cam, look.sensor_glare, sun_radiance)
+            measured["sun_in_view"] = inside
+            if glare is not None:
+                rgb = rgb + glare
+        fixed = float(exposure_scale(0.0))
+        scale = auto_exposure_scale(rgb) if auto_exposure else fixed
+        measured["auto_exposure_ev"] = math.log2(scale / fixed) if auto_exposure else None
+        rgb = rgb * np.float32(scale * 2.0**look.exposure_ev)
+    with clock.stage("sensor noise"):
+        if look.sensor_iso is not None:
+            rgb = sensor_noise(rgb, look.sensor_iso, texture_rng(look.sensor_seed))
+        rgb = np.maximum(rgb, np.float32(0.0)).astype(np.float32)
+    return SensorResult(rgb, depth, ids, surface, measured)

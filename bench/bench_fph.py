@@ -1,0 +1,57 @@
+"""Frames per hour of ``datagen build`` for each shipped scene at its defaults (issue 32).
+
+    python bench/bench_fph.py [--scenes wingcam55 podcam15 ...] [--frames 48] [--workers 2]
+
+Each scene is built as a user builds it (a subprocess: ``datagen build --config NAME
+--frames N --workers W``, shards of ``frames_per_approach`` frames so that every worker
+has work), after a 2-frame warm-up build of the same scene (Dr.Jit compiles its kernels
+once per machine; a 10,000-frame build pays that once). Prints a markdown table: the
+estimate the build printed in its first line, the measured frames/h of the build's own
+summary, and its split of a rendered frame.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import re
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from datagen.config.load import load_config, shipped_scenes
+
+
+def build(name: str, out: Path, frames: int, workers: int, shard: int) -> str:
+    done = subprocess.run([sys.executable, "-m", "datagen", "build", "--config", name, "--out", str(out),
+                           "--frames", str(frames), "--workers", str(workers), "--shard-size", str(shard)],
+                          capture_output=True, text=True, check=True)
+    return done.stdout + done.stderr
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenes", nargs="+", default=list(shipped_scenes()))
+    parser.add_argument("--frames", type=int, default=48)
+    parser.add_argument("--workers", type=int, default=2)
+    args = parser.parse_args()
+    print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}; "
+          f"{args.frames} frames per scene, --workers {args.workers}")
+    print("\n| scene | setting | estimate frames/h | measured frames/h | per rendered frame |")
+    print("|---|---|---|---|---|")
+    for name in args.scenes:
+        shard = max(1, min(load_config(name).approach.frames_per_approach, args.frames // max(1, args.workers)))
+        with tempfile.TemporaryDirectory() as tmp:
+            build(name, Path(tmp) / "warm", 2, 1, shard)
+            text = build(name, Path(tmp) / "ds", args.frames, args.workers, shard)
+        estimate = re.search(r"estimate [0-9.]+ s a frame = ([0-9,]+) frames/h on \d+ cores \(([^)]*)\)", text)
+        measured = re.search(r"this run: .* = ([0-9,]+) frames/h", text)
+        split = re.search(r"per rendered frame: (.*)\n", text)
+        print(f"| {name} | {estimate.group(2)} | {estimate.group(1)} | {measured.group(1)} | {split.group(1)} |",
+              flush=True)
+
+
+if __name__ == "__main__":
+    main()
