@@ -48,8 +48,9 @@ from datagen.config import load_config, override_config
 from datagen.config.schema import world_off
 from datagen.core.conventions import object_id
 from datagen.files import write_bytes, write_image
-from datagen.pipeline.frame import draw_frame, frame_labels, training_image
+from datagen.pipeline.frame import draw_frame, timed_frame
 from datagen.render.renderer import Renderer
+from datagen.render.timing import DENOISE, PATH_TRACING, rest_of_frame
 from datagen.render.tonemap import to_srgb8
 from datagen.scene.approach import FrameStates
 from datagen.scene.resolved import Scene
@@ -154,30 +155,15 @@ def write_crop(path: Path, config, frame: int, reference_spp: int, cache: Path) 
     print(f"  crop of {config.name}:{frame} at u {u0}-{u0 + w}, v {v0}-{v0 + h} -> {path}")
 
 
-def timed_frame(config, frame: int, tmp: Path) -> tuple[float, dict[str, float]]:
-    """Seconds for ``frame`` of ``config`` as the build makes it (after a warm-up frame),
-    and its seconds per stage."""
+def time_frame(config, frame: int, tmp: Path) -> tuple[float, dict[str, float]]:
+    """Seconds for ``frame`` of ``config`` as the build makes it, whole and per stage
+    (:func:`datagen.pipeline.frame.timed_frame`), after two untimed renders of it."""
     scene = Scene.resolve(config)
     renderer = Renderer(scene)
-    states = FrameStates(config)
-    warm = draw_frame(scene, states, frame)
+    warm = draw_frame(scene, FrameStates(config), frame)
     for _ in range(2):  # kernel compilation: a fresh scene's first render compiles other kernels than the next
         renderer.render(warm.state, warm.look, warm.render_seed)
-    start = time.perf_counter()  # the build's frame pipeline, timed whole
-    draws = draw_frame(scene, states, frame)
-    frame_labels(scene, draws)
-    result = renderer.render(draws.state, draws.look, draws.render_seed)
-    clock = dict(result.stages)
-    t = time.perf_counter()
-    renderer.feature_visibility(draws.state, scene.features)
-    clock["feature visibility"] = time.perf_counter() - t
-    t = time.perf_counter()
-    image, _ = training_image(result, draws.look)
-    write_image(tmp / "frame.jpg", image[..., ::-1], jpeg_quality=config.render.jpeg_quality)
-    clock["sRGB, JPEG, statistics, encoding"] = time.perf_counter() - t
-    whole = time.perf_counter() - start
-    clock["other"] = whole - sum(clock.values())
-    return whole, clock
+    return timed_frame(scene, renderer, FrameStates(config), frame, tmp / "frame.jpg")
 
 
 def main() -> None:
@@ -220,7 +206,7 @@ def main() -> None:
         return
 
     with tempfile.TemporaryDirectory() as tmp:
-        old = [timed_frame(override_config(configs[name], OLD_DEFAULT), i, Path(tmp))[0] for name, i in frames]
+        old = [time_frame(override_config(configs[name], OLD_DEFAULT), i, Path(tmp))[0] for name, i in frames]
         base = float(np.mean(old))
         print(f"\nold default (16 spp, no denoiser, world off), whole frame: {base:.2f} s/frame")
         print("\n| spp | denoise | PSNR dB (mean, min) | SSIM (mean) | s/frame whole, world on | x old default "
@@ -231,7 +217,7 @@ def main() -> None:
                 scores, times, stages = [], [], {}
                 for name, i in frames:
                     config = override_config(configs[name], {**MODES[mode], "render.spp": spp})
-                    whole, clock = timed_frame(config, i, Path(tmp))
+                    whole, clock = time_frame(config, i, Path(tmp))
                     times.append(whole)
                     for k, v in clock.items():
                         stages[k] = stages.get(k, 0.0) + v / len(frames)
@@ -244,13 +230,11 @@ def main() -> None:
                         write_image(args.out / f"{name}-{i}-{spp}spp-{mode}.png", image[..., ::-1])
                 p = np.array([s[0] for s in scores])
                 whole = float(np.mean(times))
-                render, denoise = stages.get("path tracing", 0.0), stages.get("denoise", 0.0)
+                render, denoise = stages.get(PATH_TRACING, 0.0), stages.get(DENOISE, 0.0)
                 print(f"| {spp} | {mode} | {p.mean():.1f}, {p.min():.1f} | {np.mean([s[1] for s in scores]):.3f} "
                       f"| {whole:.2f} | {whole / base:.2f} | {render:.2f} | {denoise:.2f} | {whole - render - denoise:.2f} |",
                       flush=True)
-                rest = sorted(((k, v) for k, v in stages.items() if k not in ("path tracing", "denoise")),
-                              key=lambda kv: -kv[1])
-                print("    stages: " + ", ".join(f"{k} {v:.3f} s" for k, v in rest)
+                print("    stages: " + ", ".join(f"{k} {v:.3f} s" for k, v in rest_of_frame(stages))
                       + f" ({(whole - render - denoise) / whole:.0%} of the frame)", flush=True)
 
 

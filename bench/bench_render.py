@@ -29,14 +29,13 @@ import os
 import platform
 import resource
 import tempfile
-import time
 from pathlib import Path
 
 from datagen.config import load_config, override_config
 from datagen.config.schema import WORLD_RANDOMIZERS, world_off
-from datagen.files import write_image
-from datagen.pipeline.frame import draw_frame, frame_labels, training_image
+from datagen.pipeline.frame import timed_frame
 from datagen.render.renderer import Renderer
+from datagen.render.timing import DENOISE, PATH_TRACING, rest_of_frame
 from datagen.scene.approach import FrameStates
 from datagen.scene.resolved import Scene
 
@@ -63,36 +62,23 @@ def main() -> None:
         for spp in args.spp:
             renderer = Renderer(scene, spp=spp, variant=args.variant)
             states = FrameStates(config)
-            render_s = denoise_s = total_s = 0.0
             stages: dict[str, float] = {}
+            total_s = 0.0
             for n, i in enumerate(range(args.frames + 1)):
-                start = time.perf_counter()  # the build's frame pipeline (datagen.pipeline.frame), timed whole
-                draws = draw_frame(scene, states, i)
-                frame_labels(scene, draws)
-                result = renderer.render(draws.state, draws.look, draws.render_seed)
-                clock = dict(result.stages)
-                t = time.perf_counter()
-                renderer.feature_visibility(draws.state, scene.features)
-                clock["feature visibility"] = time.perf_counter() - t
-                t = time.perf_counter()
-                write_image(Path(tmp) / f"{i}.png", training_image(result, draws.look)[0][..., ::-1])
-                clock["sRGB, statistics, PNG"] = time.perf_counter() - t
-                elapsed = time.perf_counter() - start
-                clock["other"] = elapsed - sum(clock.values())
+                # The build's frame pipeline (datagen.pipeline.frame), timed whole and by stage.
+                elapsed, clock = timed_frame(scene, renderer, states, i, Path(tmp) / f"{i}.png")
                 if n > 0:
-                    render_s += result.render_s
-                    denoise_s += result.denoise_s or 0.0
                     total_s += elapsed
                     for name, seconds in clock.items():
                         stages[name] = stages.get(name, 0.0) + seconds
             k = args.frames
+            render_s, denoise_s = stages.get(PATH_TRACING, 0.0), stages.get(DENOISE, 0.0)
             peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
             print(f"{renderer.variant} spp {spp:3d}, denoise {renderer.denoise}: mi.render {render_s / k:6.2f} s/frame, "
                   f"denoise {denoise_s / k:5.2f} s/frame, whole frame {total_s / k:6.2f} s/frame, outside mi.render "
                   f"{100 * (1 - render_s / total_s):4.1f}% (denoise {100 * denoise_s / total_s:4.1f}%), "
                   f"peak RSS {peak:,.0f} MiB")
-            rest = sorted(((name, t) for name, t in stages.items() if name not in ("path tracing", "denoise")),
-                          key=lambda kv: -kv[1])
+            rest = rest_of_frame(stages)
             print("    stages: " + ", ".join(f"{name} {t / k:.3f} s" for name, t in rest)
                   + f" ({sum(t for _, t in rest) / total_s:.0%} of the frame)")
 
@@ -115,14 +101,10 @@ def randomizers(config, args) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for n in range(args.frames + 1):  # frame 0 warms every mode up (kernel compilation)
             for name, (scene, renderer, states) in runs.items():
-                start = time.perf_counter()
-                draws = draw_frame(scene, states, n * 7)  # spread over approach chains and distances
-                frame_labels(scene, draws)
-                result = renderer.render(draws.state, draws.look, draws.render_seed)
-                renderer.feature_visibility(draws.state, scene.features)
-                write_image(Path(tmp) / "frame.png", training_image(result, draws.look)[0][..., ::-1])
+                # frame n * 7: spread over approach chains and distances
+                elapsed, _ = timed_frame(scene, renderer, states, n * 7, Path(tmp) / "frame.png")
                 if n > 0:
-                    times[name].append(time.perf_counter() - start)
+                    times[name].append(elapsed)
     base = float(np.mean(times["all off"]))
     for name, t in times.items():
         print(f"{name:12s} whole frame {np.mean(t):6.2f} s/frame (median {np.median(t):5.2f}), "

@@ -325,6 +325,24 @@ def test_a_rendered_builds_stages_add_up_to_its_frames_and_the_summary_names_the
     assert "path tracing" not in other
 
 
+def test_a_stage_timed_inside_another_counts_for_the_inner_one_only() -> None:
+    from datagen.render.timing import StageClock, rest_of_frame
+
+    clock = StageClock()
+    with clock.stage("outer"):
+        time.sleep(0.01)
+        with clock.stage("inner"):
+            time.sleep(0.15)
+    with clock.stage("inner"):
+        time.sleep(0.05)
+    with clock.stage("path tracing"):
+        pass
+    s = clock.seconds
+    assert list(s) == ["inner", "outer", "path tracing"]  # in the order they ended
+    assert s["inner"] >= 0.2 and 0.01 <= s["outer"] < 0.15  # the outer stage without the inner one's 0.15 s
+    assert [name for name, _ in rest_of_frame(s)] == ["inner", "outer"]
+
+
 def test_a_build_prints_its_estimate_first_and_the_model_grows_with_the_work(tmp_path: Path) -> None:
     import io
 

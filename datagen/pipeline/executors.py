@@ -199,13 +199,18 @@ def ctrl_c_flag():
         signal.signal(signal.SIGINT, previous)
 
 
+def local_threads(workers: int, threads: int | None) -> int:
+    """Mitsuba threads per local worker: ``threads``, or the cores shared among the workers."""
+    return threads or max(1, cpu_count() // workers)
+
+
 def run_local(scene: Scene, root: Path, jobs: list[ShardJob], workers: int, render: bool,
               progress: Progress, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
     """Run ``jobs`` in ``workers`` processes (one: in this process), ``threads`` Mitsuba
     threads each, as the tasks of :func:`shard_groups`; report frames to ``progress`` and
     finished shards to ``done``."""
     workers = min(workers, len(jobs))
-    threads = threads or max(1, cpu_count() // workers)
+    threads = local_threads(workers, threads)
     groups = shard_groups(jobs, workers, together=not render)
     if workers == 1:
         writer = _writer(scene, str(root), threads, render)

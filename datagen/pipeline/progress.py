@@ -12,6 +12,7 @@ from pathlib import Path
 from datagen.core.labels import Exclusion
 from datagen.dataset.layout import ShardJob
 from datagen.pipeline.estimate import FrameCost
+from datagen.render.timing import rest_of_frame
 
 __all__ = ["BuildProgress", "BuildReport", "NullProgress", "ShardSummary"]
 
@@ -111,8 +112,7 @@ class BuildReport:
             share = (frame - render) / frame if frame > 0 else 0.0
             out.append(f"  per rendered frame: {frame:.2f} s = mi.render {render:.2f} s + denoise {denoise:.2f} s "
                        f"+ other {other:.2f} s ({share:.0%} outside mi.render)")
-            rest = [(name, s / k) for name, s in self.stages.items()
-                    if name not in ("path tracing", "denoise") and round(s / k, 2) > 0]  # what shows
+            rest = [(name, s / k) for name, s in rest_of_frame(self.stages) if round(s / k, 2) > 0]  # what shows
             if rest:
                 out.append("  other, per rendered frame: " + ", ".join(f"{name} {s:.2f} s" for name, s in rest))
         excluded = ", ".join(f"{k} {v}" for k, v in self.excluded.items())

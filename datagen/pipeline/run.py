@@ -24,7 +24,7 @@ from datagen.dataset.metadata import (
 )
 from datagen.dataset.schema import read_manifest_summary
 from datagen.pipeline.estimate import frame_cost
-from datagen.pipeline.executors import Executor, cpu_count, ray_cluster, run_local, run_ray
+from datagen.pipeline.executors import Executor, cpu_count, local_threads, ray_cluster, run_local, run_ray
 from datagen.pipeline.progress import BuildReport, ShardSummary
 from datagen.scene.resolved import Scene
 
@@ -95,8 +95,8 @@ def build_dataset(config: Config, out: Path, *, workers: int | None = None, exec
                     progress.shard_done(summary)
 
             if progress is not None:
-                cores = (workers or 1) * (threads or max(1, cpu_count() // (workers or 1))) \
-                    if executor == "local" else cpu_count()
+                busy = max(1, min(workers or 1, len(todo)))  # run_local's workers
+                cores = busy * local_threads(busy, threads) if executor == "local" else cpu_count()
                 progress.start(report.frames, report.frames - sum(len(j.frames) for j in todo),
                                frame_cost(scene.config, min(cores, cpu_count()), render=render))
             try:

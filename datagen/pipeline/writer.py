@@ -25,7 +25,7 @@ from datagen.dataset.layout import Layout, ShardJob
 from datagen.dataset.schema import feature_records, manifest_row, object_records, write_manifest
 from datagen.dataset.yolo import pose_lines, yolo_lines
 from datagen.files import write_exr, write_image, write_text
-from datagen.pipeline.frame import FrameDraws, draw_frame, shard_labels, training_image
+from datagen.pipeline.frame import TRAINING_IMAGE_STAGE, FrameDraws, draw_frame, shard_labels, training_image
 from datagen.pipeline.progress import ShardSummary
 from datagen.render.timing import StageClock
 from datagen.scene.approach import FrameStates
@@ -205,7 +205,7 @@ class ShardWriter:
         if self._stop():
             raise KeyboardInterrupt
         quality = self.scene.config.render.jpeg_quality
-        with self._clock.stage("sRGB, JPEG round trip, statistics"):
+        with self._clock.stage(TRAINING_IMAGE_STAGE):
             srgb, measured = training_image(result, draws.look)
 
         def write() -> None:  # the image first: a frame is complete once its last file exists

@@ -43,7 +43,7 @@ from datagen.render.mitsuba import (
     world_from_micam,
 )
 from datagen.render.runtime import use_variant
-from datagen.render.timing import StageClock
+from datagen.render.timing import DENOISE, PATH_TRACING, StageClock
 from datagen.render.tonemap import exposure_scale, haze
 from datagen.render.world import CLOUD_LAYERS, SEA_COLOUR, SURFACES, World
 from datagen.scene.look import FrameLook, Material, neutral_look, sun_direction_world
@@ -330,21 +330,20 @@ class Renderer:
         pass (depth, object ids) when ``geometry`` is asked for or haze needs it. The
         result's ``stages`` says where the time went."""
         mi, clock = self._mi, StageClock()
-        with clock.stage("pose"):
+        with clock.stage("pose"):  # the cloud-lighting probe inside it is a stage of its own
             self.pose(state, look, clock)
-        clock.seconds["pose"] -= clock.seconds.get("cloud-lighting probe", 0.0)  # its own stage
-        with clock.stage("path tracing"):
+        with clock.stage(PATH_TRACING):
             image = mi.render(self.scene, seed=seed, spp=self.spp)
             self._dr.eval(image)  # the render happens here (Dr.Jit evaluates lazily)
             self._dr.sync_thread()
-        render_s = clock.seconds["path tracing"]
+        render_s = clock.seconds[PATH_TRACING]
         denoise_s = None
         if self.denoise == "off":
             rgb = np.array(image, dtype=np.float32)[..., :3]
         else:
-            with clock.stage("denoise"):
+            with clock.stage(DENOISE):
                 rgb = self._denoised(image)
-            denoise_s = clock.seconds["denoise"]
+            denoise_s = clock.seconds[DENOISE]
         depth = ids = surface = None
         with clock.stage("geometry pass"):
             if geometry or look.haze_visibility_m is not None:
