@@ -48,7 +48,8 @@ from datagen.config import load_config, override_config
 from datagen.config.schema import world_off
 from datagen.core.conventions import object_id
 from datagen.files import write_bytes, write_image
-from datagen.pipeline.frame import draw_frame, timed_frame
+from datagen.pipeline.frame import draw_frame
+from datagen.pipeline.writer import timed_frame
 from datagen.render.renderer import Renderer
 from datagen.render.timing import DENOISE, PATH_TRACING, rest_of_frame
 from datagen.render.tonemap import to_srgb8
@@ -157,7 +158,7 @@ def write_crop(path: Path, config, frame: int, reference_spp: int, cache: Path) 
 
 def time_frame(config, frame: int, tmp: Path) -> tuple[float, dict[str, float]]:
     """Seconds for ``frame`` of ``config`` as the build makes it, whole and per stage
-    (:func:`datagen.pipeline.frame.timed_frame`), after two untimed renders of it."""
+    (:func:`datagen.pipeline.writer.timed_frame`), after two untimed renders of it."""
     scene = Scene.resolve(config)
     renderer = Renderer(scene)
     warm = draw_frame(scene, FrameStates(config), frame)

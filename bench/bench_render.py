@@ -33,7 +33,7 @@ from pathlib import Path
 
 from datagen.config import load_config, override_config
 from datagen.config.schema import WORLD_RANDOMIZERS, world_off
-from datagen.pipeline.frame import timed_frame
+from datagen.pipeline.writer import timed_frame
 from datagen.render.renderer import Renderer
 from datagen.render.timing import DENOISE, PATH_TRACING, rest_of_frame
 from datagen.scene.approach import FrameStates

@@ -13,10 +13,8 @@ Everything a frame is depends on (scene, frame index) alone.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Final
 
 import numpy as np
@@ -24,14 +22,12 @@ import numpy as np
 from datagen.core.conventions import render_seed
 from datagen.core.keypoints import object_boxes
 from datagen.core.labels import FrameLabels, compute_labels
-from datagen.files import write_image
-from datagen.render.timing import StageClock
 from datagen.scene.approach import FrameState, FrameStates
 from datagen.scene.look import FrameLook, frame_look
 from datagen.scene.resolved import Scene
 
 __all__ = ["TRAINING_IMAGE_STAGE", "FrameDraws", "draw_frame", "frame_labels", "object_labels", "shard_labels",
-           "timed_frame", "training_image"]
+           "training_image"]
 
 #: The stage of a rendered frame that is :func:`training_image`.
 TRAINING_IMAGE_STAGE: Final = "sRGB, JPEG round trip, statistics"
@@ -104,27 +100,3 @@ def training_image(result, look: FrameLook) -> tuple[np.ndarray, dict]:
     if look.sensor_jpeg_quality is not None:
         srgb = jpeg_round_trip(srgb, look.sensor_jpeg_quality)
     return srgb, {**(result.measured or {}), **image_statistics(srgb, result.surface)}
-
-
-def timed_frame(scene: Scene, renderer, states: FrameStates, i: int, image: Path) -> tuple[float, dict[str, float]]:
-    """Frame ``i`` made as a build makes it (draws, labels, render, feature visibility, the
-    training image), its image written to ``image`` (PNG, or JPEG by the suffix) in this
-    thread; its wall seconds, whole and per stage (the render's stages included, ``other``
-    what no stage names). For the benchmarks."""
-    clock = StageClock()
-    start = time.perf_counter()
-    with clock.stage("draws and labels"):
-        draws = draw_frame(scene, states, i)
-        frame_labels(scene, draws)
-    result = renderer.render(draws.state, draws.look, draws.render_seed)
-    for name, seconds in (result.stages or {}).items():
-        clock.add(name, seconds)
-    with clock.stage("feature visibility"):
-        renderer.feature_visibility(draws.state, scene.features)
-    with clock.stage(TRAINING_IMAGE_STAGE):
-        srgb, _ = training_image(result, draws.look)
-    with clock.stage("image encoding and writing"):
-        write_image(image, srgb[..., ::-1], jpeg_quality=scene.config.render.jpeg_quality)
-    whole = time.perf_counter() - start
-    clock.add("other", whole - sum(clock.seconds.values()))
-    return whole, clock.seconds

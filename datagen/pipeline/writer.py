@@ -25,13 +25,20 @@ from datagen.dataset.layout import Layout, ShardJob
 from datagen.dataset.schema import feature_records, manifest_row, object_records, write_manifest
 from datagen.dataset.yolo import pose_lines, yolo_lines
 from datagen.files import write_exr, write_image, write_text
-from datagen.pipeline.frame import TRAINING_IMAGE_STAGE, FrameDraws, draw_frame, shard_labels, training_image
+from datagen.pipeline.frame import (
+    TRAINING_IMAGE_STAGE,
+    FrameDraws,
+    draw_frame,
+    frame_labels,
+    shard_labels,
+    training_image,
+)
 from datagen.pipeline.progress import ShardSummary
 from datagen.render.timing import StageClock
 from datagen.scene.approach import FrameStates
 from datagen.scene.resolved import Scene
 
-__all__ = ["MAX_GROUP_SHARDS", "MAX_PENDING_WRITES", "ShardWriter", "shard_groups"]
+__all__ = ["MAX_GROUP_SHARDS", "MAX_PENDING_WRITES", "ShardWriter", "shard_groups", "timed_frame"]
 
 Progress = Callable[[int], None]
 
@@ -222,3 +229,28 @@ class ShardWriter:
         """Wait until at most ``keep`` image writes are pending; re-raise their errors."""
         while len(self._writes) > keep:
             self._writes.popleft().result()
+
+
+def timed_frame(scene: Scene, renderer, states: FrameStates, i: int, image: Path) -> tuple[float, dict[str, float]]:
+    """Frame ``i`` made as a build makes it (draws, labels, render, feature visibility, the
+    training image), its image written to ``image`` (PNG, or JPEG by the suffix) in this
+    thread; its wall seconds, whole and per stage (the render's stages included, ``other``
+    what no stage names). For the benchmarks: :meth:`ShardWriter.frame` writes the image
+    in a background thread instead."""
+    clock = StageClock()
+    start = time.perf_counter()
+    with clock.stage("draws and labels"):
+        draws = draw_frame(scene, states, i)
+        frame_labels(scene, draws)
+    result = renderer.render(draws.state, draws.look, draws.render_seed)
+    for name, seconds in (result.stages or {}).items():
+        clock.add(name, seconds)
+    with clock.stage("feature visibility"):
+        renderer.feature_visibility(draws.state, scene.features)
+    with clock.stage(TRAINING_IMAGE_STAGE):
+        srgb, _ = training_image(result, draws.look)
+    with clock.stage("image encoding and writing"):
+        write_image(image, srgb[..., ::-1], jpeg_quality=scene.config.render.jpeg_quality)
+    whole = time.perf_counter() - start
+    clock.add("other", whole - sum(clock.seconds.values()))
+    return whole, clock.seconds
