@@ -122,7 +122,7 @@ def train(args, data: Path, name: str, threads: int) -> subprocess.Popen | None:
                    f"project={args.out / 'runs'}", f"name={name}", "exist_ok=True", "plots=False", "val=False",
                    f"seed={args.train_seed}"]
     log(f"train {name}: {' '.join(command)}")
-    log_file = open(args.out / f"train-{name}.log", "a")  # noqa: SIM115 (the child writes it after we return)
+    log_file = open(args.out / f"train-{name}.log", "a")
     return subprocess.Popen(command, env=env, stdout=log_file, stderr=subprocess.STDOUT)
 
 
@@ -136,7 +136,8 @@ def predict(args, name: str, images: Path, imgsz: int) -> Path:
     folder = args.out / "predict" / name
     if not (folder / "done").is_file():
         shutil.rmtree(folder, ignore_errors=True)
-        subprocess.run([str(BIN / "yolo"), "detect", "predict", f"model={args.out / 'runs' / name / 'weights' / 'last.pt'}",
+        weights = args.out / "runs" / name / "weights" / "last.pt"
+        subprocess.run([str(BIN / "yolo"), "detect", "predict", f"model={weights}",
                         f"source={images}", f"imgsz={imgsz}", "conf=0.001", "save_txt=True", "save_conf=True",
                         "save=False", f"device={args.device}", f"project={args.out / 'predict'}", f"name={name}",
                         "exist_ok=True", "verbose=False"], check=True, capture_output=True)
@@ -274,8 +275,8 @@ def main() -> None:
         bias[name] = bias_table(args.out / "eval" / name / "detections.parquet")
         (run,) = doc["runs"]
         summary["models"][name] = {"losses": losses(args.out / "runs" / name), "predict_s": predict_s,
-                                   "detector": doc["detector"], "ptd": {k: run[k] for k in ("overall", "at", "by_distance",
-                                                                                             "reasons")},
+                                   "detector": doc["detector"],
+                                   "ptd": {k: run[k] for k in ("overall", "at", "by_distance", "reasons")},
                                    "bias_by_offset": bias[name]}
         (result,) = per_frame(args.out / "eval" / name)
         plots_runs.append(({"source": "predictions", "predictions": f"{name} labels"}, result))
@@ -320,11 +321,13 @@ def markdown(s: dict) -> str:
             if not (b["labeled"] or b["spurious"]):
                 continue
             where = "all" if b["lo_m"] is None else f"{b['lo_m']:g}-{b['hi_m']:g}"
-            lines.append(f"| {where} | {b['labeled']} | {b['matched']} | {_f(b['recall'] and 100 * b['recall'], 1, '%')} | "
+            recall = _f(b['recall'] and 100 * b['recall'], 1, '%')
+            lines.append(f"| {where} | {b['labeled']} | {b['matched']} | {recall} | "
                          f"{b['mislocated']} | {b['missed']} | {b['spurious']} | {_f(b['error_median_px'])} | "
                          f"{_f(b['error_p95_px'])} | {_f(b['along_parallax_mean_px'])} | "
                          f"{_f(b['parallax_offset_mean_px'])} |")
-        lines += ["", "Per object:", "", "| object | labeled | recall | error median px | error p95 px |", "|---|---|---|---|---|"]
+        lines += ["", "Per object:", "", "| object | labeled | recall | error median px | error p95 px |",
+                  "|---|---|---|---|---|"]
         objects: dict[str, list] = {}
         for cls, v in d["by_class"].items():
             objects.setdefault(cls.split(".")[0], []).append(v)
@@ -346,7 +349,8 @@ def markdown(s: dict) -> str:
                              f"{_f(r['along_parallax_mean_px'])} (+- {_f(r['along_parallax_sem_px'])}) |")
         lines.append("")
     lines += ["### PtD vector error (m) against distance, and reliability", "",
-              "| source | reliability | mean | +2 sigma | at contact (< 0.5 m) mean | frames |", "|---|---|---|---|---|---|"]
+              "| source | reliability | mean | +2 sigma | at contact (< 0.5 m) mean | frames |",
+              "|---|---|---|---|---|---|"]
     rows = [(f"truth + {t['noise_px']:g} px", t) for t in s["truth"]]
     rows += [(f"detector ({name} labels)", m["ptd"]) for name, m in s["models"].items()]
     for label, r in rows:

@@ -35,9 +35,9 @@ def measure(integrator: str, args) -> dict:
     world.World.integrator = property(lambda self: integrator)
     out: dict = {"integrator": integrator}
     for key, width, spp in (("render_s", args.width, args.spp), ("fireflies", args.firefly_width, args.firefly_spp)):
-        config = override_config(load_config("wingcam55"), {"render.denoise": "off",
-                                                            "randomization.sensor.enabled": False,
-                                                            "camera.width": width, "camera.height": width * 1080 // 2048})
+        config = override_config(load_config("wingcam55"), {
+            "render.denoise": "off", "randomization.sensor.enabled": False,
+            "camera.width": width, "camera.height": width * 1080 // 2048})
         scene = Scene.resolve(config)
         renderer = Renderer(scene, spp=spp)
         states = FrameStates(config)

@@ -17,12 +17,12 @@ import os
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
-import platform
-import time
+import platform  # noqa: E402 (the thread variables are set before numpy loads)
+import time  # noqa: E402
 
-import numpy as np
+import numpy as np  # noqa: E402
 
-from datagen import FeatureTable, Intrinsics, compute_labels, make_transform, rotation_from_ypr, yolo_lines
+from datagen import FeatureTable, Intrinsics, compute_labels, make_transform, rotation_from_ypr, yolo_lines  # noqa: E402
 
 
 def scene(n_frames: int, seed: int = 0):

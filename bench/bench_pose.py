@@ -96,7 +96,7 @@ def main() -> None:
                 both_s = build(scene, root, args.frames, args.seed, **{"labels.format": "both",
                                                                        "labels.truncated_objects": truncated})
                 view = load_dataset(root)
-                in_instance = view.labeled & (view.object_exclusion[:, view.features.object_index] == None)
+                in_instance = view.labeled & np.equal(view.object_exclusion[:, view.features.object_index], None)
                 stats = audit(view).stats["learnable_pose"]
                 loader = "-"
                 if have_ultralytics:
@@ -109,7 +109,8 @@ def main() -> None:
                               f"{shares['lines']} lines, {100 * (shares['anchored_share'] or 0):.1f}% anchored")
                 share = "-" if stats["share"] is None else f"{100 * stats['share']:.1f}%"
                 print(f"| {scene} | {truncated} | {stats['instances'] / len(view):.2f} | "
-                      f"{in_instance.sum():,} / {view.labeled.sum():,} ({100 * in_instance.sum() / view.labeled.sum():.1f}%) | "
+                      f"{in_instance.sum():,} / {view.labeled.sum():,} "
+                      f"({100 * in_instance.sum() / view.labeled.sum():.1f}%) | "
                       f"{share} | {both_s:.1f} / {detect_s:.1f} | {loader} |")
                 shutil.rmtree(root)
 

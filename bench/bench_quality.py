@@ -233,7 +233,8 @@ def main() -> None:
                 whole = float(np.mean(times))
                 render, denoise = stages.get(PATH_TRACING, 0.0), stages.get(DENOISE, 0.0)
                 print(f"| {spp} | {mode} | {p.mean():.1f}, {p.min():.1f} | {np.mean([s[1] for s in scores]):.3f} "
-                      f"| {whole:.2f} | {whole / base:.2f} | {render:.2f} | {denoise:.2f} | {whole - render - denoise:.2f} |",
+                      f"| {whole:.2f} | {whole / base:.2f} | {render:.2f} | {denoise:.2f} "
+                      f"| {whole - render - denoise:.2f} |",
                       flush=True)
                 print("    stages: " + ", ".join(f"{k} {v:.3f} s" for k, v in rest_of_frame(stages))
                       + f" ({(whole - render - denoise) / whole:.0%} of the frame)", flush=True)

@@ -74,7 +74,8 @@ def main() -> None:
             k = args.frames
             render_s, denoise_s = stages.get(PATH_TRACING, 0.0), stages.get(DENOISE, 0.0)
             peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-            print(f"{renderer.variant} spp {spp:3d}, denoise {renderer.denoise}: mi.render {render_s / k:6.2f} s/frame, "
+            print(f"{renderer.variant} spp {spp:3d}, denoise {renderer.denoise}: "
+                  f"mi.render {render_s / k:6.2f} s/frame, "
                   f"denoise {denoise_s / k:5.2f} s/frame, whole frame {total_s / k:6.2f} s/frame, outside mi.render "
                   f"{100 * (1 - render_s / total_s):4.1f}% (denoise {100 * denoise_s / total_s:4.1f}%), "
                   f"peak RSS {peak:,.0f} MiB")

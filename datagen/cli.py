@@ -81,7 +81,7 @@ def output_path(path: Path, flag: str) -> Path:
     try:
         text.encode("utf-8")
     except UnicodeEncodeError:
-        raise DatagenError(f"{flag}: {ascii(text)}: not a UTF-8 path; choose a name in UTF-8") from None
+        raise DatagenError(f"{flag}: {text!a}: not a UTF-8 path; choose a name in UTF-8") from None
     for part in Path(text).parts:
         if len(os.fsencode(part)) > 255:
             raise DatagenError(f"{flag}: {part[:40]}...: a name of {len(os.fsencode(part))} bytes, longer than "
@@ -125,7 +125,8 @@ def validate(
             continue
         cam, k, table = config.camera, scene.intrinsics, scene.features
         typer.echo(
-            f"{path}{'' if found == path else f' ({found})'}: ok ({config.name}: {cam.mount}, {cam.hfov_deg:g} deg hFOV, "
+            f"{path}{'' if found == path else f' ({found})'}: ok "
+            f"({config.name}: {cam.mount}, {cam.hfov_deg:g} deg hFOV, "
             f"{cam.width}x{cam.height}, fx=fy={k.fx:.3f} px, {config.dataset.frames} frames, "
             f"{'corrected' if config.labels.corrected else 'tight'} labels, {len(table)} classes "
             f"({config.features.variant} features of {' + '.join(config.features.objects)}))"
@@ -327,8 +328,14 @@ def evaluate(
     the detector itself against the true centres: per class and distance, features
     matched, mislocated and missed, spurious detections and the centre error."""
     from datagen.analysis.detections import score_detections, summarize_detections
-    from datagen.analysis.evaluate import (DISTANCE_EDGES, Run, covered_splits, evaluate_runs, parse_predictions,
-                                           summarize)
+    from datagen.analysis.evaluate import (
+        DISTANCE_EDGES,
+        Run,
+        covered_splits,
+        evaluate_runs,
+        parse_predictions,
+        summarize,
+    )
     from datagen.dataset.reader import open_dataset
     from datagen.pipeline.progress import BuildProgress
     from datagen.report.evaluation_report import write_evaluation

@@ -57,8 +57,8 @@ def label_files(root: Path) -> dict[str, bytes]:
 
 
 def image_files(root: Path) -> dict[str, bytes]:
-    return {str(p.relative_to(root)): p.read_bytes() for tree in ("images", "exr") for p in sorted((root / tree).rglob("*"))
-            if p.is_file()}
+    return {str(p.relative_to(root)): p.read_bytes() for tree in ("images", "exr")
+            for p in sorted((root / tree).rglob("*")) if p.is_file()}
 
 
 def temporaries(root: Path) -> list[Path]:

@@ -204,7 +204,8 @@ def test_hose_runs_from_port_to_drogue_coupling() -> None:
     np.testing.assert_allclose(s.hose_points_world[0], port[:3], atol=1e-9)
     np.testing.assert_allclose(s.hose_points_world[-1], coupling[:3], atol=1e-9)
     # In the tanker frame the hose runs steadily aft, and leaves the port downward.
-    hose_tanker = (invert_rigid(s.world_from_tanker) @ np.c_[s.hose_points_world, np.ones(len(s.hose_points_world))].T).T
+    hose_h = np.c_[s.hose_points_world, np.ones(len(s.hose_points_world))]
+    hose_tanker = (invert_rigid(s.world_from_tanker) @ hose_h.T).T
     assert (np.diff(hose_tanker[:, 0]) < 0).all()
     assert hose_tanker[1, 2] < hose_tanker[0, 2]
 

@@ -186,7 +186,7 @@ def test_meshes_load_in_mitsuba(meshes) -> None:
     from datagen.render.runtime import use_variant
 
     use_variant("auto")
-    for name, mesh in meshes.items():
+    for mesh in meshes.values():
         shapes = {p: mitsuba_mesh(p, m.vertices, m.faces) for p, m in mesh.parts.items()}
         scene = mi.load_dict({"type": "scene", **shapes}, optimize=False)
         assert len(scene.shapes()) == len(mesh.parts)
@@ -330,7 +330,7 @@ BAD_FEATURES = {
 @pytest.mark.parametrize("case", BAD_FEATURES, ids=str)
 def test_bad_feature_files_get_one_line_naming_file_and_key(tmp_path: Path, case: str) -> None:
     mutate, key, message = BAD_FEATURES[case]
-    mesh_path, features_path = write_user_assets(tmp_path)
+    _, features_path = write_user_assets(tmp_path)
     doc = json.loads(features_path.read_text())
     mutate(doc["variants"]["baseline"])
     features_path.write_text(json.dumps(doc))

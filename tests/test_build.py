@@ -369,7 +369,7 @@ def test_a_build_prints_its_estimate_first_and_the_model_grows_with_the_work(tmp
 
 @pytest.mark.render
 def test_layout_is_what_ultralytics_reads(reference) -> None:
-    root, config = reference
+    root, _ = reference
     rows = manifest_rows(root)
     images = sorted((root / "images").rglob("*.png"))
     assert len(images) == 8 == len(rows)
@@ -392,7 +392,7 @@ def test_layout_is_what_ultralytics_reads(reference) -> None:
 
 @pytest.mark.render
 def test_labels_recompute_from_manifest_and_features_alone(reference) -> None:
-    root, config = reference
+    root, _ = reference
     features = read_features(root / "features.parquet")
     doc = json.loads((root / "dataset.json").read_text())
     lines_checked = 0
@@ -565,7 +565,7 @@ def test_the_manifest_readme_recompute_example_runs_and_matches(tmp_path: Path) 
     code = section[section.index("```python") + len("```python"):]
     code = code[:code.index("```")].replace("DATASET", str(tmp_path / "ds"))
     scope: dict = {}
-    exec(compile(code, "manifests/README.md", "exec"), scope)  # noqa: S102 (the project's own documentation)
+    exec(compile(code, "manifests/README.md", "exec"), scope)
     labels, row = scope["labels"], scope["row"]
     stored = row["features"]
     np.testing.assert_allclose(labels.center_px, np.array([f["center_px"] or [np.nan] * 2 for f in stored],

@@ -32,7 +32,7 @@ def variant() -> str:
             try:
                 mi.set_variant(name)
                 return name
-            except Exception:  # noqa: BLE001 - LLVM missing: fall back
+            except Exception:
                 continue
     pytest.skip("no usable Mitsuba variant")
 

@@ -162,7 +162,7 @@ def test_a_full_disk_names_the_spill_file_and_tmpdir_and_the_folder_goes(monkeyp
 
     if not os.path.exists("/dev/full"):
         pytest.skip("needs /dev/full")
-    monkeypatch.setattr(exact, "scratch_file", lambda folder, name: open("/dev/full", "r+b"))  # noqa: SIM115
+    monkeypatch.setattr(exact, "scratch_file", lambda folder, name: open("/dev/full", "r+b"))
     spill = Spill()
     with pytest.raises(OSError) as info, spill:
         spill.add("s", np.arange(3), value=np.ones(3))

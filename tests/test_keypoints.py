@@ -12,7 +12,6 @@ from hypothesis.extra.numpy import arrays
 from datagen.assets.files import builtin_paths, load_mesh, mesh_hull
 from datagen.config import load_config
 from datagen.core.camera import Intrinsics, project_points
-
 from datagen.core.features import FeatureTable
 from datagen.core.keypoints import (
     FLAG_HIDDEN,

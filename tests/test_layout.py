@@ -98,7 +98,8 @@ def test_every_file_write_goes_through_one_module_called_by_the_writers() -> Non
             if isinstance(node, ast.ImportFrom) and node.module == "datagen.files" and \
                     {a.name for a in node.names} & WRITERS:
                 callers.add(path)
-    allowed = {p for p in callers if p.startswith(("dataset/", "report/"))} | {"pipeline/writer.py", "assets/generate.py",
+    allowed = {p for p in callers if p.startswith(("dataset/", "report/"))} | {"pipeline/writer.py",
+                                                                                 "assets/generate.py",
                                                                                      "analysis/exact.py"}
     assert callers <= allowed, callers - allowed
     assert {"pipeline/writer.py", "dataset/metadata.py", "report/plots.py"} <= callers

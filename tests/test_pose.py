@@ -84,7 +84,7 @@ def test_tanker_instance_is_excluded_when_its_full_box_leaves_the_image(both) ->
     box = view.object_tight_xyxy[:, tanker]
     k, m = view.intrinsics, view.edge_margin_px
     inside = (box[:, 0] >= m) & (box[:, 1] >= m) & (box[:, 2] <= k.width - m) & (box[:, 3] <= k.height - m)
-    labeled = view.object_exclusion[:, tanker] == None
+    labeled = view.object_exclusion[:, tanker] == None  # noqa: E711 (element-wise on an object array)
     assert np.array_equal(labeled, inside)
     assert (~inside).any() and inside.any()
 
@@ -148,7 +148,7 @@ def test_clip_gives_the_receiver_an_instance_a_mounted_camera_never_sees_whole(t
                        **{"labels.format": "pose", "labels.truncated_objects": "clip"})
     view = load_dataset(root)
     receiver = view.features.objects.index("receiver")
-    assert (view.object_exclusion[:, receiver] == None).all()
+    assert (view.object_exclusion[:, receiver] == None).all()  # noqa: E711 (element-wise)
     assert np.isnan(view.object_tight_xyxy[:, receiver]).all()  # its full box does not exist: behind the camera
     box = view.object_label_xyxy[:, receiver]
     assert (box[:, :2] >= 0).all() and (box[:, 2] <= view.intrinsics.width).all()

@@ -99,7 +99,7 @@ def test_the_manifest_readme_table_lines_run(dataset) -> None:
     code = section[section.index("```python") + len("```python"):]
     code = code[:code.index("```")].replace("DATASET", str(dataset))
     scope: dict = {}
-    exec(compile(code, "manifests/README.md", "exec"), scope)  # noqa: S102 (the project's own documentation)
+    exec(compile(code, "manifests/README.md", "exec"), scope)
     assert scope["m"].shape == (4, 4)
     assert scope["u_mean"] == pytest.approx(labeled_u_mean(dataset), rel=1e-12)
 

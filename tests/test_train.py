@@ -100,7 +100,7 @@ def test_ultralytics_label_verifier_accepts_every_label_file(held_out) -> None:
         image = held_out / Layout(held_out).image_rel(view.split[b], int(view.label_path[b].split("/")[2]),
                                                        int(view.frame_id[b]))
         result = verify_image_label((str(image), str(held_out / view.label_path[b]), "", False, nc, 0, 0, False))
-        _, lb, shape, _, _, missing, found, empty, corrupt, msg = result
+        _, lb, shape, _, _, missing, _found, _empty, corrupt, msg = result
         assert (missing, corrupt) == (0, 0) and msg == "", msg
         assert len(lb) == int(view.labeled[b].sum()) and shape == (1080, 2048)
 

@@ -342,7 +342,8 @@ def _check_manifest(view: DatasetView, labels: FrameLabels) -> Check:
     checked = err[good]
     check.worst = float(checked[np.isfinite(checked)].max(initial=0.0))
     reasons = _REASONS[labels.exclusion.astype(np.int64)]
-    bad = good[:, None] & ((err > MANIFEST_TOLERANCE_PX) | (reasons != view.exclusion) | (view.labeled != labels.labeled))
+    bad = good[:, None] & ((err > MANIFEST_TOLERANCE_PX) | (reasons != view.exclusion)
+                           | (view.labeled != labels.labeled))
     for b in np.flatnonzero(~good | bad.any(axis=1)):
         where = f"{view.manifest_file[b]} frame {view.frame_id[b]}"
         if not k_ok[b]:
@@ -434,7 +435,7 @@ def _check_label_files(view: DatasetView, labels: FrameLabels) -> tuple[list[Che
         rules.fail(where(i), f"values {texts[i].split()[1:]} outside [0, 1] or a size not positive", row=row[i],
                    seq=seq(i, 1))
     # Duplicate rows (same tokens) and second lines of a class, per file: flagged on the second occurrence.
-    for b_file, (rel, start, count) in files.items():
+    for b_file, (_rel, start, count) in files.items():
         mine = idx[np.searchsorted(idx, start):np.searchsorted(idx, start + count)]  # the file's well-formed lines
         keys = [tuple(texts[i].split()) for i in mine]
         classes = values[mine, 0].astype(np.int64)
@@ -623,7 +624,8 @@ def _check_objects(view: DatasetView, objects: FrameLabels) -> Check:
         where = f"{view.manifest_file[b]} frame {view.frame_id[b]}"
         name = view.features.objects[c]
         if reasons[b, c] != view.object_exclusion[b, c]:
-            check.fail(where, f"{name}: stored exclusion {view.object_exclusion[b, c]!r}, recomputed {reasons[b, c]!r}", row=b)
+            check.fail(where, f"{name}: stored exclusion {view.object_exclusion[b, c]!r}, "
+                              f"recomputed {reasons[b, c]!r}", row=b)
         else:
             check.fail(where, f"{name}: box off by {err[b, c]:.3g} px", float(err[b, c]), row=b)
     return check
@@ -682,7 +684,8 @@ def _check_pose_files(view: DatasetView, labels: FrameLabels, objects: FrameLabe
                 lines.fail(where, f"class {c} ({layout.objects[c]}) has more than one line", row=b)
             if not objects.labeled[b, c]:
                 reason = Exclusion(int(objects.exclusion[b, c])).reason
-                lines.fail(where, f"class {c} ({layout.objects[c]}) has a line but the object is excluded ({reason})", row=b)
+                lines.fail(where, f"class {c} ({layout.objects[c]}) has a line but the object is excluded "
+                                  f"({reason})", row=b)
                 continue
             want_box = np.array([centre[b, c, 0] / w, centre[b, c, 1] / h,
                                  (box[b, c, 2] - box[b, c, 0]) / w, (box[b, c, 3] - box[b, c, 1]) / h])
@@ -697,12 +700,14 @@ def _check_pose_files(view: DatasetView, labels: FrameLabels, objects: FrameLabe
             kp_err = np.where(np.isnan(kp_err), np.inf, kp_err)
             worst = max(worst, float(kp_err.max(initial=0.0)) * max(w, h))
             if not np.all(box_err <= LINE_TOLERANCE):
-                lines.fail(where, f"class {c} box differs from the manifest's by {(box_err * [w, h, w, h]).max():.3g} px",
+                worst = (box_err * [w, h, w, h]).max()
+                lines.fail(where, f"class {c} box differs from the manifest's by {worst:.3g} px",
                            float((box_err * [w, h, w, h]).max()), row=b)
             wrong_flag = slots[kp[:, 2] != want_flag]
             if len(wrong_flag):
                 s0 = int(wrong_flag[0])
-                lines.fail(where, f"class {c} keypoint {s0}: flag {kp[s0, 2]:g}, the manifest says {want_flag[s0]}", row=b)
+                lines.fail(where, f"class {c} keypoint {s0}: flag {kp[s0, 2]:g}, "
+                                  f"the manifest says {want_flag[s0]}", row=b)
             off = slots[kp_err > POSE_TOLERANCE]
             if len(off):
                 s0 = int(off[np.argmax(kp_err[off])])
@@ -810,7 +815,8 @@ def _check_files(view: DatasetIndex | DatasetView) -> Check:
             check.fail(name, f"missing or unreadable; it lists the {split} images for Ultralytics")
         elif have != want:
             extra = sorted(set(have) - set(want))[:1]
-            what = f"names {extra[0]!r}, which no manifest does" if extra else "misses images or lists them out of order"
+            what = (f"names {extra[0]!r}, which no manifest does" if extra
+                    else "misses images or lists them out of order")
             check.fail(name, f"{what} ({len(have)} lines, {len(want)} {split} images)")
     ids, counts = np.unique(view.frame_id, return_counts=True)
     for frame in ids[counts > 1][:MAX_OFFENDERS]:

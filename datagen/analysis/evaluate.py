@@ -432,12 +432,9 @@ def _evaluate_block(dataset: DatasetView | DatasetSource, positions: NDArray[np.
     out: list[dict[str, list]] = [{c: [] for c in _COLUMNS} for _ in runs]
     for view, rows in _chunks(dataset, positions, index):
         _evaluate_rows(view, rows, runs, chains, seed=seed, settings=settings, out=out)
-    arrays = []
-    for res in out:
-        arrays.append({c: (np.array(v, dtype=t).reshape(-1, 3) if c in ("ptd_m", "truth_m", "ptd_receiver_m")
-                           else np.array(v, dtype=t)) for (c, t), v in zip(_COLUMNS.items(), res.values(),
-                                                                            strict=True)})
-    return arrays
+    return [{c: (np.array(v, dtype=t).reshape(-1, 3) if c in ("ptd_m", "truth_m", "ptd_receiver_m")
+                 else np.array(v, dtype=t)) for (c, t), v in zip(_COLUMNS.items(), res.values(), strict=True)}
+            for res in out]
 
 
 def _blocks(index: DatasetIndex | DatasetView, attempted: NDArray[np.int64], n: int) -> list[NDArray[np.int64]]:

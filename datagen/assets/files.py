@@ -173,7 +173,7 @@ def mesh_hull(path: Path, object_name: str) -> NDArray[np.float64]:
     mesh = load_mesh(path, object_name).combined
     try:
         return np.asarray(mesh.convex_hull.vertices, dtype=np.float64)
-    except Exception:  # noqa: BLE001 (qhull refuses flat or degenerate meshes: every vertex then)
+    except Exception:
         return np.unique(np.asarray(mesh.vertices, dtype=np.float64), axis=0)
 
 

@@ -32,13 +32,13 @@ from datagen.files import write_bytes
 __all__ = [
     "RING_POINTS",
     "asset_documents",
-    "write_assets",
     "build_model",
     "features_document",
     "mesh_document",
     "model_features",
     "random_features",
     "ring_points",
+    "write_assets",
 ]
 
 #: Points of a feature ring (besides the snapped anchor).

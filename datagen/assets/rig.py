@@ -25,8 +25,8 @@ __all__ = [
     "HOSE_ATTACH_DROGUE_M",
     "HOSE_PORT_TANKER_M",
     "MOUNTS",
-    "Mount",
     "RECEIVER_CENTRELINE_Y_M",
+    "Mount",
     "body_from_cam_looking",
 ]
 

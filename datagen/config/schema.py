@@ -778,10 +778,11 @@ class Config(_Section):
             clear = self.approach.range_m[1] + CLOUD_CLEARANCE_M
             for key in ("deck_below_m", "layer_offset_m"):
                 if getattr(clouds, key)[0] < clear:
-                    raise ValueError(f"randomization.clouds.{key} must start at {clear:g} m or more (approach.range_m's "
-                                     f"far end plus {CLOUD_CLEARANCE_M:g} m), so that no cloud lies between the camera "
-                                     f"and a feature; got {list(getattr(clouds, key))}")
+                    raise ValueError(f"randomization.clouds.{key} must start at {clear:g} m or more "
+                                     f"(approach.range_m's far end plus {CLOUD_CLEARANCE_M:g} m), so that no cloud "
+                                     f"lies between the camera and a feature; got {list(getattr(clouds, key))}")
             if clouds.deck_below_m[1] >= self.tanker.altitude_m[0]:
                 raise ValueError(f"randomization.clouds.deck_below_m {list(clouds.deck_below_m)} must stay below "
-                                 f"tanker.altitude_m's low end {self.tanker.altitude_m[0]:g} m (the deck is above the sea)")
+                                 f"tanker.altitude_m's low end {self.tanker.altitude_m[0]:g} m "
+                                 "(the deck is above the sea)")
         return self

@@ -50,15 +50,15 @@ from datagen.core.features import FeatureTable
 from datagen.core.labels import Exclusion, FrameLabels, compute_labels
 
 __all__ = [
+    "CLIP_DEPTH_M",
     "FLAG_HIDDEN",
     "FLAG_OFF",
     "FLAG_VISIBLE",
     "KEYPOINT_RANGE",
     "PoseLayout",
+    "TruncatedObjects",
     "flip_index",
     "keypoint_flags",
-    "CLIP_DEPTH_M",
-    "TruncatedObjects",
     "mirror_name",
     "object_boxes",
     "object_table",

@@ -199,7 +199,7 @@ def read_object_ids(path: Path) -> NDArray[np.uint32]:
     try:
         with OpenEXR.File(str(path), separate_channels=True) as exr:
             return np.asarray(exr.channels()["object_id"].pixels, dtype=np.uint32)
-    except Exception as exc:  # noqa: BLE001 (OpenEXR raises several kinds on a damaged file)
+    except Exception as exc:
         raise DatagenError(f"{path}: unreadable EXR or no object_id channel ({type(exc).__name__})") from None
 
 

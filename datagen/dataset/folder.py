@@ -139,9 +139,8 @@ def prepare_folder(layout: Layout, fingerprint: str, scene: Scene, *, render: bo
         old_assets = existing.get("assets") if isinstance(existing.get("assets"), dict) else {}
         for name, files in sorted(scene.assets.items()):
             old = old_assets.get(name) if isinstance(old_assets.get(name), dict) else {}
-            for kind in ("mesh", "features"):
-                if old.get(f"{kind}_sha256") != files[f"{kind}_sha256"]:
-                    changes.append(f"{name} {kind} file {files[kind]} changed")
+            changes.extend(f"{name} {kind} file {files[kind]} changed" for kind in ("mesh", "features")
+                           if old.get(f"{kind}_sha256") != files[f"{kind}_sha256"])
         what = "; ".join(changes[:3]) + (f"; and {len(changes) - 3} more" if len(changes) > 3 else "")
         raise DatagenError(f"{path}: this folder holds a dataset of another config, assets or build "
                            f"({what or 'made by another datagen version'}); use --overwrite to replace it, or "
@@ -203,7 +202,7 @@ def owned_files(layout: Layout, doc: dict) -> list[Path]:
         manifests.append(path)
         try:
             table = pq.read_table(path, columns=[c for c in FILE_COLUMNS if c in pq.read_schema(path).names])
-        except Exception:  # noqa: BLE001 (an unreadable manifest names nothing)
+        except Exception:
             continue
         for column in table.columns:
             frames += [p for p in column.to_pylist() if p]

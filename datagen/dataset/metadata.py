@@ -145,7 +145,7 @@ def _commands(root: Path, imgsz: int, task: str = "detect", dataset: Path | None
 # that PnP makes of the {'detections' if task == 'detect' else 'keypoints'} at or above --conf:
 #   yolo {task} predict model={runs / name / 'weights' / 'best.pt'} source={root / 'val.txt'} imgsz={imgsz} conf=0.001 save_txt=True save_conf=True project={runs} name={name}-predict
 #   datagen evaluate {dataset} --predictions {runs / (name + '-predict') / 'labels'} --conf 0.25
-"""
+"""  # noqa: E501 (text the user reads, one line per sentence)
 
 
 def data_yaml(root: Path, class_names: list[str], splits: tuple[str, ...] = SPLITS, *, imgsz: int = 864,
@@ -223,7 +223,7 @@ perspective: 0.0
 hsv_h: 0.015
 hsv_s: 0.7
 hsv_v: 0.4
-"""
+"""  # noqa: E501 (text the user reads, one line per sentence)
 
 
 def pose_hyp_yaml(scene: Scene, root: Path, dataset: Path | None = None) -> str:
@@ -236,7 +236,8 @@ def pose_hyp_yaml(scene: Scene, root: Path, dataset: Path | None = None) -> str:
         flip = ("# flip_idx (data.yaml) swaps every left/right pair of keypoints, so a horizontal flip\n"
                 "# keeps each keypoint on its feature.\nfliplr: 0.5\n")
     else:
-        flip = f"# No flip_idx: {layout.flip_problem}; a flip would move keypoints onto the wrong features.\nfliplr: 0.0\n"
+        flip = (f"# No flip_idx: {layout.flip_problem}; a flip would move keypoints onto the wrong features.\n"
+                "fliplr: 0.0\n")
     return f"""\
 # Ultralytics pose training recipe for a datagen dataset ({config.name}).
 {_commands(root, imgsz, "pose", dataset)}# Each object is an instance whose keypoints are its features' true centre projections
@@ -258,7 +259,7 @@ copy_paste: 0.0
 hsv_h: 0.015
 hsv_s: 0.7
 hsv_v: 0.4
-"""
+"""  # noqa: E501 (text the user reads, one line per sentence)
 
 
 def write_image_lists(layout: Layout, jobs: list[ShardJob]) -> list[Path]:
@@ -338,7 +339,7 @@ cx = {k.cx:g}, cy = {k.cy:g}), {_rendered(config) if render else "labels only (n
   datagen's `manifests/README.md`; `datasets.load_dataset(this folder)` reads the manifests.
 - **Training**: `data.yaml` and `hyp.yaml` for Ultralytics YOLO; their comments give the train, predict and
   evaluate commands. `dataset.json` records the resolved config, the software versions and the asset hashes.
-"""
+"""  # noqa: E501 (text the user reads, one line per sentence)
 
 
 def _pose_card(scene: Scene) -> str:

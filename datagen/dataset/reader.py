@@ -350,7 +350,7 @@ def open_dataset(root: str | Path) -> DatasetSource:
         raise DatagenError(f"{root / 'features.parquet'}: missing or not a regular file")
     try:
         features = read_features(root / "features.parquet")
-    except Exception as exc:  # noqa: BLE001 (pyarrow and numpy raise many kinds on a damaged table)
+    except Exception as exc:
         raise DatagenError(f"{root / 'features.parquet'}: unreadable ({type(exc).__name__}: "
                            f"{' '.join(str(exc).split())[:120]})") from None
     k = doc["intrinsics"]
@@ -454,7 +454,8 @@ def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, al
         exclusion=exclusion,
         visible_fraction=_floats(flat.field("visible_fraction"), (b, f)),
         center_visible=_floats(pc.cast(flat.field("center_visible"), pa.float64()), (b, f)),
-        keypoint_flag=np.asarray(flat.field("keypoint_flag").to_numpy(zero_copy_only=False), dtype=np.int8).reshape(b, f),
+        keypoint_flag=np.asarray(flat.field("keypoint_flag").to_numpy(zero_copy_only=False),
+                                 dtype=np.int8).reshape(b, f),
         object_tight_xyxy=_floats(objects.field("tight_xyxy"), (b, n_obj, 4)),
         object_label_xyxy=_floats(objects.field("label_xyxy"), (b, n_obj, 4)),
         object_exclusion=np.array(objects.field("exclusion").to_pylist(), dtype=object).reshape(b, n_obj),
@@ -493,7 +494,7 @@ def _read_hulls(path: Path, objects: tuple[str, ...]) -> dict[str, NDArray[np.fl
         raise DatagenError(f"{path}: missing or not a regular file")
     try:
         hulls = read_objects(path)
-    except Exception as exc:  # noqa: BLE001 (pyarrow and numpy raise many kinds on a damaged table)
+    except Exception as exc:
         raise DatagenError(f"{path}: unreadable ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
     if tuple(hulls) != tuple(objects) or any(len(h) == 0 or not np.isfinite(h).all() for h in hulls.values()):
         raise DatagenError(f"{path}: objects {', '.join(hulls) or 'none'} with their hull points; features.parquet "

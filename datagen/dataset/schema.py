@@ -40,20 +40,20 @@ __all__ = [
     "APPEARANCE",
     "MANIFEST_VERSION",
     "MEASURED_COLUMNS",
-    "FeatureColumns",
     "RUN_COLUMNS",
+    "FeatureColumns",
     "feature_records",
-    "object_records",
-    "read_objects",
-    "write_objects",
     "features_schema",
     "manifest_row",
     "manifest_schema",
     "matrix_field",
+    "object_records",
     "read_features",
     "read_manifest_summary",
+    "read_objects",
     "write_features",
     "write_manifest",
+    "write_objects",
 ]
 
 #: Version of the manifest and feature-table schemas (bumped on any incompatible change).
@@ -299,10 +299,11 @@ def matrix_field(m: np.ndarray) -> list[list[float]]:
 
 
 def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, label_path: str | None,
-                 pose_label_path: str | None, exr_path: str | None, intrinsics: Intrinsics, state: FrameState, look: FrameLook, seed: int,
-                 render_seed: int, spp: int | None, denoise: str | None, features: FeatureColumns,
-                 objects: list[dict], n_labeled: int, render_s: float | None, denoise_s: float | None, frame_s: float, worker: str,
-                 worker_rss_mib: float, rendered: dict | None = None) -> dict:
+                 pose_label_path: str | None, exr_path: str | None, intrinsics: Intrinsics, state: FrameState,
+                 look: FrameLook, seed: int, render_seed: int, spp: int | None, denoise: str | None,
+                 features: FeatureColumns, objects: list[dict], n_labeled: int, render_s: float | None,
+                 denoise_s: float | None, frame_s: float, worker: str, worker_rss_mib: float,
+                 rendered: dict | None = None) -> dict:
     """One frame's manifest row, column by column (:func:`manifest_schema`): the frame,
     its files, the camera, the poses, the approach, every appearance draw, the features,
     what the render measured (:data:`MEASURED_COLUMNS`, from ``rendered``) and the run

@@ -30,7 +30,10 @@ from datagen.pipeline.progress import ShardSummary
 from datagen.pipeline.writer import ShardWriter, shard_groups
 from datagen.scene.resolved import Scene
 
-__all__ = ["Executor", "cpu_count", "ctrl_c_flag", "fixed_mmap_threshold", "map_in_order", "ray_cluster", "run_local", "run_ray"]
+__all__ = [
+    "Executor", "cpu_count", "ctrl_c_flag", "fixed_mmap_threshold", "map_in_order", "ray_cluster", "run_local",
+    "run_ray",
+]
 
 Executor = Literal["local", "ray"]
 Progress = Callable[[int], None]

@@ -187,7 +187,8 @@ class ShardWriter:
             write_text(layout.root / pose_rel, "".join(line + "\n" for line in pose_lines(rows)))
         row = manifest_row(
             frame=i, split=job.split, shard=job.shard, image_path=image_rel, label_path=label_rel,
-            pose_label_path=pose_rel, exr_path=exr_rel, intrinsics=k, state=draws.state, look=draws.look, seed=draws.seed,
+            pose_label_path=pose_rel, exr_path=exr_rel, intrinsics=k, state=draws.state, look=draws.look,
+            seed=draws.seed,
             render_seed=draws.render_seed, spp=scene.config.render.spp if self.renderer is not None else None,
             denoise=scene.config.render.denoise if self.renderer is not None else None,
             features=records, objects=object_records(objects, features.objects),

@@ -240,7 +240,8 @@ def sun_glare(shape: tuple[int, int], intrinsics: Intrinsics, sun_cam: NDArray, 
             gu, gv = k.cx + t * (su - k.cx), k.cy + t * (sv - k.cy)
             if not (-w < gu < 2 * w and -h < gv < 2 * h):
                 continue
-            cv2.circle(ghosts, (int(drawing_px(gu)), int(drawing_px(gv))), max(2, int(radius * w)), tint, -1, cv2.LINE_AA)
+            centre = (int(drawing_px(gu)), int(drawing_px(gv)))
+            cv2.circle(ghosts, centre, max(2, int(radius * w)), tint, -1, cv2.LINE_AA)
         ghosts = cv2.GaussianBlur(ghosts, (0, 0), max(1.0, 0.004 * w))
         glare += ghosts * np.float32(0.04 * strength * radiance)
     return glare, inside

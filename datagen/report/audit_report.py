@@ -104,7 +104,7 @@ def write_report(result: AuditResult, dataset: DatasetView | DatasetSource, out:
         image = draw_overlay(view, b, labels)
         scale = min(1.0, 1200 / image.shape[1])
         image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
-        ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 85])
+        _, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 85])
         overlay_html.append(f"<figure><img alt='overlay frame {view.frame_id[b]}' "
                             f"src='{data_uri(data.tobytes(), 'jpeg')}'><figcaption>frame {view.frame_id[b]} "
                             f"({esc(view.split[b])})</figcaption></figure>")
@@ -150,7 +150,7 @@ window.addEventListener("load", () => {{
 }});
 </script>
 </body></html>
-"""
+"""  # noqa: E501 (the page's text, one line per paragraph)
     write_text(out / "report.html", page)
     # report.json last: it is the record of every file the report wrote (``files``, relative to
     # the report folder), which --overwrite removes and nothing else.

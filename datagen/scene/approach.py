@@ -438,7 +438,8 @@ def _start_chain(config: Config, seed: int, approach_index: int) -> tuple[_Chain
     its distance targets (far to near). The one place that fixes the order of the chain's
     first draws, so that a traced approach is the one its frames come from."""
     rng = approach_rng(seed, approach_index)
-    chain = _Chain(config, rng) if config.approach.model == 1 else _FastChain(config, rng, gust_rng(seed, approach_index))
+    chain = (_Chain(config, rng) if config.approach.model == 1
+             else _FastChain(config, rng, gust_rng(seed, approach_index)))
     return chain, _begin_chain(chain)
 
 

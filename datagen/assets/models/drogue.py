@@ -24,7 +24,9 @@ from datagen.assets.models import FeatureAnchor, InternalFeature, Model
 from datagen.assets.models.geometry import Parts, box, loft, tube, tube_rings
 from datagen.assets.rig import HOSE_ATTACH_DROGUE_M
 
-__all__ = ["HOSE_RADIUS_M", "HOSE_SIDES", "build_drogue", "hose_faces", "hose_mesh", "hose_placeholder", "hose_vertices"]
+__all__ = [
+    "HOSE_RADIUS_M", "HOSE_SIDES", "build_drogue", "hose_faces", "hose_mesh", "hose_placeholder", "hose_vertices",
+]
 
 N_RIBS: Final = 16
 RIM_X: Final = -0.35  # canopy rim plane, aft of the centre
