@@ -46,9 +46,9 @@ import pyarrow.parquet as pq
 from matplotlib.figure import Figure
 
 from datagen.config import find_config, load_config, override_config
-from datagen.dataset.layout import Layout, plan_shards
-from datagen.dataset.metadata import write_image_lists
 from datagen.files import link_or_copy, write_figure
+from datagen.pipeline.metadata import write_image_lists
+from datagen.pipeline.plan import dataset_layout, plan_shards
 from datagen.pipeline.run import build_dataset
 from datagen.report.plots import plot_evaluation
 
@@ -89,7 +89,7 @@ def relabel(config, rendered: Path, root: Path) -> None:
     """``rendered``'s frames with ``config``'s label rules: a labels-only build of the same
     frames (labels do not depend on pixels), the rendered images hard-linked in."""
     build_dataset(config, root, render=False)
-    layout = Layout.of(root, config)
+    layout = dataset_layout(root, config)
     jobs = plan_shards(config)
     for job in jobs:
         for i in job.frames:

@@ -35,9 +35,9 @@ from datagen.analysis.audit import audit
 from datagen.config import load_config, override_config
 from datagen.config.schema import Config
 from datagen.core.training import TrainView
-from datagen.dataset.layout import Layout, plan_shards
-from datagen.dataset.metadata import write_placeholder_images
 from datagen.dataset.reader import load_dataset
+from datagen.pipeline.metadata import write_placeholder_images
+from datagen.pipeline.plan import dataset_layout, plan_shards
 from datagen.pipeline.run import build_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -56,7 +56,8 @@ def blank_images(root: Path) -> None:
     """Grey placeholder images for a labels-only build (the dataloader reads images)."""
     view = load_dataset(root)
     config = Config.model_validate(view.doc["config"])
-    write_placeholder_images(Layout.of(root, config), plan_shards(config), config.camera.width, config.camera.height)
+    write_placeholder_images(dataset_layout(root, config), plan_shards(config), config.camera.width,
+                             config.camera.height)
 
 
 def dataloader_shares(pose_root: Path) -> dict:

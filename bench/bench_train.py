@@ -99,10 +99,11 @@ def contested(view) -> tuple[int, int]:
 def blank_images(root: Path, config) -> None:
     """Grey placeholder images and the image lists: Ultralytics' dataloader needs images to
     exist, not rendered ones (labels do not depend on pixels)."""
-    from datagen.dataset.layout import Layout, plan_shards
-    from datagen.dataset.metadata import write_placeholder_images
+    from datagen.pipeline.metadata import write_placeholder_images
+    from datagen.pipeline.plan import dataset_layout, plan_shards
 
-    write_placeholder_images(Layout.of(root, config), plan_shards(config), config.camera.width, config.camera.height)
+    write_placeholder_images(dataset_layout(root, config), plan_shards(config), config.camera.width,
+                             config.camera.height)
 
 
 def sweep(args) -> None:

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import math
 import os
 import sys
 from collections.abc import Callable
@@ -42,8 +41,6 @@ EXIT_BAD_INPUT = 2
 #: Most frames one --frames list of preview or render may name.
 MAX_FRAME_LIST = 10_000
 #: Largest --noise-px radius, pixels, and most radii in one run.
-MAX_NOISE_PX = 1000.0
-MAX_NOISE_RUNS = 20
 #: Largest --spp of render, gallery and assets preview (as render.spp).
 MAX_SPP = 65536
 #: Most approaches --frames prints, and most overlays in an audit report.
@@ -330,12 +327,15 @@ def evaluate(
     from datagen.analysis.detections import score_detections, summarize_detections
     from datagen.analysis.evaluate import (
         DISTANCE_EDGES,
+        PnPSettings,
         Run,
-        covered_splits,
         evaluate_runs,
-        parse_predictions,
+        failure_text,
+        noise_radii,
+        prediction_split,
         summarize,
     )
+    from datagen.analysis.predictions import parse_predictions
     from datagen.dataset.reader import open_dataset
     from datagen.pipeline.progress import BuildProgress
     from datagen.report.evaluation_report import write_evaluation
@@ -350,31 +350,19 @@ def evaluate(
         pose = source.pose_layout if source.pose_yaml is not None else None
         found = parse_predictions(predictions, k.width, k.height, len(source.features), min_conf=conf, pose=pose)
         if split is None:
-            covered = covered_splits(index, found)
-            if not found:  # yolo predict writes no file for an image without detections
-                split = "val"
-                typer.echo(f"{predictions}: no prediction file: the detector found nothing; scoring the val "
-                           "split (--split to choose)")
-            elif not covered:
-                raise DatagenError(f"--predictions: {predictions}: no prediction file is named after an image of "
-                                   f"{dataset} (expected files like 00000003.txt from `yolo predict save_txt=True`)")
-            else:
-                split = covered[0] if len(covered) == 1 else "all"
-                typer.echo(f"scoring the {split} split{'s' if split == 'all' else ''}: the frames the "
-                           "predictions cover (--split to choose)")
+            try:
+                split, why = prediction_split(index, found)
+            except ValueError as exc:
+                raise DatagenError(f"--predictions: {predictions}: {exc}") from None
+            typer.echo(f"{predictions}: {why} (--split to choose)" if not found else f"{why} (--split to choose)")
         sources = [{"source": "predictions", "predictions": str(predictions), "conf": conf, "split": split}]
         plan = [Run(predictions=found)]
     else:
         split = split or "all"
         try:
-            radii = [float(r) for r in noise_px.split(",")]
-        except ValueError:
-            raise DatagenError(f"--noise-px: {noise_px!r} is not a list of radii like 0,0.5,1,2.5") from None
-        if not all(math.isfinite(r) and r >= 0 for r in radii):
-            raise DatagenError(f"--noise-px: {noise_px!r}: radii must be finite and not negative")
-        if max(radii) > MAX_NOISE_PX or len(radii) > MAX_NOISE_RUNS:
-            raise DatagenError(f"--noise-px: {noise_px[:60]!r}: at most {MAX_NOISE_RUNS} radii of at most "
-                               f"{MAX_NOISE_PX:g} px each")
+            radii = noise_radii(noise_px)
+        except ValueError as exc:
+            raise DatagenError(f"--noise-px: {exc}") from None
         sources = [{"source": "truth", "noise_px": radius, "split": split} for radius in radii]
         plan = [Run(noise_px=radius, run=run) for run, radius in enumerate(radii)]
     only = None if split == "all" else split
@@ -401,19 +389,8 @@ def evaluate(
                    f"target {s['target']}")
         failures = [(r, n) for r, n in s["reasons"].items() if r != "ok" and n]
         if failures:
-            typer.echo("  failed: " + ", ".join(f"{n} {_REASON_TEXT.get(r, r).format(conf=conf)}" for r, n in failures))
+            typer.echo("  failed: " + ", ".join(f"{n} {failure_text(r, PnPSettings(), conf)}" for r, n in failures))
     typer.echo(f"wrote {written['json']}")
-
-
-#: How ``datagen evaluate`` names a failure reason of :data:`datagen.analysis.evaluate.REASONS`.
-_REASON_TEXT = {
-    "too_few_matches": "with fewer than 3 matched features of an object",
-    "pnp_failed": "where PnP found no pose",
-    "beyond_range": "with a vector longer than 120 m",
-    "outlier": "beyond 6 sigma of the approach's rolling mean",
-    "no_detections": "with no prediction file (nothing detected, or not predicted)",
-    "below_conf": "with all detections below --conf {conf:g}",
-}
 
 
 @app.command()
@@ -425,8 +402,8 @@ def export(
     out: Annotated[Path, typer.Option("--out", help="New folder for the export.", show_default=False)],
 ) -> None:
     """Write a built dataset as COCO keypoints or in the BOP format (poses, models, masks)."""
-    from datagen.dataset.export import EXPORT_FORMATS, export_dataset
     from datagen.dataset.reader import load_dataset
+    from datagen.report.export import EXPORT_FORMATS, export_dataset
 
     if format not in EXPORT_FORMATS:
         raise DatagenError(f"--format: {format!r}: choose {' or '.join(EXPORT_FORMATS)}")

@@ -29,11 +29,12 @@ from datagen.config import LabelsConfig, load_config, override_config
 from datagen.core.camera import Intrinsics
 from datagen.core.errors import ConfigError, DatagenError
 from datagen.core.labels import compute_labels
-from datagen.core.training import label_options
-from datagen.dataset.folder import DatasetLock
-from datagen.dataset.layout import SPLITS, Layout, frame_split, plan_shards
+from datagen.core.training import TrainView
+from datagen.dataset.layout import SPLITS
 from datagen.dataset.schema import MANIFEST_VERSION, features_schema, manifest_schema, read_features
 from datagen.pipeline.executors import PROGRESS_EVERY_S, _run_group
+from datagen.pipeline.folder import DatasetLock
+from datagen.pipeline.plan import dataset_layout, frame_split, plan_shards
 from datagen.pipeline.run import build_dataset
 from datagen.pipeline.writer import MAX_GROUP_SHARDS, ShardWriter, shard_groups
 from datagen.scene.resolved import Scene
@@ -103,7 +104,7 @@ def test_labels_only_builds_in_shard_groups_write_what_each_shard_writes_alone(t
     assert max(len(group) for group in shard_groups(jobs, 1)) > 1  # the build below runs groups
     build_dataset(config, tmp_path / "grouped", render=False)
     alone = tmp_path / "alone"
-    layout = Layout.of(alone, config)
+    layout = dataset_layout(alone, config)
     (alone / "manifests").mkdir(parents=True)
     scene = Scene.resolve(config)
     for job in jobs:  # each shard by a writer of its own: nothing simulated or drawn for another shard
@@ -118,7 +119,7 @@ def test_a_worker_sends_its_frames_in_few_messages_and_all_of_them_at_each_shard
     config = override_config(load_config(ROOT / "scenes/wingcam55.yaml"),
                              {"dataset.frames": 600, "dataset.shard_size": 80})
     group = max(shard_groups(plan_shards(config), 1), key=len)
-    layout = Layout.of(tmp_path, config)
+    layout = dataset_layout(tmp_path, config)
     (tmp_path / "manifests").mkdir()
     for job in group:
         for folder in layout.shard_dirs(job):
@@ -261,7 +262,7 @@ def test_a_running_build_locks_the_folder(tmp_path: Path) -> None:
     tiny_config(tmp_path)
     root = tmp_path / "ds"
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time; from pathlib import Path; from datagen.dataset.folder import "
+        [sys.executable, "-c", "import sys, time; from pathlib import Path; from datagen.pipeline.folder import "
          "DatasetLock; DatasetLock(Path(sys.argv[1])).acquire(); print('locked', flush=True); time.sleep(120)",
          str(root)], stdout=subprocess.PIPE, text=True)
     try:
@@ -402,7 +403,9 @@ def test_labels_recompute_from_manifest_and_features_alone(reference) -> None:
         cam_from_objects = np.stack([cam_from_world @ np.reshape(row[f"world_from_{o}"], (4, 4))
                                      for o in features.objects])
         rules = LabelsConfig.model_validate(doc["config"]["labels"])
-        labels = compute_labels(features, cam_from_objects, k, **label_options(rules, k.width, k.height))
+        min_size = TrainView(k.width, k.height, rules.train_imgsz).min_label_size_px(rules.min_box_px)
+        labels = compute_labels(features, cam_from_objects, k, edge_margin_px=rules.edge_margin_px,
+                                corrected=rules.corrected, min_size_px=min_size, small_boxes=rules.small_boxes)
         stored = row["features"]
         assert [f["class_id"] for f in stored] == features.class_id.tolist()
         for name in ("center_px", "tight_xyxy", "corrected_xyxy"):
@@ -544,7 +547,7 @@ def test_out_must_be_a_folder_and_temporaries_do_not_make_it_foreign(tmp_path: P
 def test_exclude_mode_drops_boxes_under_the_minimum_as_too_small(tmp_path: Path) -> None:
     config = tiny_config(tmp_path, **{"labels.small_boxes": "exclude", "labels.min_box_px": 16.0})
     report = build_dataset(config, tmp_path / "ds", render=False)
-    need = np.array(label_options(config.labels, 128, 68)["min_size_px"])
+    need = np.array(TrainView(128, 68, config.labels.train_imgsz).min_label_size_px(config.labels.min_box_px))
     records = [f for row in manifest_rows(tmp_path / "ds").values() for f in row["features"]]
     small = [f for f in records if f["exclusion"] == "too_small"]
     assert len(small) == report.excluded["too_small"] > 0

@@ -14,7 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from datagen.analysis.detections import score_detections, summarize_detections
-from datagen.analysis.evaluate import DISTANCE_EDGES, Predictions
+from datagen.analysis.evaluate import DISTANCE_EDGES
+from datagen.analysis.predictions import Predictions
 from datagen.config import load_config, override_config
 from datagen.core.training import MATCH_PX
 from datagen.dataset.reader import load_dataset, open_dataset

@@ -14,7 +14,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from datagen.analysis.evaluate import PnPSettings, evaluate, parse_predictions, ptd_from_points, solve_pose, summarize
+from datagen.analysis.evaluate import PnPSettings, evaluate, ptd_from_points, solve_pose, summarize
+from datagen.analysis.predictions import parse_predictions
 from datagen.assets.table import feature_table
 from datagen.config import load_config, override_config
 from datagen.core.camera import Intrinsics, project_points
@@ -230,3 +231,14 @@ def test_predictions_that_match_no_frame_are_one_line(wingcam, tmp_path: Path) -
                           str(tmp_path / "pred")], capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert out.returncode == 2 and out.stderr.count("\n") == 1
     assert "no prediction file is named after an image of" in out.stderr
+
+
+def test_failure_texts_state_the_settings_they_were_judged_by() -> None:
+    from datagen.analysis.evaluate import REASONS, failure_text
+
+    settings = PnPSettings(max_range_m=80.0, outlier_sigma=4.5, min_matches=5)
+    assert failure_text("beyond_range", settings, 0.25) == "with a vector longer than 80 m"
+    assert failure_text("outlier", settings, 0.25) == "beyond 4.5 sigma of the approach's rolling mean"
+    assert failure_text("too_few_matches", settings, 0.25) == "with fewer than 5 matched features of an object"
+    assert failure_text("below_conf", settings, 0.4) == "with all detections below --conf 0.4"
+    assert all(failure_text(r, settings, 0.25) != r for r in REASONS if r != "ok")

@@ -134,7 +134,7 @@ def test_a_spill_refuses_columns_of_another_length() -> None:
 
 def test_box_quartiles_and_whiskers_match_matplotlibs(tmp_path) -> None:
     """What the audit's size boxes are drawn from: matplotlib's own box statistics."""
-    from datagen.analysis.audit import _drift_statistics
+    from datagen.analysis.audit.statistics import _drift_statistics
 
     rng = np.random.default_rng(8)
     n = 5000

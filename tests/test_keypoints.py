@@ -146,8 +146,8 @@ def test_keypoint_flags_are_zero_when_excluded_one_when_hidden_two_when_visible_
 
 @pytest.fixture(scope="module")
 def tanker_mesh():
-    mesh = load_mesh(builtin_paths("tanker")[0], "tanker").combined
-    return np.asarray(mesh.vertices), mesh_hull(builtin_paths("tanker")[0], "tanker")
+    mesh = load_mesh(builtin_paths("tanker")[0], "tanker")
+    return np.asarray(mesh.combined.vertices), mesh_hull(mesh)
 
 
 @given(intrinsics(), rotations(), st.floats(60.0, 400.0, **finite),

@@ -56,6 +56,81 @@ def test_only_the_render_package_imports_mitsuba_or_drjit() -> None:
                if p.startswith("render/"))
 
 
+def datagen_imports(tree: ast.Module) -> set[str]:
+    """The datagen modules a module imports, at any depth in its code."""
+    return {n for n in imported(tree) if n.startswith("datagen.")}
+
+
+def package_of(path_or_module: str) -> str:
+    """``dataset`` for ``dataset/reader.py`` or ``datagen.dataset.reader``; ``files`` for ``files.py``."""
+    parts = (path_or_module.removeprefix("datagen.").split(".") if "/" not in path_or_module
+             and not path_or_module.endswith(".py") else path_or_module.removesuffix(".py").split("/"))
+    return parts[0]
+
+
+#: The packages from the bottom up: a package imports only packages of a lower rank (the
+#: build, ``pipeline``, and the reading commands, ``analysis``, share a rank and import neither
+#: the other); ``cli`` and the package's own ``__init__``/``__main__`` sit on top.
+RANKS = {"core": 0, "files": 1, "parallel": 1, "config": 2, "dataset": 3, "assets": 4, "scene": 5, "render": 6,
+         "pipeline": 7, "analysis": 7, "report": 8, "cli": 9, "__init__": 10, "__main__": 10}
+
+
+def test_every_package_imports_only_packages_below_it() -> None:
+    upward = []
+    for path, tree in modules().items():
+        me = package_of(path)
+        for target in datagen_imports(tree):
+            other = package_of(target)
+            if other != me and RANKS[other] >= RANKS[me]:
+                upward.append(f"{path} imports {target}")
+    assert set(package_of(p) for p in modules()) <= set(RANKS)
+    assert upward == []
+
+
+def test_the_dataset_contract_imports_only_core_config_inputs_and_files() -> None:
+    """``dataset/`` is the on-disk contract: reading a dataset needs no scene, renderer,
+    build or config schema."""
+    allowed = ("datagen.core.", "datagen.dataset.")
+    offenders = {path: sorted(t for t in datagen_imports(tree)
+                              if not t.startswith(allowed) and t not in ("datagen.config.inputs", "datagen.files"))
+                 for path, tree in modules().items() if path.startswith("dataset/")}
+    assert {p: o for p, o in offenders.items() if o} == {}
+    assert len(offenders) >= 4
+
+
+def test_reading_a_dataset_or_auditing_one_loads_no_simulator_and_no_build() -> None:
+    code = ("import sys\nimport datagen.dataset.reader, datagen.analysis.audit, datagen.analysis.evaluate\n"
+            "print(sorted({'.'.join(m.split('.')[:2]) for m in sys.modules if m.startswith('datagen.')}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    loaded = set(ast.literal_eval(out.stdout.strip()))
+    assert "datagen.dataset" in loaded and "datagen.analysis" in loaded
+    assert loaded & {"datagen.scene", "datagen.render", "datagen.pipeline", "datagen.assets"} == set()
+
+
+def test_the_module_import_graph_has_no_cycles() -> None:
+    """Counting every import, at any depth in a module's code (a deferred import too)."""
+    names = {f"datagen.{p.removesuffix('.py').replace('/', '.')}".removesuffix(".__init__"): tree
+             for p, tree in modules().items()}
+    graph = {m: {t for t in datagen_imports(tree) if t in names and t != m} for m, tree in names.items()}
+    state: dict[str, int] = {}  # 1 on the current path, 2 done
+    cycles = []
+
+    def visit(m: str, path: list[str]) -> None:
+        state[m] = 1
+        for t in sorted(graph[m]):
+            if state.get(t) == 1:
+                cycles.append(" -> ".join([*path[path.index(t):], t]))
+            elif t not in state:
+                visit(t, [*path, t])
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m, [m])
+    assert cycles == []
+
+
 #: Calls that write a file (or create one), wherever they appear.
 WRITE_CALLS = {"write_text", "write_bytes", "savefig", "imwrite", "write_table", "write_to_dataset"}
 #: The functions of datagen.files that write.
@@ -85,24 +160,23 @@ def writes(tree: ast.Module) -> list[str]:
 
 
 def test_every_file_write_goes_through_one_module_called_by_the_writers() -> None:
-    """``datagen/files.py`` writes (and ``dataset/folder.py`` creates the lock); the modules
-    that call its writers are the dataset writer (``dataset/``, ``pipeline/writer.py``), the
+    """``datagen/files.py`` writes (and ``pipeline/folder.py`` creates the lock); the modules
+    that call its writers are the dataset writer (``dataset/``, ``pipeline/``), the
     report writers (``report/``), the asset writer (``assets/generate.py``) and the audit's
     spill of values into a private temporary folder (``analysis/exact.py``)."""
     primitives = {path: found for path, tree in modules().items() if (found := writes(tree))}
-    assert set(primitives) == {"files.py", "dataset/folder.py"}, primitives
-    assert primitives["dataset/folder.py"] == ["os.open"]  # the lock file
+    assert set(primitives) == {"files.py", "pipeline/folder.py"}, primitives
+    assert primitives["pipeline/folder.py"] == ["os.open"]  # the lock file
     callers = set()
     for path, tree in modules().items():
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom) and node.module == "datagen.files" and \
                     {a.name for a in node.names} & WRITERS:
                 callers.add(path)
-    allowed = {p for p in callers if p.startswith(("dataset/", "report/"))} | {"pipeline/writer.py",
-                                                                                 "assets/generate.py",
+    allowed = {p for p in callers if p.startswith(("dataset/", "pipeline/", "report/"))} | {"assets/generate.py",
                                                                                      "analysis/exact.py"}
     assert callers <= allowed, callers - allowed
-    assert {"pipeline/writer.py", "dataset/metadata.py", "report/plots.py"} <= callers
+    assert {"pipeline/writer.py", "pipeline/metadata.py", "report/plots.py"} <= callers
 
 
 #: Calls that set process-wide state; only these modules may hold them, inside functions.

@@ -14,14 +14,15 @@ import pytest
 import yaml
 
 from datagen.analysis.audit import audit
-from datagen.analysis.evaluate import evaluate, parse_predictions
+from datagen.analysis.evaluate import evaluate
+from datagen.analysis.predictions import parse_predictions
 from datagen.config import load_config, override_config
 from datagen.core.conventions import index_px, object_id
 from datagen.core.errors import DatagenError
 from datagen.core.keypoints import PoseLayout
-from datagen.dataset.export import export_dataset, read_object_ids
 from datagen.dataset.reader import load_dataset
 from datagen.pipeline.run import build_dataset
+from datagen.report.export import export_dataset, read_object_ids
 
 from .support import ROOT, comparable, run_cli, tiny_config
 

@@ -19,7 +19,7 @@ from datagen.analysis.audit import audit
 from datagen.analysis.evaluate import Run, evaluate_runs
 from datagen.config import load_config, override_config
 from datagen.dataset.reader import load_dataset, open_dataset
-from datagen.pipeline.executors import IN_FLIGHT_PER_WORKER, map_in_order
+from datagen.parallel import IN_FLIGHT_PER_WORKER, map_in_order
 from datagen.pipeline.progress import BuildProgress
 from datagen.pipeline.run import build_dataset
 from datagen.report.audit_report import report_document
@@ -108,8 +108,8 @@ def test_streaming_audit_of_a_good_dataset_passes_with_the_same_statistics(built
     streamed = audit(open_dataset(built), workers=2)
     assert whole.passed and streamed.passed
     assert _report(streamed) == _report(whole)
-    assert np.array_equal(streamed.stats["_plot"]["drift_scatter"], whole.stats["_plot"]["drift_scatter"])
-    assert streamed.stats["_plot"]["drift_boxes"] == whole.stats["_plot"]["drift_boxes"]
+    assert np.array_equal(streamed.plot.scatter, whole.plot.scatter)
+    assert streamed.plot.boxes == whole.plot.boxes
 
 
 @pytest.mark.parametrize(("split", "workers"), [(None, 2), ("val", 1)])
@@ -164,7 +164,7 @@ def _report_file(folder: Path) -> dict:
     ["7 0.5 0.5 0.1 0.2"], ["0 0.5 0.5 0.1"], ["-0 -0.5 0.5 0.1 0.2"], ["0 1_0 0.5 0.1 0.2"], ["0\t0.5  0.5 0.1 0.2 "],
 ])
 def test_bulk_label_parsing_gives_what_parse_line_gives_line_by_line(lines) -> None:
-    from datagen.analysis.audit import _parse_lines
+    from datagen.analysis.audit.label_lines import _parse_lines
     from datagen.dataset.yolo import parse_line
 
     values, problems = _parse_lines(lines, 5, 5)

@@ -20,9 +20,10 @@ import yaml
 
 from datagen.analysis.audit import audit
 from datagen.config import load_config, override_config
-from datagen.dataset.layout import Layout, plan_shards
-from datagen.dataset.metadata import write_placeholder_images
+from datagen.dataset.layout import Layout
 from datagen.dataset.reader import load_dataset
+from datagen.pipeline.metadata import write_placeholder_images
+from datagen.pipeline.plan import dataset_layout, plan_shards
 from datagen.pipeline.run import build_dataset
 
 pytestmark = pytest.mark.train
@@ -41,7 +42,8 @@ def labels_with_blank_images(root: Path, frames: int, scene: str = "wingcam55", 
     config = override_config(load_config(ROOT / "scenes" / f"{scene}.yaml"),
                              {"dataset.frames": frames, "dataset.seed": HELD_OUT_SEED, **overrides})
     build_dataset(config, root, render=False)
-    write_placeholder_images(Layout.of(root, config), plan_shards(config), config.camera.width, config.camera.height)
+    write_placeholder_images(dataset_layout(root, config), plan_shards(config), config.camera.width,
+                             config.camera.height)
     return root
 
 

@@ -2,7 +2,7 @@
 
 The paper keeps, per image and class, the detection of highest confidence at or above
 a threshold and uses its box centre as the feature's 2D point (3.3). This module scores
-exactly those points (:class:`datagen.analysis.evaluate.Predictions`) against the
+exactly those points (:class:`datagen.analysis.predictions.Predictions`) against the
 projection of each feature's true 3D centre (``center_px`` of the manifests), per
 feature of every frame of the scored split:
 

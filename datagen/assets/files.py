@@ -27,6 +27,8 @@ file and the key; files are read with the bounds of :mod:`datagen.config.inputs`
 from __future__ import annotations
 
 import functools
+import hashlib
+import io
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -112,6 +114,7 @@ class ObjectMesh:
     name: str
     path: Path
     parts: dict[str, trimesh.Trimesh]
+    sha256: str  # of the file's bytes, as read for the parts
 
     @functools.cached_property
     def combined(self) -> trimesh.Trimesh:
@@ -146,7 +149,12 @@ def load_mesh(path: Path, object_name: str) -> ObjectMesh:
     if size > MAX_MESH_BYTES:
         raise fail(f"{size:,} bytes: larger than the {MAX_MESH_BYTES:,} bytes a mesh file may have")
     try:
-        scene = trimesh.load(path, force="scene", process=False)
+        data = path.read_bytes()
+    except OSError as exc:
+        raise fail(f"cannot read mesh: {exc.strerror}") from None
+    try:
+        scene = trimesh.load(io.BytesIO(data), file_type=path.suffix.lower()[1:], force="scene", process=False,
+                             resolver=trimesh.resolvers.FilePathResolver(str(path.parent)))
     except Exception as exc:  # trimesh raises many kinds on a malformed file
         raise fail(f"cannot read mesh: {exc}") from None
     parts: dict[str, list[trimesh.Trimesh]] = {}
@@ -164,13 +172,13 @@ def load_mesh(path: Path, object_name: str) -> ObjectMesh:
     for name, mesh in merged.items():
         if not np.isfinite(mesh.vertices).all():
             raise fail(f"part {name!r} has non-finite vertex coordinates")
-    return ObjectMesh(object_name, path, merged)
+    return ObjectMesh(object_name, path, merged, hashlib.sha256(data).hexdigest())
 
 
-def mesh_hull(path: Path, object_name: str) -> NDArray[np.float64]:
+def mesh_hull(mesh: ObjectMesh) -> NDArray[np.float64]:
     """The vertices of the convex hull of an object's mesh, ``(H, 3)`` in its body frame: the
     points whose projection bounds the projected mesh (:mod:`datagen.core.keypoints`)."""
-    mesh = load_mesh(path, object_name).combined
+    mesh = mesh.combined
     try:
         return np.asarray(mesh.convex_hull.vertices, dtype=np.float64)
     except Exception:

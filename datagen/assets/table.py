@@ -6,7 +6,7 @@ then the next object's; names are qualified by object (``receiver.probe_tip``).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -45,25 +45,26 @@ def object_paths(config: Config, object_name: str) -> tuple[Path, Path]:
     return spec.mesh or mesh, spec.features or features
 
 
-def object_features(config: Config, object_name: str) -> list[Feature]:
-    """One object's features under the config's variant, files and seed."""
+def object_features(config: Config, object_name: str, mesh: ObjectMesh | None = None) -> list[Feature]:
+    """One object's features under the config's variant, files and seed (``mesh``: the
+    object's mesh where it is already loaded)."""
     mesh_path, features_path = object_paths(config, object_name)
     return load_object_features(object_name, config.features.variant, mesh_path=mesh_path,
                                 features_path=features_path, seed=config.dataset.seed,
-                                random_count=config.features.random_per_object)
+                                random_count=config.features.random_per_object, mesh=mesh)
 
 
 def load_object_features(object_name: str, variant: str, *, mesh_path: Path | None = None,
                          features_path: Path | None = None, seed: int = 0,
-                         random_count: int = 40) -> list[Feature]:
+                         random_count: int = 40, mesh: ObjectMesh | None = None) -> list[Feature]:
     """One object's features: a stored variant from its feature file, or
-    ``random_count`` random surface features of its mesh seeded by ``seed``.
-    Paths default to the built-in assets."""
+    ``random_count`` random surface features of its mesh (``mesh``, or read from
+    ``mesh_path``) seeded by ``seed``. Paths default to the built-in assets."""
     builtin_mesh, builtin_features = builtin_paths(object_name)
     mesh_path, features_path = mesh_path or builtin_mesh, features_path or builtin_features
     if variant != "random":
         return load_features(features_path, object_name, variant)
-    mesh = load_mesh(mesh_path, object_name)
+    mesh = mesh or load_mesh(mesh_path, object_name)
     radius = _random_radius(features_path, mesh)
     from datagen.assets.generate import random_features  # trimesh: only when random features are asked for
 
@@ -86,12 +87,14 @@ def _random_radius(features_path: Path, mesh: ObjectMesh) -> float:
     return 0.01 * float(np.linalg.norm(mesh.combined.extents))
 
 
-def feature_table(config: Config) -> FeatureTable:
-    """Every labeled feature of the config, class ids in ``features.objects`` order.
+def feature_table(config: Config, meshes: Mapping[str, ObjectMesh] | None = None) -> FeatureTable:
+    """Every labeled feature of the config, class ids in ``features.objects`` order (``meshes``:
+    the objects' meshes where they are already loaded).
 
     Names are qualified by object (``receiver.probe_tip``).
     """
-    features = [f for obj in config.features.objects for f in object_features(config, obj)]
+    meshes = meshes or {}
+    features = [f for obj in config.features.objects for f in object_features(config, obj, meshes.get(obj))]
     return FeatureTable.from_point_sets(
         [f.points_m for f in features],
         objects=[f.object for f in features],
@@ -101,23 +104,24 @@ def feature_table(config: Config) -> FeatureTable:
     )
 
 
-def check_assets(config: Config) -> FeatureTable:
-    """Load every mesh and the labeled features a config uses; all problems are
-    raised together. Returns the dataset's feature table."""
+def check_assets(config: Config) -> tuple[FeatureTable, dict[str, ObjectMesh]]:
+    """Load every mesh and the labeled features a config uses (each file read once); all
+    problems are raised together. Returns the dataset's feature table and the meshes."""
     problems: list[Problem] = []
+    meshes: dict[str, ObjectMesh] = {}
     for name in RIGID_OBJECTS:
         try:
-            load_mesh(object_paths(config, name)[0], name)
+            meshes[name] = load_mesh(object_paths(config, name)[0], name)
         except ConfigError as exc:
             problems += exc.problems
     try:
-        table = feature_table(config)
+        table = feature_table(config, meshes)
     except ConfigError as exc:
         problems += exc.problems
     if problems:
         unique = {str(p): p for p in problems}  # a file shared by two objects is reported once
         raise ConfigError(list(unique.values()))
-    return table
+    return table, meshes
 
 
 def describe_features(features: Sequence[Feature]) -> str:

@@ -26,6 +26,9 @@ from pydantic import (
 
 from datagen.core.conventions import CAMERA_MOUNTS, RIGID_OBJECTS
 from datagen.core.features import FEATURE_VARIANTS
+from datagen.core.keypoints import TruncatedObjects
+from datagen.core.labelling import LabelFormat, LabelRules
+from datagen.core.labels import SmallBoxes
 
 __all__ = [
     "WORLD_RANDOMIZERS",
@@ -102,7 +105,7 @@ def _within(low: float, high: float) -> AfterValidator:
 
 #: Clouds keep at least this far (metres) beyond the approach's far end from the tanker's altitude.
 CLOUD_CLEARANCE_M = 200.0
-#: The world's randomizers (issue 18) by name, each as the config overrides that switch it
+#: The world's randomizers by name, each as the config overrides that switch it
 #: off: the ablation switches a user flips, bench/bench_render.py times and the tests check.
 WORLD_RANDOMIZERS: Final[dict[str, dict[str, Any]]] = {
     "clouds": {"randomization.clouds.enabled": False},
@@ -116,7 +119,8 @@ WORLD_RANDOMIZERS: Final[dict[str, dict[str, Any]]] = {
 
 def world_off(*names: str) -> dict[str, Any]:
     """Config overrides that switch the named world randomizers off (every one when none is
-    named): with all of them off a build renders the world it rendered before issue 18."""
+    named): with all of them off a frame has a clear sky, a flat uniform sea, plain paint and a
+    pinhole camera."""
     unknown = set(names) - set(WORLD_RANDOMIZERS)
     if unknown:
         raise KeyError(f"no world randomizer {sorted(unknown)}; there are {list(WORLD_RANDOMIZERS)}")
@@ -466,7 +470,7 @@ class CloudsConfig(_Section):
     the camera and a labeled feature."""
 
     enabled: Flag = True
-    """Render cloud layers; off: a clear sky, today's images bit for bit."""
+    """Render cloud layers; off: a clear sky (the scene then has no cloud meshes at all)."""
 
     deck_coverage: UnitRange = (0.0, 0.9)
     """Share of the deck's area that is cloud."""
@@ -516,7 +520,7 @@ class SensorConfig(_Section):
     JPEG round trip. Labels follow the distortion exactly (:mod:`datagen.core.camera`)."""
 
     enabled: Flag = True
-    """Apply the camera model; off: today's images bit for bit."""
+    """Apply the camera model; off: the path tracer's pinhole image, exposed and encoded."""
 
     auto_exposure: Flag = True
     """Meter the frame (centre-weighted log-average luminance to mid-grey, clamped to
@@ -665,17 +669,17 @@ class LabelsConfig(_Section):
     (datagen.core.training); 48 gives about six times the target of that minimum. A box
     near a border grows only as far as the edge margin allows, so no feature is lost."""
 
-    small_boxes: Literal["grow", "exclude"] = "grow"
+    small_boxes: SmallBoxes = "grow"
     """A label box with a side under min_box_px: 'grow' widens it symmetrically about its
     centre (the true centre stays exact); 'exclude' drops the feature as too_small."""
 
-    format: Literal["detect", "pose", "both"] = "detect"
+    format: LabelFormat = "detect"
     """Label files: 'detect' (one box per feature, centred on its true centre), 'pose' (one
     instance per object whose keypoints are its features' true centres, Ultralytics' pose
     format: datagen.core.keypoints) or 'both' (detect in labels/, the pose set beside it in
     pose/ with its own data.yaml and hyp.yaml)."""
 
-    truncated_objects: Literal["exclude", "clip"] = "exclude"
+    truncated_objects: TruncatedObjects = "exclude"
     """A pose instance whose full-object box is not inside the image's edge margin (or whose
     mesh reaches behind the camera): 'exclude' it, or 'clip' it to the box of its in-view
     part. A camera on the receiver never sees the whole receiver: only 'clip' gives the
@@ -693,6 +697,10 @@ class LabelsConfig(_Section):
         if self.min_box_px >= self.train_imgsz:
             raise ValueError(f"min_box_px {self.min_box_px:g} must be smaller than train_imgsz {self.train_imgsz}")
         return self
+
+    def rules(self) -> LabelRules:
+        """This section as the labelling reads it (:class:`datagen.core.labelling.LabelRules`)."""
+        return LabelRules(**self.model_dump())
 
 
 # --- dataset -------------------------------------------------------------------

@@ -3,7 +3,7 @@
 A label teaches a detector only if it survives the trainer's own transforms, the
 detection head can assign it to an anchor, and that assignment gives it a target
 that is not zero. Ultralytics 8.4 with the recipe of
-:func:`datagen.dataset.metadata.hyp_yaml` (mosaic, scale, translate, rotation, shear and
+:func:`datagen.pipeline.metadata.hyp_yaml` (mosaic, scale, translate, rotation, shear and
 perspective all off) does this to a ``W x H`` image at ``imgsz``:
 
 1. **resize** (``BaseDataset.load_image``): the long side becomes ``imgsz``,
@@ -61,7 +61,6 @@ __all__ = [
     "MIN_TRAIN_SIDE_PX",
     "TRAIN_BATCH",
     "TrainView",
-    "label_options",
 ]
 
 #: Strides of the YOLO detection head's three levels (P3, P4, P5).
@@ -174,11 +173,3 @@ class TrainView:
     def learnable(self, xyxy: ArrayLike) -> NDArray[np.bool_]:
         """``(...)`` :meth:`reaches_loss` and :meth:`assignable`: the box can teach the detector."""
         return self.reaches_loss(xyxy) & self.assignable(xyxy)
-
-
-def label_options(labels, width: int, height: int) -> dict:
-    """The keyword arguments of :func:`datagen.core.labels.compute_labels` that a config's
-    ``labels`` section (:class:`datagen.config.schema.LabelsConfig`) gives a ``width`` x ``height`` camera."""
-    view = TrainView(width, height, labels.train_imgsz)
-    return {"edge_margin_px": labels.edge_margin_px, "corrected": labels.corrected,
-            "min_size_px": view.min_label_size_px(labels.min_box_px), "small_boxes": labels.small_boxes}

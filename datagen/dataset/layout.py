@@ -1,4 +1,4 @@
-"""The dataset folder: its layout, its shard plan, its metadata files and its lock.
+"""The dataset folder: its layout (the paths of its files) and its shards.
 
 Layout (Ultralytics reads it as it is: a label's path is its image's path with
 the last ``/images/`` replaced by ``/labels/`` and the extension by ``.txt``)::
@@ -14,11 +14,10 @@ the last ``/images/`` replaced by ``/labels/`` and the extension by ``.txt``)::
     manifests/{split}-{shard:05d}.parquet          one row per frame (datagen.dataset.schema)
     .datagen.lock                                  held by the build that writes the folder
 
-Every frame's split comes from the seed alone (:func:`datagen.core.conventions.split_uniform`);
-each split's frames, in frame order, are cut into shards of ``shard_size``. A
-shard is the unit of work and of resumption: it is done exactly when its
-manifest exists, and the manifest is written last, after every image and label
-of the shard is in place.
+Each split's frames, in frame order, are cut into shards (the build's plan:
+:func:`datagen.pipeline.plan.plan_shards`). A shard is the unit of work and of
+resumption: it is done exactly when its manifest exists, and the manifest is written
+last, after every image and label of the shard is in place.
 """
 
 from __future__ import annotations
@@ -28,9 +27,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
-from datagen.config.schema import Config
-from datagen.core.conventions import split_uniform
-
 __all__ = [
     "LOCK_NAME",
     "MANIFEST_NAME",
@@ -38,8 +34,6 @@ __all__ = [
     "SPLITS",
     "Layout",
     "ShardJob",
-    "frame_split",
-    "plan_shards",
 ]
 
 SPLITS: Final = ("train", "val")
@@ -69,27 +63,6 @@ class ShardJob:
         return f"{self.split}-{self.shard:05d}"
 
 
-def frame_split(config: Config, frame_index: int, seed: int | None = None) -> str:
-    """``train`` or ``val``, decided by the seed for the frame (or its approach chain)."""
-    d = config.dataset
-    seed = d.seed if seed is None else seed
-    unit = frame_index if d.split_by == "frame" else frame_index // config.approach.frames_per_approach
-    return "val" if split_uniform(seed, unit) < d.val_fraction else "train"
-
-
-def plan_shards(config: Config) -> list[ShardJob]:
-    """Every shard of the dataset, train first: a pure function of the config."""
-    d = config.dataset
-    frames: dict[str, list[int]] = {s: [] for s in SPLITS}
-    for i in range(d.frames):
-        frames[frame_split(config, i)].append(i)
-    return [
-        ShardJob(split, n, tuple(indices[start:start + d.shard_size]))
-        for split, indices in frames.items()
-        for n, start in enumerate(range(0, len(indices), d.shard_size))
-    ]
-
-
 @dataclass(frozen=True)
 class Layout:
     """Paths inside a dataset folder; ``*_rel`` are relative to the root (as in manifests)."""
@@ -97,11 +70,6 @@ class Layout:
     root: Path
     image_suffix: str = ".png"
     label_format: str = "detect"  # labels.format: detect, pose or both
-
-    @classmethod
-    def of(cls, root: Path, config: Config) -> Layout:
-        """The layout a config gives a dataset at ``root``."""
-        return cls(Path(root), config.render.image_suffix, config.labels.format)
 
     @property
     def detect(self) -> bool:

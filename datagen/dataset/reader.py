@@ -20,17 +20,16 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 from numpy.typing import NDArray
-from pydantic import ValidationError
 
 from datagen.config.inputs import parse_json, parse_yaml, read_text
-from datagen.config.schema import LabelsConfig
 from datagen.core.camera import Intrinsics
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import DatagenError
 from datagen.core.features import FeatureTable
-from datagen.core.keypoints import PoseLayout, object_boxes, object_table
-from datagen.core.labels import FrameLabels, compute_labels
-from datagen.core.training import TrainView, label_options
+from datagen.core.keypoints import PoseLayout
+from datagen.core.labelling import LabellingContext, LabelRules
+from datagen.core.labels import FrameLabels
+from datagen.core.training import TrainView
 from datagen.dataset.layout import MANIFEST_NAME
 from datagen.dataset.schema import (
     APPEARANCE,
@@ -65,30 +64,37 @@ class DatasetMeta:
     def edge_margin_px(self) -> float:
         return float(self.doc["edge_margin_px"])
 
+    @functools.cached_property
+    def labelling(self) -> LabellingContext:
+        """What labelled the dataset's frames: its features, camera, hulls and the ``labels``
+        section of the config it was built with (the build's own context, rebuilt)."""
+        return LabellingContext(self.features, self.intrinsics, self.hulls,
+                                LabelRules.from_mapping(self.doc["config"]["labels"]))
+
     @property
-    def label_rules(self) -> LabelsConfig:
+    def label_rules(self) -> LabelRules:
         """The ``labels`` section of the config the dataset was built with."""
-        return LabelsConfig.model_validate(self.doc["config"]["labels"])
+        return self.labelling.rules
 
     @property
     def train_view(self) -> TrainView:
         """How Ultralytics' trainer sees this dataset's images (``labels.train_imgsz``)."""
-        return TrainView(self.intrinsics.width, self.intrinsics.height, self.label_rules.train_imgsz)
+        return self.labelling.train_view
 
     @property
     def label_format(self) -> str:
         """``labels.format``: detect, pose or both."""
         return self.label_rules.format
 
-    @functools.cached_property
+    @property
     def object_table(self) -> FeatureTable:
         """The hulls as the table :func:`recompute_objects` labels (:func:`datagen.core.keypoints.object_table`)."""
-        return object_table(self.features.objects, self.hulls)
+        return self.labelling.object_table
 
-    @functools.cached_property
+    @property
     def pose_layout(self) -> PoseLayout:
         """Where each feature goes in a pose instance (:class:`datagen.core.keypoints.PoseLayout`)."""
-        return PoseLayout.from_features(self.features)
+        return self.labelling.pose_layout
 
 
 @dataclass(frozen=True, eq=False)
@@ -140,24 +146,15 @@ class DatasetView(DatasetMeta):
 
     def recompute_objects(self) -> FrameLabels:
         """Every frame's pose boxes from the poses and objects.parquet alone."""
-        rules = self.label_rules
-        options = label_options(rules, self.intrinsics.width, self.intrinsics.height)
-        return object_boxes(self.object_table, self.cam_from_objects(), self.intrinsics, options=options,
-                            distortion=self.distortion if self.distortion.any() else None,
-                            truncated=rules.truncated_objects)
+        return self.labelling.label_objects(self.cam_from_objects(),
+                                            self.distortion if self.distortion.any() else None)
 
     def recompute(self) -> FrameLabels:
         """The labels of every frame from the poses and features.parquet alone (with the
         manifest's visibility for the optional occlusion rule)."""
-        rules = self.label_rules
-        labels = compute_labels(self.features, self.cam_from_objects(), self.intrinsics,
-                                **label_options(rules, self.intrinsics.width, self.intrinsics.height),
-                                distortion=self.distortion if self.distortion.any() else None)
-        threshold = rules.min_visible_fraction
-        if threshold > 0:
-            fraction = np.where(np.isnan(self.visible_fraction), 1.0, self.visible_fraction)
-            labels = labels.with_visibility(fraction, threshold)
-        return labels
+        labels = self.labelling.label_features(self.cam_from_objects(),
+                                               self.distortion if self.distortion.any() else None)
+        return self.labelling.occlude(labels, self.visible_fraction)
 
 
 @dataclass(frozen=True, eq=False)
@@ -328,12 +325,9 @@ def open_dataset(root: str | Path) -> DatasetSource:
     doc = _read_json(root / "dataset.json")
     _check_document(doc, root / "dataset.json")
     try:
-        LabelsConfig.model_validate(doc["config"].get("labels", {}))
-    except ValidationError as exc:
-        err = exc.errors(include_url=False)[0]
-        key = ".".join(str(part) for part in err["loc"])
-        raise DatagenError(f"{root / 'dataset.json'}: config.labels.{key}: "
-                           f"{err['msg'].removeprefix('Value error, ')}") from None
+        LabelRules.from_mapping(doc["config"].get("labels", {}))
+    except ValueError as exc:
+        raise DatagenError(f"{root / 'dataset.json'}: config.labels.{exc}") from None
     data_yaml = parse_yaml(read_text(root / "data.yaml", "data.yaml"), root / "data.yaml")
     if not isinstance(data_yaml, dict):
         raise DatagenError(f"{root / 'data.yaml'}: expected a mapping with train, val, nc and names")

@@ -13,38 +13,31 @@ documents every column; a test checks that the two agree.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Final
+from typing import Final
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
-from datagen.core.camera import Intrinsics
 from datagen.core.features import FeatureTable
 from datagen.core.keypoints import keypoint_flags
 from datagen.core.labels import Exclusion
 from datagen.files import write_parquet
-from datagen.render.tonemap import IMAGE_STATISTICS
-from datagen.scene.look import FrameLook, sun_direction_world
-
-if TYPE_CHECKING:
-    from datagen.scene.approach import FrameState
 
 __all__ = [
     "APPEARANCE",
+    "IMAGE_STATISTICS",
     "MANIFEST_VERSION",
     "MEASURED_COLUMNS",
     "RUN_COLUMNS",
     "FeatureColumns",
     "feature_records",
     "features_schema",
-    "manifest_row",
     "manifest_schema",
     "matrix_field",
     "object_records",
@@ -58,6 +51,11 @@ __all__ = [
 
 #: Version of the manifest and feature-table schemas (bumped on any incompatible change).
 MANIFEST_VERSION: Final = "6"
+
+#: The image statistics a manifest records per rendered frame
+#: (:func:`datagen.render.tonemap.image_statistics` measures them).
+IMAGE_STATISTICS: Final = ("image_mean_luminance", "image_rms_contrast", "share_sky", "share_sea", "share_cloud",
+                           "share_object")
 #: Manifest columns that name a frame's files (relative to the dataset root; null when absent).
 FILE_COLUMNS: Final = ("image_path", "label_path", "pose_label_path", "exr_path")
 #: Manifest columns that describe the run rather than the frame: they differ between
@@ -296,67 +294,6 @@ def read_objects(path: Path) -> dict[str, NDArray[np.float64]]:
 def matrix_field(m: np.ndarray) -> list[list[float]]:
     """A 4x4 transform as the four rows of a manifest column."""
     return np.asarray(m, dtype=np.float64).reshape(4, 4).tolist()
-
-
-def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, label_path: str | None,
-                 pose_label_path: str | None, exr_path: str | None, intrinsics: Intrinsics, state: FrameState,
-                 look: FrameLook, seed: int, render_seed: int, spp: int | None, denoise: str | None,
-                 features: FeatureColumns, objects: list[dict], n_labeled: int, render_s: float | None,
-                 denoise_s: float | None, frame_s: float, worker: str, worker_rss_mib: float,
-                 rendered: dict | None = None) -> dict:
-    """One frame's manifest row, column by column (:func:`manifest_schema`): the frame,
-    its files, the camera, the poses, the approach, every appearance draw, the features,
-    what the render measured (:data:`MEASURED_COLUMNS`, from ``rendered``) and the run
-    columns (:data:`RUN_COLUMNS`)."""
-    rendered = rendered or {}
-    k = intrinsics
-    return {
-        "frame_id": frame,
-        "split": split,
-        "shard": shard,
-        "image_path": image_path,
-        "label_path": label_path,
-        "pose_label_path": pose_label_path,
-        "exr_path": exr_path,
-        "width": k.width,
-        "height": k.height,
-        "fx": k.fx,
-        "fy": k.fy,
-        "cx": k.cx,
-        "cy": k.cy,
-        "cam_from_world": matrix_field(state.cam_from_world),
-        "world_from_tanker": matrix_field(state.world_from_tanker),
-        "world_from_receiver": matrix_field(state.world_from_receiver),
-        "world_from_drogue": matrix_field(state.world_from_drogue),
-        "ptd_receiver_m": state.ptd_receiver_m.tolist(),
-        "distance_m": state.distance_m,
-        "seed": seed,
-        "render_seed": render_seed,
-        "spp": spp,
-        "denoise": denoise,
-        "mount": state.mount,
-        "approach_index": state.approach_index,
-        "approach_number": state.approach_number,
-        "time_s": state.time_s,
-        "turbulence_intensity": state.turbulence_intensity,
-        "bank_deg": state.bank_deg,
-        "sun_direction_world": np.asarray(sun_direction_world(state, look), dtype=np.float64).tolist(),
-        **{f.name: getattr(look, f.name) for f in dataclasses.fields(look) if f.name != "materials"},
-        "materials": [
-            {"object": obj, "part_class": cls, "base_color": list(m.base_color), "roughness": m.roughness,
-             "metallic": m.metallic, "specular": m.specular}
-            for obj, classes in look.materials.items() for cls, m in classes.items()
-        ],
-        **{name: rendered.get(name) for name in MEASURED_COLUMNS},
-        "n_labeled": n_labeled,
-        "features": features,
-        "objects": objects,
-        "render_s": render_s,
-        "denoise_s": denoise_s,
-        "frame_s": frame_s,
-        "worker": worker,
-        "worker_rss_mib": worker_rss_mib,
-    }
 
 
 @dataclass(frozen=True)

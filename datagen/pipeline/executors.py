@@ -13,37 +13,26 @@ depend on (scene, frame index) only, never on the executor or the worker count.
 from __future__ import annotations
 
 import contextlib
-import ctypes
-import functools
-import itertools
 import os
 import signal
 import time
-from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Final, Literal
 
 from datagen.core.errors import DatagenError
 from datagen.dataset.layout import ShardJob
+from datagen.parallel import cpu_count
 from datagen.pipeline.progress import ShardSummary
 from datagen.pipeline.writer import ShardWriter, shard_groups
 from datagen.scene.resolved import Scene
 
-__all__ = [
-    "Executor", "cpu_count", "ctrl_c_flag", "fixed_mmap_threshold", "map_in_order", "ray_cluster", "run_local",
-    "run_ray",
-]
+__all__ = ["Executor", "ctrl_c_flag", "local_threads", "ray_cluster", "run_local", "run_ray"]
 
 Executor = Literal["local", "ray"]
 Progress = Callable[[int], None]
 
 
-def cpu_count() -> int:
-    """The cores this process may run on."""
-    with contextlib.suppress(AttributeError):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
 
 
 class _Worker:
@@ -125,58 +114,6 @@ def _run_group(writer: ShardWriter, group: list[ShardJob], send: Callable[[int],
 
 def _pool_run(group: list[ShardJob]) -> list[ShardSummary]:
     return _run_group(_writer(*_Worker.args), group, _Worker.queue.put)
-
-
-#: Tasks :func:`map_in_order` keeps submitted per worker: enough to keep the workers busy
-#: while the caller takes the results in order, few enough that results never pile up.
-IN_FLIGHT_PER_WORKER: Final = 2
-
-
-def map_in_order(fn: Callable, tasks: list[tuple], workers: int) -> Iterator:
-    """``fn(*task)`` of each task, yielded in task order: in this process, or in ``workers``
-    spawned processes (for the reading commands: each task reads what it needs itself and
-    returns a compact result). At most :data:`IN_FLIGHT_PER_WORKER` tasks per worker are
-    submitted or done and not yet taken, and a result is let go once yielded, so that
-    memory does not grow with the number of tasks (:func:`fixed_mmap_threshold`)."""
-    fixed_mmap_threshold()
-    if workers <= 1 or len(tasks) <= 1:
-        for task in tasks:
-            yield fn(*task)
-        return
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
-
-    workers = min(workers, len(tasks))
-    with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
-        todo = iter(tasks)
-        pending = deque(pool.submit(fn, *task) for task in itertools.islice(todo, IN_FLIGHT_PER_WORKER * workers))
-        while pending:
-            result = pending.popleft().result()
-            task = next(todo, None)
-            if task is not None:
-                pending.append(pool.submit(fn, *task))
-            yield result
-            del result
-
-
-#: glibc's ``mallopt`` parameter of the size above which an allocation gets pages of its own.
-_M_MMAP_THRESHOLD: Final = -3
-#: Allocations of at least this many bytes get pages of their own, returned when freed.
-MMAP_THRESHOLD_BYTES: Final = 64 * 1024
-
-
-@functools.cache
-def fixed_mmap_threshold() -> bool:
-    """Make glibc give every allocation of :data:`MMAP_THRESHOLD_BYTES` or more pages of its
-    own, handed back to the system when freed (once per process; False where the C library
-    is not glibc). By default glibc raises that threshold to the largest block freed so far
-    (up to 32 MiB), and a reader that takes shard after shard of arrays then keeps them in a
-    heap that fragments: the audit of 100,000 frames grew to 497 MiB in its parent process,
-    229 MiB with the threshold fixed."""
-    try:
-        return bool(ctypes.CDLL("libc.so.6").mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES))
-    except (OSError, AttributeError):
-        return False
 
 
 @contextlib.contextmanager

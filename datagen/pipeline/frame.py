@@ -20,8 +20,7 @@ from typing import Final
 import numpy as np
 
 from datagen.core.conventions import render_seed
-from datagen.core.keypoints import object_boxes
-from datagen.core.labels import FrameLabels, compute_labels
+from datagen.core.labels import FrameLabels
 from datagen.scene.approach import FrameState, FrameStates
 from datagen.scene.look import FrameLook, frame_look
 from datagen.scene.resolved import Scene
@@ -70,11 +69,8 @@ def shard_labels(scene: Scene, draws: Sequence[FrameDraws]) -> tuple[FrameLabels
     one frame at a time: the label arithmetic is element by element). Each frame is seen
     through its look's lens distortion where it has one."""
     cam_from_objects, distortion = _cameras(scene, draws)
-    labels = compute_labels(scene.features, cam_from_objects, scene.intrinsics, **scene.label_options,
-                            distortion=distortion)
-    objects = object_boxes(scene.object_table, cam_from_objects, scene.intrinsics, options=scene.label_options,
-                           distortion=distortion, truncated=scene.config.labels.truncated_objects)
-    return labels, objects
+    return (scene.labelling.label_features(cam_from_objects, distortion),
+            scene.labelling.label_objects(cam_from_objects, distortion))
 
 
 def frame_labels(scene: Scene, draws: FrameDraws) -> FrameLabels:

@@ -14,7 +14,7 @@ from datagen.dataset.layout import ShardJob
 from datagen.pipeline.estimate import FrameCost
 from datagen.render.timing import rest_of_frame
 
-__all__ = ["BuildProgress", "BuildReport", "NullProgress", "ShardSummary"]
+__all__ = ["BuildProgress", "BuildReport", "ShardSummary"]
 
 @dataclass
 class ShardSummary:
@@ -211,16 +211,3 @@ def _duration(seconds: float) -> str:
     if s >= 3600:
         return f"{s // 3600} h {s % 3600 // 60:02d} min"
     return f"{s // 60} min {s % 60:02d} s" if s >= 60 else f"{s} s"
-
-
-class NullProgress:
-    """:class:`BuildProgress`'s interface, showing nothing (a caller that passed none)."""
-
-    def start(self, total: int, done: int, estimate: FrameCost | None = None) -> None:
-        pass
-
-    def advance(self, n: int) -> None:
-        pass
-
-    def close(self) -> None:
-        pass

@@ -14,17 +14,19 @@ from pathlib import Path
 
 from datagen.config.schema import Config
 from datagen.core.errors import DatagenError
-from datagen.dataset.folder import DatasetLock, check_folder, prepare_folder, remove_owned, sweep_temporaries
-from datagen.dataset.layout import LOCK_NAME, Layout, plan_shards
-from datagen.dataset.metadata import (
+from datagen.dataset.layout import LOCK_NAME, Layout
+from datagen.dataset.schema import read_manifest_summary
+from datagen.parallel import cpu_count
+from datagen.pipeline.estimate import frame_cost
+from datagen.pipeline.executors import Executor, local_threads, ray_cluster, run_local, run_ray
+from datagen.pipeline.folder import DatasetLock, check_folder, prepare_folder, remove_owned, sweep_temporaries
+from datagen.pipeline.metadata import (
     config_fingerprint,
     write_dataset_card,
     write_dataset_files,
     write_image_lists,
 )
-from datagen.dataset.schema import read_manifest_summary
-from datagen.pipeline.estimate import frame_cost
-from datagen.pipeline.executors import Executor, cpu_count, local_threads, ray_cluster, run_local, run_ray
+from datagen.pipeline.plan import dataset_layout, plan_shards
 from datagen.pipeline.progress import BuildReport, ShardSummary
 from datagen.scene.resolved import Scene
 
@@ -61,7 +63,7 @@ def build_dataset(config: Config, out: Path, *, workers: int | None = None, exec
                            f"(at most {cpu_count()}; --executor ray for a cluster)")
     scene = Scene.resolve(config)
     root = Path(out).resolve()
-    layout = Layout.of(root, scene.config)
+    layout = dataset_layout(root, scene.config)
     check_folder(layout)  # refuse someone else's folder before anything (the lock included) is created
     jobs = plan_shards(config)
     fingerprint = config_fingerprint(scene, render=render)

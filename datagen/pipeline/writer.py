@@ -21,8 +21,8 @@ from pathlib import Path
 
 from datagen.core.keypoints import pose_rows
 from datagen.core.labels import FrameLabels
-from datagen.dataset.layout import Layout, ShardJob
-from datagen.dataset.schema import feature_records, manifest_row, object_records, write_manifest
+from datagen.dataset.layout import ShardJob
+from datagen.dataset.schema import feature_records, object_records, write_manifest
 from datagen.dataset.yolo import pose_lines, yolo_lines
 from datagen.files import write_exr, write_image, write_text
 from datagen.pipeline.frame import (
@@ -33,6 +33,8 @@ from datagen.pipeline.frame import (
     shard_labels,
     training_image,
 )
+from datagen.pipeline.manifest import manifest_row
+from datagen.pipeline.plan import dataset_layout
 from datagen.pipeline.progress import ShardSummary
 from datagen.render.timing import StageClock
 from datagen.scene.approach import FrameStates
@@ -93,7 +95,7 @@ class ShardWriter:
     def __init__(self, scene: Scene, root: Path, *, render: bool = True) -> None:
         self.scene = scene
         self.states = FrameStates(scene.config)  # each approach chain simulated once per process
-        self.layout = Layout.of(root, scene.config)
+        self.layout = dataset_layout(root, scene.config)
         self.renderer = None
         self._stop: Callable[[], bool] = lambda: False
         # Images are encoded and written by one background thread while the next frame
@@ -175,7 +177,7 @@ class ShardWriter:
                                                          layout.root / exr_rel if exr_rel else None)
             with self._clock.stage("feature visibility"):
                 fraction, center_visible = self.renderer.feature_visibility(draws.state, features)
-            labels = labels.with_visibility(fraction, scene.config.labels.min_visible_fraction)
+            labels = scene.labelling.occlude(labels, fraction)
         records = feature_records(labels, features.class_id, fraction, center_visible)
         label_rel = layout.label_rel(job.split, job.shard, i)
         pose_rel = layout.pose_label_rel(job.split, job.shard, i)

@@ -11,7 +11,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["IMAGE_STATISTICS", "WHITE_RADIANCE", "exposure_scale", "haze", "image_statistics", "to_srgb8"]
+__all__ = ["WHITE_RADIANCE", "exposure_scale", "haze", "image_statistics", "to_srgb8"]
 
 #: Linear radiance that maps to sRGB white at 0 EV (sunsky radiance is in W/(m^2 sr nm)-like units).
 WHITE_RADIANCE: Final = 0.7
@@ -50,9 +50,6 @@ def haze(rgb: NDArray[np.float32], depth: NDArray[np.float32], ids: NDArray[np.u
     return (rgb * transmittance + airlight * (1 - transmittance)).astype(np.float32)
 
 
-#: The image statistics a manifest records per rendered frame (:func:`image_statistics`).
-IMAGE_STATISTICS: Final = ("image_mean_luminance", "image_rms_contrast", "share_sky", "share_sea", "share_cloud",
-                           "share_object")
 
 
 def image_statistics(srgb8: NDArray[np.uint8], surface: NDArray[np.uint8] | None,

@@ -2,8 +2,8 @@
 aircraft liveries, built into the scene once and re-dressed per frame through
 ``mi.traverse`` from a frame's :class:`~datagen.scene.look.FrameLook`.
 
-Each piece exists in the scene only when its randomizer is on, so that a build with it
-off renders the scene it rendered before, bit for bit. Texture contents change per frame
+Each piece exists in the scene only when its randomizer is on: with it off, the scene
+holds nothing of it (no mesh, texture or kernel). Texture contents change per frame
 (data updates, no new kernel); texture tilings are fixed per build (Mitsuba bakes
 ``to_uv`` into its kernels).
 
@@ -105,7 +105,7 @@ class World:
         ``volpath`` multiplies a shadow ray's weight by the null transmission of every
         surface it crosses, so next-event estimation sees the sun through the cloud and
         MIS stays balanced; on surfaces it is the same path tracer. Without clouds the
-        scene has no null surfaces and ``path`` renders it as before, bit for bit."""
+        scene has no null surfaces, and ``path``, the cheaper of the two, renders it."""
         return "volpath" if self.clouds else "path"
 
     def sea_bsdf(self, principled: dict) -> tuple[dict, str]:

@@ -1,1 +1,2 @@
-"""What the analyses and previews write: plots, the audit and evaluation reports, overlays, sheets, the gallery."""
+"""What the analyses and previews write: plots, the audit and evaluation reports, overlays, sheets, the gallery,
+and a dataset in the formats other tools read (COCO, BOP)."""

@@ -26,7 +26,7 @@ __all__ = ["report_document", "write_report"]
 # --- the report --------------------------------------------------------------------------------
 def report_document(result: AuditResult) -> dict:
     """report.json: machine-readable, for gating in CI (``passed`` and each check's)."""
-    stats = {k: v for k, v in result.stats.items() if not k.startswith("_")}
+    stats = result.stats
     return {
         "dataset": str(result.root),
         "name": result.name,
@@ -70,7 +70,7 @@ def write_report(result: AuditResult, dataset: DatasetView | DatasetSource, out:
     from datagen.report.plots import plot_audit
 
     out = Path(out)
-    plots = plot_audit(result.stats, out / "plots")
+    plots = plot_audit(result.stats, result.plot, out / "plots")
 
     def data_uri(data: bytes, kind: str) -> str:
         return f"data:image/{kind};base64,{base64.b64encode(data).decode()}"

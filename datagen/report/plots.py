@@ -12,6 +12,7 @@ from pathlib import Path
 
 from matplotlib.figure import Figure
 
+from datagen.analysis.audit.check import DriftPlot
 from datagen.config.schema import Config
 from datagen.files import write_figure
 from datagen.scene.approach import trace_approach
@@ -56,17 +57,17 @@ def plot_approaches(config: Config, path: Path, approaches: int = 5, seed: int |
     _save_png(fig, path, dpi=110)
 
 
-def plot_audit(stats: dict, folder: Path) -> dict[str, Path]:
-    """The audit's figures as PNGs in ``folder``; returns {name: path}."""
+def plot_audit(stats: dict, plot: DriftPlot, folder: Path) -> dict[str, Path]:
+    """The audit's figures as PNGs in ``folder`` (``stats``: the statistics' summary);
+    returns {name: path}."""
     import numpy as np
 
-    plot = stats["_plot"]
     out: dict[str, Path] = {}
 
     def save(fig, name: str) -> None:
         out[name] = _save_png(fig, Path(folder) / f"{name}.png")
 
-    scatter = plot["drift_scatter"]  # every k-th feature in frame order: (distance, drift)
+    scatter = plot.scatter  # every k-th feature in frame order: (distance, drift)
     floor = 1e-4  # a drift of exactly 0 (a symmetric view) still shows on the log axis
     fig, ax = _figure(figsize=(8, 4.5))
     if len(scatter):
@@ -82,7 +83,7 @@ def plot_audit(stats: dict, folder: Path) -> dict[str, Path]:
     save(fig, "drift_vs_distance")
 
     fig, axes = _figure(1, 2, figsize=(11, 4.2))
-    boxes = plot["drift_boxes"]  # (size tag, quartiles and whiskers) per tag with features
+    boxes = plot.boxes  # (size tag, quartiles and whiskers) per tag with features
     if boxes:
         axes[0].bxp([{"label": tag, **{k: max(v, floor) for k, v in box.items()}} for tag, box in boxes],
                     showfliers=False)

@@ -10,7 +10,6 @@ object; none derives any of it again.
 
 from __future__ import annotations
 
-import functools
 import hashlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,8 +23,9 @@ from datagen.config.schema import Config
 from datagen.core.camera import Intrinsics
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.features import FeatureTable
-from datagen.core.keypoints import PoseLayout, object_table
-from datagen.core.training import TrainView, label_options
+from datagen.core.keypoints import PoseLayout
+from datagen.core.labelling import LabellingContext
+from datagen.core.training import TrainView
 
 __all__ = ["Scene"]
 
@@ -43,39 +43,48 @@ class Scene:
     """A config and what it resolves to (frozen; pickles to worker processes)."""
 
     config: Config
-    features: FeatureTable
-    intrinsics: Intrinsics
-    train_view: TrainView
-    label_options: dict  # the keyword arguments of datagen.core.labels.compute_labels
+    labelling: LabellingContext  # features, intrinsics, hulls and label rules: what labels a frame
     assets: dict[str, dict[str, str]]  # object -> mesh, mesh_sha256, features, features_sha256
-    hulls: dict[str, NDArray[np.float64]]  # labeled object -> its mesh's convex-hull vertices, body frame (m)
 
     @classmethod
     def resolve(cls, config: Config) -> Scene:
         """Load and check every mesh and feature file ``config`` uses (all problems at once,
         :class:`~datagen.core.errors.ConfigError`) and derive the rest."""
-        features = check_assets(config)
+        features, meshes = check_assets(config)
         cam = config.camera
         assets = {}
         for name in RIGID_OBJECTS:
             mesh, feature_file = object_paths(config, name)
-            assets[name] = {"mesh": str(mesh), "mesh_sha256": _sha256(mesh),
+            assets[name] = {"mesh": str(mesh), "mesh_sha256": meshes[name].sha256,
                             "features": str(feature_file), "features_sha256": _sha256(feature_file)}
-        return cls(config=config, features=features,
-                   intrinsics=Intrinsics.from_hfov_deg(cam.width, cam.height, cam.hfov_deg),
-                   train_view=TrainView(cam.width, cam.height, config.labels.train_imgsz),
-                   label_options=label_options(config.labels, cam.width, cam.height), assets=assets,
-                   hulls={name: mesh_hull(object_paths(config, name)[0], name) for name in features.objects})
+        hulls = {name: mesh_hull(meshes[name]) for name in features.objects}
+        labelling = LabellingContext(features, Intrinsics.from_hfov_deg(cam.width, cam.height, cam.hfov_deg), hulls,
+                                     config.labels.rules())
+        return cls(config=config, labelling=labelling, assets=assets)
 
-    @functools.cached_property
+    @property
+    def features(self) -> FeatureTable:
+        return self.labelling.features
+
+    @property
+    def intrinsics(self) -> Intrinsics:
+        return self.labelling.intrinsics
+
+    @property
+    def hulls(self) -> dict[str, NDArray[np.float64]]:
+        return dict(self.labelling.hulls)
+
+    @property
+    def train_view(self) -> TrainView:
+        return self.labelling.train_view
+
+    @property
     def object_table(self) -> FeatureTable:
-        """The labeled objects' hulls as a feature table (:func:`datagen.core.keypoints.object_table`)."""
-        return object_table(self.features.objects, self.hulls)
+        return self.labelling.object_table
 
-    @functools.cached_property
+    @property
     def pose_layout(self) -> PoseLayout:
-        """Where each feature goes in a pose instance (:class:`datagen.core.keypoints.PoseLayout`)."""
-        return PoseLayout.from_features(self.features)
+        return self.labelling.pose_layout
 
     @property
     def name(self) -> str:

@@ -19,10 +19,11 @@ from typing import Final
 
 from datagen.config.schema import Config
 from datagen.core.errors import DatagenError
-from datagen.dataset.layout import LOCK_NAME, MANIFEST_NAME, POSE_IMAGES_LINK, Layout, plan_shards
-from datagen.dataset.metadata import is_dataset_card
+from datagen.dataset.layout import LOCK_NAME, MANIFEST_NAME, POSE_IMAGES_LINK, Layout
 from datagen.dataset.schema import FILE_COLUMNS
 from datagen.files import is_temporary
+from datagen.pipeline.metadata import is_dataset_card
+from datagen.pipeline.plan import dataset_layout, plan_shards
 from datagen.scene.resolved import Scene
 
 __all__ = [
@@ -188,7 +189,7 @@ def owned_files(layout: Layout, doc: dict) -> list[Path]:
     except (ValueError, TypeError):
         config = None
     if config is not None:
-        old = Layout.of(root, config)
+        old = dataset_layout(root, config)
         for job in plan_shards(config):
             manifests.append(old.manifest(job))
             for i in job.frames:

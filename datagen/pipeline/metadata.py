@@ -115,7 +115,7 @@ def dataset_document(scene: Scene, jobs: list[ShardJob], fingerprint: str, *, re
         "corrected": config.labels.corrected,
         "label_size": {"train_imgsz": config.labels.train_imgsz, "min_box_px": config.labels.min_box_px,
                        "small_boxes": config.labels.small_boxes,
-                       "min_label_size_px": list(scene.label_options["min_size_px"])},
+                       "min_label_size_px": list(scene.labelling.min_size_px)},
         "pixel_convention": PIXEL_CONVENTION,
         "camera_frame": "opencv: x right, y down, z forward",
         "body_frame": "x forward, y left, z up",
@@ -312,7 +312,7 @@ def dataset_card(scene: Scene, jobs: list[ShardJob], *, render: bool, labels: in
     k, cam = scene.intrinsics, config.camera
     model = f" (paper model {config.paper_model})" if config.paper_model else ""
     lo, hi = config.approach.range_m
-    rules = scene.label_options
+    rules = scene.labelling.rules
     reasons = ", ".join(f"{n:,} {r}" for r, n in excluded.items() if n) or "none"
     boxes = ("YOLO boxes in `labels/`" if config.labels.format != "pose"
              else "labeled features (no detection label files: the pose keypoints below)")
@@ -330,8 +330,8 @@ cx = {k.cx:g}, cy = {k.cy:g}), {_rendered(config) if render else "labels only (n
 - **Frames**: {frames['train']:,} train, {frames['val']:,} val; {len(scene.features)} classes (the
   {config.features.variant} features of {' and '.join(config.features.objects)}).
 - **Labels**: {labels:,} {boxes}, each centred exactly on the projection of its feature's
-  true 3D centre ({'corrected' if rules['corrected'] else 'tight (uncorrected)'} boxes, at least
-  {config.labels.min_box_px:g} px at imgsz {config.labels.train_imgsz}, {rules['edge_margin_px']:g} px edge
+  true 3D centre ({'corrected' if rules.corrected else 'tight (uncorrected)'} boxes, at least
+  {config.labels.min_box_px:g} px at imgsz {config.labels.train_imgsz}, {rules.edge_margin_px:g} px edge
   margin); excluded feature-frames: {reasons}.
 {_pose_card(scene)}- **Tables**: `manifests/{{split}}-{{shard}}.parquet`, one row per frame (poses as 4x4 matrices, intrinsics,
   seeds, every appearance draw, and per feature its true centre, boxes, exclusion and visibility; missing

@@ -1,0 +1,27 @@
+"""``datagen audit``: prove a dataset's labels are what they claim, and measure the
+parallax that corrected boxes remove.
+
+Every check recomputes from the manifests and ``features.parquet`` alone, with the
+labelling context the build used (:attr:`datagen.dataset.reader.DatasetMeta.labelling`),
+and names its worst offenders by file. The statistics show how far the *tight* box
+centre (the perceived centre) lies from the projection of the true 3D centre, as a
+function of distance, feature size and view obliqueness (paper Fig. 8).
+
+One module per group of checks (:mod:`.manifest`, :mod:`.label_lines`, :mod:`.pose`,
+:mod:`.files`), the statistics (:mod:`.statistics`) and the driver that feeds them shard
+by shard (:mod:`.run`).
+"""
+
+from datagen.analysis.audit.check import DRIFT_LIMIT_PX, AuditResult, Check
+from datagen.analysis.audit.geometry import feature_normals, obliqueness_deg, tight_centre_drift_px
+from datagen.analysis.audit.run import audit
+
+__all__ = [
+    "DRIFT_LIMIT_PX",
+    "AuditResult",
+    "Check",
+    "audit",
+    "feature_normals",
+    "obliqueness_deg",
+    "tight_centre_drift_px",
+]

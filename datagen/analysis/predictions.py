@@ -1,0 +1,109 @@
+"""A detector's predictions as ``datagen evaluate`` reads them: Ultralytics ``save_txt``
+files (``cls cx cy w h conf``, or pose lines with keypoint confidences), the most confident
+point per class and image (paper 3.3)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from datagen.core.errors import DatagenError
+from datagen.core.keypoints import PoseLayout
+from datagen.dataset.yolo import parse_line
+
+__all__ = ["Predictions", "parse_predictions"]
+
+
+@dataclass(frozen=True)
+class Predictions(Mapping):
+    """A detector's predictions by image stem: per class the highest-confidence detection at
+    or above the threshold, as ``(u_px, v_px, conf)`` of its box centre (paper 3.3)."""
+
+    best: dict[str, dict[int, tuple[float, float, float]]]
+    min_conf: float
+    #: Detections per stem, and those below ``min_conf``.
+    detections: dict[str, int] = field(default_factory=dict)
+    below_conf: dict[str, int] = field(default_factory=dict)
+
+    def __getitem__(self, stem: str) -> dict[int, tuple[float, float, float]]:
+        return self.best[stem]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.best)
+
+    def __len__(self) -> int:
+        return len(self.best)
+
+    def all_below_conf(self, stem: str) -> bool:
+        """The image has detections, every one of them below the threshold."""
+        return self.detections.get(stem, 0) > 0 and self.below_conf.get(stem, 0) == self.detections[stem]
+
+
+def _keep(best: dict, feature: int, u: float, v: float, conf: float) -> None:
+    """Keep ``(u, v, conf)`` as the feature's point unless a more confident one is there."""
+    if feature not in best or conf > best[feature][2]:
+        best[feature] = (u, v, conf)
+
+
+def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_conf: float = 0.25,
+                      pose: PoseLayout | None = None) -> Predictions:
+    """Ultralytics ``save_txt`` files by image stem: per feature class the highest-confidence
+    point at or above ``min_conf``, as ``(u_px, v_px, conf)`` (paper 3.3). Lines without a
+    confidence count as confidence 1.
+
+    - a detection line ``cls cx cy w h [conf]`` (normalized) is its feature's box centre;
+    - with ``pose`` (the dataset's :class:`~datagen.core.keypoints.PoseLayout`), a pose line
+      ``cls cx cy w h (x y kconf) * K [conf]`` (``yolo pose predict``) is an object instance:
+      each of its keypoints whose own confidence is at or above ``min_conf`` is its slot's
+      feature, with the instance's confidence (an instance below ``min_conf`` gives nothing)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise DatagenError(f"--predictions: {folder}: no such folder")
+    out: dict[str, dict[int, tuple[float, float, float]]] = {}
+    detections: dict[str, int] = {}
+    below: dict[str, int] = {}
+    pose_columns = () if pose is None else (pose.columns, pose.columns + 1)
+    wanted = ("a detection line 'class cx cy w h [conf]'" if pose is None else
+              f"a detection line 'class cx cy w h [conf]' or a pose line of {pose.columns} or {pose.columns + 1} "
+              "columns")
+    for path in sorted(folder.rglob("*.txt")):
+        if not path.is_file():  # a folder or a FIFO named *.txt is not a prediction file
+            continue
+        best: dict[int, tuple[float, float, float]] = {}
+        try:
+            text = path.read_text()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise DatagenError(f"{path}: unreadable prediction file ({exc})") from None
+
+        n_detections = n_below = 0
+        for n, line in enumerate(text.splitlines(), start=1):
+            if not line.split():
+                continue
+            is_pose = len(line.split()) in pose_columns
+            values, problem = parse_line(line, len(pose.objects) if is_pose else nc,
+                                         columns=pose_columns if is_pose else (5, 6))
+            if problem:
+                raise DatagenError(f"{path}:{n}: not {wanted}: {problem}")
+            n_detections += 1
+            if is_pose:
+                conf = values[-1] if len(values) == pose.columns + 1 else 1.0
+                if conf < min_conf:
+                    n_below += 1
+                    continue
+                points = np.asarray(values[5:5 + 3 * pose.kpt_count]).reshape(-1, 3)
+                for feature, (x, y, kconf) in zip(pose.feature_at[int(values[0])], points, strict=True):
+                    if feature >= 0 and kconf >= min_conf:
+                        _keep(best, int(feature), x * width, y * height, conf)
+                continue
+            cls, cx, cy = int(values[0]), values[1], values[2]
+            conf = values[5] if len(values) == 6 else 1.0
+            if conf < min_conf:
+                n_below += 1
+            else:
+                _keep(best, cls, cx * width, cy * height, conf)
+        out[path.stem] = best
+        detections[path.stem], below[path.stem] = n_detections, n_below
+    return Predictions(out, min_conf, detections, below)
