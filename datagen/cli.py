@@ -162,7 +162,8 @@ def approach(
     seed: Annotated[int | None, typer.Option("--seed", min=0, help="Override the config's seed.")] = None,
 ) -> None:
     """Simulate Monte Carlo refueling approaches; plot a few, print frame states."""
-    from datagen.scene.approach import frame_states, trace_approach
+    from datagen.scene.approach import frame_states
+    from datagen.scene.chains import trace_approach
 
     if plot is not None:
         output_path(plot, "--plot")

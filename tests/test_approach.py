@@ -14,6 +14,7 @@ from datagen.assets.rig import HOSE_ATTACH_DROGUE_M, HOSE_PORT_TANKER_M, MOUNTS
 from datagen.config import Config, load_config
 from datagen.core.transforms import invert_rigid, rotvec_from_rotation
 from datagen.scene import approach as ap
+from datagen.scene import chains
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = load_config(ROOT / "scenes" / "wingcam55.yaml")
@@ -33,7 +34,7 @@ def ypr_of(rotation: np.ndarray) -> tuple[float, float, float]:
 
 
 def convergence_rates(config: Config, seed: int, index: int, lo: float = 0.05, hi: float = 12.0):
-    tr = ap.trace_approach(config, seed, index, every=1)
+    tr = chains.trace_approach(config, seed, index, every=1)
     keep = (tr["distance_m"] < hi) & (tr["distance_m"] > lo)
     t, v = tr["time_s"][keep], np.abs(tr["ptd_receiver_m"][keep])
     forward = -np.polyfit(t, np.log(v[:, 0]), 1)[0]
@@ -84,7 +85,7 @@ def test_lateral_and_vertical_converge_twice_as_fast_as_forward() -> None:
 def test_approaches_reach_contact_in_every_scene(path: Path) -> None:
     cfg = load_config(path)
     for a in range(2):
-        tr = ap.trace_approach(cfg, cfg.dataset.seed, a, every=50)
+        tr = chains.trace_approach(cfg, cfg.dataset.seed, a, every=50)
         assert tr["distance_m"][-1] < cfg.approach.contact_m
         assert (tr["distance_m"][:-1] >= cfg.approach.contact_m).all()
         assert tr["time_s"][-1] < 400.0
@@ -94,7 +95,7 @@ def test_approaches_reach_contact_in_every_scene(path: Path) -> None:
 def test_traced_approach_is_the_one_the_frames_come_from(sampling: str) -> None:
     """`datagen approach` plots chain a's first approach: its frames lie on that trace."""
     cfg = variant(approach={"sampling": sampling, "stride_steps": 3})
-    trace = ap.trace_approach(cfg, 5, 2, every=1)
+    trace = chains.trace_approach(cfg, 5, 2, every=1)
     k = cfg.approach.frames_per_approach
     for s in ap.frame_states(cfg, range(2 * k, 3 * k), seed=5):
         if s.approach_number:
@@ -212,7 +213,7 @@ def test_hose_runs_from_port_to_drogue_coupling() -> None:
 
 def test_banking_turn_is_coordinated() -> None:
     cfg = variant(tanker={"turn_probability": 1.0, "bank_deg": [25.0, 25.0]})
-    tanker = ap.TankerFlight(cfg, np.random.default_rng(0))
+    tanker = chains.TankerFlight(cfg, np.random.default_rng(0))
     assert abs(math.degrees(tanker.bank)) == pytest.approx(25.0)
     a, b = tanker.world_from_tanker(10.0), tanker.world_from_tanker(11.0)
     yaw_rate = math.atan2(b[1, 0], b[0, 0]) - math.atan2(a[1, 0], a[0, 0])
@@ -227,19 +228,19 @@ def test_turbulence_amplitude_follows_the_config() -> None:
     cfg = variant(drogue={"intensity": [1.0, 1.0], "rms_m": [0.2, 0.5, 0.3]})
     samples = []
     for seed in range(6):
-        turb = ap.DrogueTurbulence(cfg, np.random.default_rng(seed), cfg.approach.dt_s)
+        turb = chains.DrogueTurbulence(cfg, np.random.default_rng(seed), cfg.approach.dt_s)
         for _ in range(6000):
             turb.step()
             samples.append(turb.position)
     rms = np.sqrt(np.mean(np.square(samples), axis=0))
     np.testing.assert_allclose(rms, [0.2, 0.5, 0.3], rtol=0.3)
-    calm = ap.DrogueTurbulence(variant(drogue={"intensity": [0.0, 0.0]}), np.random.default_rng(0), 0.03)
+    calm = chains.DrogueTurbulence(variant(drogue={"intensity": [0.0, 0.0]}), np.random.default_rng(0), 0.03)
     calm.step()
     np.testing.assert_array_equal(calm.position, 0.0)
 
 
 # --- approach models ----------------------------------------------------------------------
-class _GustFedChain(ap._Chain):
+class _GustFedChain(chains._Chain):
     """Model 1's numpy chain, its drogue gusts taken from model 2's blocks instead of its own stream."""
 
     def __init__(self, config: Config, rng: np.random.Generator, gusts: np.random.Generator):
@@ -247,31 +248,34 @@ class _GustFedChain(ap._Chain):
 
         def normal() -> list[float]:
             if not rows:
-                rows.extend(gusts.standard_normal((ap.GUST_BLOCK, 3)).tolist()[::-1])
+                rows.extend(gusts.standard_normal((chains.GUST_BLOCK, 3)).tolist()[::-1])
             return rows.pop()
 
         self._normal = normal
         super().__init__(config, rng)
 
-    def _turbulence(self) -> ap.DrogueTurbulence:
-        return ap.DrogueTurbulence(self.config, self.rng, self.dt, normals=self._normal)
+    def _turbulence(self) -> chains.DrogueTurbulence:
+        return chains.DrogueTurbulence(self.config, self.rng, self.dt, normals=self._normal)
 
 
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), index=st.integers(0, 10_000), steps=st.integers(1, 900))
 def test_model_2_steps_model_1s_dynamics_given_the_same_gusts(seed: int, index: int, steps: int) -> None:
-    """Model 2 is model 1's simulation in plain floats: fed the same draws, the two chains
-    stay together to rounding (the models differ only in where the gusts are drawn)."""
+    """Model 2 (chains stepped as a batch) is model 1's simulation: fed the same draws, the
+    two chains stay together to rounding (the models differ only in where the gusts are drawn)."""
     from datagen.core.conventions import approach_rng, gust_rng
 
-    fast = ap._FastChain(BASE, approach_rng(seed, index), gust_rng(seed, index))
+    batch = chains._Chains(BASE, seed, [index])  # model 2: a chain alone is a batch of one
     slow = _GustFedChain(BASE, approach_rng(seed, index), gust_rng(seed, index))
-    for chain in (fast, slow):
-        chain.new_approach(100.0)
-        for _ in range(steps):
-            chain.step()
+    chains._begin_chain(slow)
+    state = batch.load([0])
+    for _ in range(steps):
+        batch.step(state, [0])
+        slow.step()
+    batch.store(state, [0], [0])
+    fast = batch.chains[0]
     a, b = fast.snap(), slow.snap()
-    assert abs(fast.distance - slow.distance) < 1e-9
+    assert abs(float(batch.distance(state)[0]) - slow.distance) < 1e-9
     for name in ("probe_tanker", "attitude_rotvec", "drogue_offset", "probe_velocity", "drogue_velocity"):
         assert np.allclose(getattr(a, name), getattr(b, name), rtol=0, atol=1e-9), name
 
@@ -292,9 +296,9 @@ def test_chains_simulated_together_equal_each_chain_simulated_alone(sampling: st
     """simulate_chains steps model 2's chains together, element by element: each chain's
     snapshots are bit for bit its own, whichever chains it shares a batch with."""
     config = variant(approach={"sampling": sampling, "stride_steps": 90, "range_m": [2.0, 12.0]})
-    alone = {a: ap.simulate_chain(config, 11, a) for a in range(20, 32)}
+    alone = {a: chains.simulate_chain(config, 11, a) for a in range(20, 32)}
     for batch in (range(20, 32), range(26, 29), [31, 20]):
-        together = ap.simulate_chains(config, 11, batch)
+        together = chains.simulate_chains(config, 11, batch)
         assert set(together) == set(batch)
         for a, snapshots in together.items():
             assert len(snapshots) == len(alone[a])
@@ -305,7 +309,7 @@ def test_chains_simulated_together_equal_each_chain_simulated_alone(sampling: st
     if sampling == "time":  # chains that reach contact and begin another approach mid-batch
         assert any(s.approach_number > 0 for snapshots in alone.values() for s in snapshots)
     upto = {20: 1, 23: 5, 31: 9}  # chains stopped early hold at least their wanted first snapshots, the same
-    partial = ap.simulate_chains(config, 11, range(20, 32), upto)
+    partial = chains.simulate_chains(config, 11, range(20, 32), upto)
     for a, snapshots in partial.items():
         assert upto.get(a, len(alone[a])) <= len(snapshots) <= len(alone[a])
         for x, y in zip(snapshots, alone[a], strict=False):
@@ -340,3 +344,7 @@ def test_the_earlier_state_is_made_on_first_use_motion_dt_before_and_kept() -> N
     assert 0.0 < moved < 5.0
     copy = pickle.loads(pickle.dumps(ap.FrameStates(BASE, 5)(20)))
     np.testing.assert_array_equal(copy.earlier.world_from_cam, earlier.world_from_cam)
+
+
+def test_simulating_no_chain_gives_no_snapshots() -> None:
+    assert chains.simulate_chains(BASE, 3, []) == {}

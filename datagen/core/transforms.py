@@ -11,6 +11,7 @@ producing a wrong pose.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +24,7 @@ __all__ = [
     "make_transform",
     "rotation_from_rotvec",
     "rotation_from_ypr",
+    "rotation_rows_from_rotvecs",
     "rotvec_from_rotation",
 ]
 
@@ -96,6 +98,30 @@ def rotation_from_rotvec(rotvec: ArrayLike) -> FloatArray:
     axis = rotvec / angle
     k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
     return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+
+
+def rotation_rows_from_rotvecs(rotvecs: ArrayLike) -> FloatArray:
+    """Row-major rotation matrices ``(C, 9)`` of rotation vectors ``(C, 3)``: Rodrigues'
+    formula written out per element (each matrix entry one expression, sines and cosines
+    per row through :mod:`math`), so that a row's matrix does not depend on the other rows
+    (:func:`rotation_from_rotvec` computes the same rotation through ``K @ K``: the two
+    differ in the last bits)."""
+    rotvec = np.asarray(rotvecs, dtype=np.float64).reshape(-1, 3)
+    rx, ry, rz = rotvec[:, 0], rotvec[:, 1], rotvec[:, 2]
+    angle = np.sqrt(rx * rx + ry * ry + rz * rz)
+    small = angle < 1e-12
+    safe = np.where(small, 1.0, angle)
+    x, y, z = rx / safe, ry / safe, rz / safe
+    s = np.array([math.sin(v) for v in angle.tolist()])
+    c = np.array([1.0 - math.cos(v) for v in angle.tolist()])
+    full = np.stack([1.0 - c * (y * y + z * z), -s * z + c * x * y, s * y + c * x * z,
+                     s * z + c * x * y, 1.0 - c * (x * x + z * z), -s * x + c * y * z,
+                     -s * y + c * x * z, s * x + c * y * z, 1.0 - c * (x * x + y * y)], axis=1)
+    if small.any():
+        one = np.ones_like(rx)
+        tiny = np.stack([one, -rz, ry, rz, one, -rx, -ry, rx, one], axis=1)
+        full = np.where(small[:, None], tiny, full)
+    return full
 
 
 def rotvec_from_rotation(rotation: ArrayLike) -> FloatArray:

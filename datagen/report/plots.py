@@ -15,7 +15,7 @@ from matplotlib.figure import Figure
 from datagen.analysis.audit.check import DriftPlot
 from datagen.config.schema import Config
 from datagen.files import write_figure
-from datagen.scene.approach import trace_approach
+from datagen.scene.chains import trace_approach
 
 __all__ = ["plot_approaches", "plot_audit", "plot_detector", "plot_evaluation"]
 
