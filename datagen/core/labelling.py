@@ -22,7 +22,7 @@ from datagen.core.keypoints import PoseLayout, TruncatedObjects, object_boxes, o
 from datagen.core.labels import FrameLabels, SmallBoxes, compute_labels
 from datagen.core.training import TrainView
 
-__all__ = ["LabelFormat", "LabelRules", "LabellingContext"]
+__all__ = ["LabelFormat", "LabelRules", "Labelled", "LabellingContext"]
 
 #: Which label files a dataset has: one box per feature, one pose instance per object, or both.
 LabelFormat = Literal["detect", "pose", "both"]
@@ -128,3 +128,31 @@ class LabellingContext:
             return labels
         fraction = np.asarray(visible_fraction, dtype=np.float64)
         return labels.with_visibility(np.where(np.isnan(fraction), 1.0, fraction), threshold)
+
+
+class Labelled:
+    """What a holder of a labelling context (``labelling``: a build's
+    :class:`~datagen.scene.resolved.Scene`, a dataset's
+    :class:`~datagen.dataset.reader.DatasetMeta`) reads from it by name."""
+
+    labelling: LabellingContext
+
+    @property
+    def label_rules(self) -> LabelRules:
+        """The ``labels`` section of the config."""
+        return self.labelling.rules
+
+    @property
+    def train_view(self) -> TrainView:
+        """How Ultralytics' trainer sees the images (``labels.train_imgsz``)."""
+        return self.labelling.train_view
+
+    @property
+    def object_table(self) -> FeatureTable:
+        """The labeled objects' hulls as a feature table (:func:`datagen.core.keypoints.object_table`)."""
+        return self.labelling.object_table
+
+    @property
+    def pose_layout(self) -> PoseLayout:
+        """Where each feature goes in a pose instance (:class:`datagen.core.keypoints.PoseLayout`)."""
+        return self.labelling.pose_layout

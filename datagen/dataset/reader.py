@@ -26,10 +26,8 @@ from datagen.core.camera import Intrinsics
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import DatagenError
 from datagen.core.features import FeatureTable
-from datagen.core.keypoints import PoseLayout
-from datagen.core.labelling import LabellingContext, LabelRules
+from datagen.core.labelling import Labelled, LabellingContext, LabelRules
 from datagen.core.labels import FrameLabels
-from datagen.core.training import TrainView
 from datagen.dataset.layout import MANIFEST_NAME
 from datagen.dataset.schema import (
     APPEARANCE,
@@ -44,7 +42,7 @@ __all__ = ["DatasetIndex", "DatasetMeta", "DatasetSource", "DatasetView", "image
 
 
 @dataclass(frozen=True, eq=False)
-class DatasetMeta:
+class DatasetMeta(Labelled):
     """What every frame of a dataset shares: dataset.json, the data.yaml files, the feature
     table, the intrinsics and the object hulls."""
 
@@ -72,29 +70,9 @@ class DatasetMeta:
                                 LabelRules.from_mapping(self.doc["config"]["labels"]))
 
     @property
-    def label_rules(self) -> LabelRules:
-        """The ``labels`` section of the config the dataset was built with."""
-        return self.labelling.rules
-
-    @property
-    def train_view(self) -> TrainView:
-        """How Ultralytics' trainer sees this dataset's images (``labels.train_imgsz``)."""
-        return self.labelling.train_view
-
-    @property
     def label_format(self) -> str:
         """``labels.format``: detect, pose or both."""
         return self.label_rules.format
-
-    @property
-    def object_table(self) -> FeatureTable:
-        """The hulls as the table :func:`recompute_objects` labels (:func:`datagen.core.keypoints.object_table`)."""
-        return self.labelling.object_table
-
-    @property
-    def pose_layout(self) -> PoseLayout:
-        """Where each feature goes in a pose instance (:class:`datagen.core.keypoints.PoseLayout`)."""
-        return self.labelling.pose_layout
 
 
 @dataclass(frozen=True, eq=False)

@@ -23,9 +23,7 @@ from datagen.config.schema import Config
 from datagen.core.camera import Intrinsics
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.features import FeatureTable
-from datagen.core.keypoints import PoseLayout
-from datagen.core.labelling import LabellingContext
-from datagen.core.training import TrainView
+from datagen.core.labelling import Labelled, LabellingContext
 
 __all__ = ["Scene"]
 
@@ -39,7 +37,7 @@ def _sha256(path: Path) -> str:
 
 
 @dataclass(frozen=True, eq=False)
-class Scene:
+class Scene(Labelled):
     """A config and what it resolves to (frozen; pickles to worker processes)."""
 
     config: Config
@@ -73,18 +71,6 @@ class Scene:
     @property
     def hulls(self) -> dict[str, NDArray[np.float64]]:
         return dict(self.labelling.hulls)
-
-    @property
-    def train_view(self) -> TrainView:
-        return self.labelling.train_view
-
-    @property
-    def object_table(self) -> FeatureTable:
-        return self.labelling.object_table
-
-    @property
-    def pose_layout(self) -> PoseLayout:
-        return self.labelling.pose_layout
 
     @property
     def name(self) -> str:
