@@ -1,104 +1,26 @@
-"""The ``datagen`` command line.
+"""The ``datagen`` commands on scenes and datasets: validate, scenes, approach, build,
+audit, preview, evaluate, export, render, gallery."""
 
-Bad input ends with one line per problem on stderr and exit status 2, and so
-does a file that cannot be read or written (read-only folder, full disk, a name
-too long); no traceback reaches the user for anything that is not a bug in
-datagen. Every count a flag takes has an upper bound, checked before any work.
-"""
 
 from __future__ import annotations
 
-import contextlib
-import functools
-import os
-import sys
-from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, TypeVar
+from typing import Annotated
 
 import typer
 
-from datagen import __version__
-from datagen.config import find_config, load_config
-from datagen.core.conventions import RIGID_OBJECTS
-from datagen.core.errors import ConfigError, DatagenError
-from datagen.core.features import FEATURE_VARIANTS
-from datagen.core.training import MATCH_PX
-
-app = typer.Typer(
-    name="datagen",
-    help="Physically based synthetic training data for vision-based aerial refueling.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
+from datagen.cli.common import (
+    MAX_FRAME_LIST,
+    MAX_OVERLAYS,
+    MAX_PRINTED_FRAMES,
+    MAX_SPP,
+    app,
+    output_path,
+    user_errors,
 )
-assets_app = typer.Typer(help="Build and inspect the built-in meshes and feature sets.", no_args_is_help=True)
-app.add_typer(assets_app, name="assets")
-
-#: Exit status for bad input (configs, assets, dataset folders, flags) and for files that
-#: cannot be read or written.
-EXIT_BAD_INPUT = 2
-#: Most frames one --frames list of preview or render may name.
-MAX_FRAME_LIST = 10_000
-#: Largest --noise-px radius, pixels, and most radii in one run.
-#: Largest --spp of render, gallery and assets preview (as render.spp).
-MAX_SPP = 65536
-#: Most approaches --frames prints, and most overlays in an audit report.
-MAX_PRINTED_FRAMES = 100_000
-MAX_OVERLAYS = 100
-
-F = TypeVar("F", bound=Callable[..., object])
-
-
-def user_errors(func: F) -> F:
-    """Turn :class:`DatagenError` into one line per problem on stderr and exit 2."""
-
-    @functools.wraps(func)
-    def wrapper(*args, **kwargs):
-        try:
-            return func(*args, **kwargs)
-        except DatagenError as exc:
-            lines = exc.lines()
-        except OSError as exc:  # a file that cannot be read or written: where and why, on one line
-            where = exc.filename if exc.filename is not None else "datagen"
-            lines = [f"{os.fsdecode(where)}: {exc.strerror or exc}"]
-        except MemoryError:
-            lines = ["datagen: out of memory"]
-        for line in lines:
-            typer.echo(line, err=True)
-        raise typer.Exit(EXIT_BAD_INPUT) from None
-
-    return wrapper  # type: ignore[return-value]
-
-
-def output_path(path: Path, flag: str) -> Path:
-    """An output path that can be created: UTF-8 and every name within the filesystem's
-    limit, checked before anything is written (a bad one would fail half-way)."""
-    text = str(path)
-    try:
-        text.encode("utf-8")
-    except UnicodeEncodeError:
-        raise DatagenError(f"{flag}: {text!a}: not a UTF-8 path; choose a name in UTF-8") from None
-    for part in Path(text).parts:
-        if len(os.fsencode(part)) > 255:
-            raise DatagenError(f"{flag}: {part[:40]}...: a name of {len(os.fsencode(part))} bytes, longer than "
-                               "the 255 a folder or file name may have")
-    return path
-
-
-def _version(value: bool) -> None:
-    if value:
-        typer.echo(f"datagen {__version__}")
-        raise typer.Exit()
-
-
-@app.callback()
-def _root(
-    version: Annotated[
-        bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version.")
-    ] = False,
-) -> None:
-    pass
+from datagen.config import find_config, load_config
+from datagen.core.errors import ConfigError, DatagenError
+from datagen.core.training import MATCH_PX
 
 
 @app.command()
@@ -478,104 +400,3 @@ def _frame_list(text: str) -> list[int]:
     if count > MAX_FRAME_LIST:
         raise DatagenError(f"--frames: {text[:60]!r} names {count:,} frames; at most {MAX_FRAME_LIST:,} at a time")
     return [i for lo, hi in ranges for i in range(lo, hi + 1)]
-
-
-@assets_app.command("build")
-@user_errors
-def assets_build(
-    out: Annotated[Path | None, typer.Option("--out", help="Assets folder (default: the built-in one).")] = None,
-) -> None:
-    """Regenerate every built-in mesh and feature file, byte for byte."""
-    from datagen.assets.files import BUILTIN_DIR
-    from datagen.assets.generate import write_assets
-
-    for path, size in write_assets(output_path(out, "--out") if out else BUILTIN_DIR).items():
-        typer.echo(f"wrote {path} ({size:,} bytes)")
-
-
-def _object_name(name: str) -> str:
-    if name not in RIGID_OBJECTS:
-        raise DatagenError(f"unknown object {name!r} (choose from {', '.join(RIGID_OBJECTS)})")
-    return name
-
-
-
-
-@assets_app.command("show")
-@user_errors
-def assets_show(
-    name: Annotated[str, typer.Argument(help=f"Object: {', '.join(RIGID_OBJECTS)}.", show_default=False)],
-    variant: Annotated[str, typer.Option("--variant", help=f"{', '.join(FEATURE_VARIANTS[:-1])} or "
-                                         f"{FEATURE_VARIANTS[-1]}.")] = "baseline",
-    config: Annotated[Path | None, typer.Option("--config", help="Use this config's mesh and feature files "
-                                                "and its seed (default: the built-in assets).")] = None,
-    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of random features without --config.")] = 0,
-    count: Annotated[int, typer.Option("--count", min=3, max=1000, help="Random features without --config "
-                                       "(as features.random_per_object).")] = 40,
-) -> None:
-    """Print the feature table of an object."""
-    from datagen.assets.files import builtin_paths
-    from datagen.assets.table import describe_features, load_object_features, object_paths
-
-    name = _object_name(name)
-    if variant not in FEATURE_VARIANTS:
-        raise DatagenError(f"--variant: unknown variant {variant!r} (choose from {', '.join(FEATURE_VARIANTS)})")
-    mesh_path, features_path = builtin_paths(name)
-    if config is not None:
-        cfg = load_config(config)
-        mesh_path, features_path = object_paths(cfg, name)
-        seed, count = cfg.dataset.seed, cfg.features.random_per_object
-    features = load_object_features(name, variant, mesh_path=mesh_path, features_path=features_path,
-                                    seed=seed, random_count=count)
-    source = f"{mesh_path}, seed {seed}" if variant == "random" else features_path
-    typer.echo(f"{name}: {len(features)} features, variant {variant}, from {source}")
-    typer.echo(describe_features(features))
-
-
-@assets_app.command("preview")
-@user_errors
-def assets_preview(
-    out: Annotated[Path | None, typer.Option("--out", help="Folder for the PNGs (default: assets/previews, the "
-                                            "repository's documentation).")] = None,
-    objects: Annotated[list[str] | None, typer.Option("--object", help="Only this object (repeatable).")] = None,
-    spp: Annotated[int, typer.Option("--spp", min=1, max=MAX_SPP, help="Samples per pixel.")] = 64,
-    config: Annotated[Path | None, typer.Option("--config", help="Use this config's mesh and feature files.")] = None,
-) -> None:
-    """Render a contact sheet of each object from six views, feature centres marked."""
-    from datagen.assets.files import builtin_paths, load_features, load_mesh
-    from datagen.assets.table import object_paths
-    from datagen.report.contact_sheets import write_contact_sheet
-
-    cfg = load_config(config) if config is not None else None
-    folder = output_path(out, "--out") if out else Path("assets") / "previews"
-    for name in objects or RIGID_OBJECTS:
-        name = _object_name(name)
-        mesh_path, features_path = object_paths(cfg, name) if cfg else builtin_paths(name)
-        mesh = load_mesh(mesh_path, name)
-        features = load_features(features_path, name, "baseline")
-        variant = cfg.render.variant if cfg else "auto"
-        path = write_contact_sheet(folder / f"{name}.png", mesh, features, spp=spp, variant=variant)
-        typer.echo(f"wrote {path}")
-
-
-def main() -> None:
-    """The ``datagen`` command: a bad flag is one line too, and so is an unprintable path."""
-    for stream in (sys.stdout, sys.stderr):  # paths with undecodable bytes print escaped, never crash
-        with contextlib.suppress(AttributeError, ValueError):
-            stream.reconfigure(errors="backslashreplace")
-    try:
-        code = app(prog_name="datagen", standalone_mode=False)
-    except typer.exceptions.TyperException as exc:
-        ctx = getattr(exc, "ctx", None)
-        if type(exc).__name__ == "NoArgsIsHelpError" and ctx is not None:  # a bare group: its help
-            print(ctx.get_help())
-            sys.exit(EXIT_BAD_INPUT)
-        if not hasattr(exc, "format_message"):
-            raise
-        where = ctx.command_path if ctx is not None else "datagen"
-        print(f"{where}: {' '.join(exc.format_message().split())}", file=sys.stderr)
-        sys.exit(EXIT_BAD_INPUT)
-    except typer.Abort:
-        print("datagen: aborted", file=sys.stderr)
-        sys.exit(130)
-    sys.exit(code if isinstance(code, int) else 0)

@@ -1,0 +1,117 @@
+"""What every ``datagen`` command shares: the app, the exit status and one-line errors
+for bad input, output paths checked before anything is written, the bounds on counts."""
+
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Annotated, TypeVar
+
+import typer
+
+from datagen import __version__
+from datagen.core.errors import DatagenError
+
+app = typer.Typer(
+    name="datagen",
+    help="Physically based synthetic training data for vision-based aerial refueling.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+assets_app = typer.Typer(help="Build and inspect the built-in meshes and feature sets.", no_args_is_help=True)
+app.add_typer(assets_app, name="assets")
+
+#: Exit status for bad input (configs, assets, dataset folders, flags) and for files that
+#: cannot be read or written.
+EXIT_BAD_INPUT = 2
+#: Most frames one --frames list of preview or render may name.
+MAX_FRAME_LIST = 10_000
+#: Largest --noise-px radius, pixels, and most radii in one run.
+#: Largest --spp of render, gallery and assets preview (as render.spp).
+MAX_SPP = 65536
+#: Most approaches --frames prints, and most overlays in an audit report.
+MAX_PRINTED_FRAMES = 100_000
+MAX_OVERLAYS = 100
+
+F = TypeVar("F", bound=Callable[..., object])
+
+
+def user_errors(func: F) -> F:
+    """Turn :class:`DatagenError` into one line per problem on stderr and exit 2."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except DatagenError as exc:
+            lines = exc.lines()
+        except OSError as exc:  # a file that cannot be read or written: where and why, on one line
+            where = exc.filename if exc.filename is not None else "datagen"
+            lines = [f"{os.fsdecode(where)}: {exc.strerror or exc}"]
+        except MemoryError:
+            lines = ["datagen: out of memory"]
+        for line in lines:
+            typer.echo(line, err=True)
+        raise typer.Exit(EXIT_BAD_INPUT) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+def output_path(path: Path, flag: str) -> Path:
+    """An output path that can be created: UTF-8 and every name within the filesystem's
+    limit, checked before anything is written (a bad one would fail half-way)."""
+    text = str(path)
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        raise DatagenError(f"{flag}: {text!a}: not a UTF-8 path; choose a name in UTF-8") from None
+    for part in Path(text).parts:
+        if len(os.fsencode(part)) > 255:
+            raise DatagenError(f"{flag}: {part[:40]}...: a name of {len(os.fsencode(part))} bytes, longer than "
+                               "the 255 a folder or file name may have")
+    return path
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"datagen {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version.")
+    ] = False,
+) -> None:
+    pass
+
+
+
+def main() -> None:
+    """The ``datagen`` command: a bad flag is one line too, and so is an unprintable path."""
+    for stream in (sys.stdout, sys.stderr):  # paths with undecodable bytes print escaped, never crash
+        with contextlib.suppress(AttributeError, ValueError):
+            stream.reconfigure(errors="backslashreplace")
+    try:
+        code = app(prog_name="datagen", standalone_mode=False)
+    except typer.exceptions.TyperException as exc:
+        ctx = getattr(exc, "ctx", None)
+        if type(exc).__name__ == "NoArgsIsHelpError" and ctx is not None:  # a bare group: its help
+            print(ctx.get_help())
+            sys.exit(EXIT_BAD_INPUT)
+        if not hasattr(exc, "format_message"):
+            raise
+        where = ctx.command_path if ctx is not None else "datagen"
+        print(f"{where}: {' '.join(exc.format_message().split())}", file=sys.stderr)
+        sys.exit(EXIT_BAD_INPUT)
+    except typer.Abort:
+        print("datagen: aborted", file=sys.stderr)
+        sys.exit(130)
+    sys.exit(code if isinstance(code, int) else 0)
