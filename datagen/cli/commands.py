@@ -289,13 +289,15 @@ def evaluate(
         sources = [{"source": "truth", "noise_px": radius, "split": split} for radius in radii]
         plan = [Run(noise_px=radius, run=run) for run, radius in enumerate(radii)]
     only = None if split == "all" else split
-    results = evaluate_runs(source, plan, seed=seed, split=only, workers=workers, progress=progress, index=index)
+    settings = PnPSettings()  # the paper's: every run is solved, summarized and reported with these
+    results = evaluate_runs(source, plan, seed=seed, settings=settings, split=only, workers=workers,
+                            progress=progress, index=index)
     runs = list(zip(sources, results, strict=True))
     detector = None
     if predictions is not None:
         detector = score_detections(source, found, split=only, match_px=match_px)
     written = write_evaluation(index, runs, output_path(out if out is not None else Path(dataset) / "evaluation",
-                                                        "--out"), detector=detector)
+                                                        "--out"), settings=settings, detector=detector)
     if detector is not None:
         d = summarize_detections(detector, DISTANCE_EDGES)["overall"]
         typer.echo(f"detector: {d['matched']} of {d['labeled']} labeled features found within {match_px:g} px "
@@ -303,7 +305,7 @@ def evaluate(
                    f"{d['missed']} missed, {d['spurious']} spurious detections; centre error median "
                    f"{_px(d['error_median_px'])}, 95th percentile {_px(d['error_p95_px'])}")
     for source, result in runs:
-        s = summarize(result)
+        s = summarize(result, settings)
         what = f"noise {source['noise_px']:g} px" if source["source"] == "truth" else "predictions"
         contact = s["at"]["contact"]
         typer.echo(f"{what}: reliability {100 * (s['overall']['reliability'] or 0):.1f}% of {len(result['frame_id'])}, "
@@ -312,7 +314,7 @@ def evaluate(
                    f"target {s['target']}")
         failures = [(r, n) for r, n in s["reasons"].items() if r != "ok" and n]
         if failures:
-            typer.echo("  failed: " + ", ".join(f"{n} {failure_text(r, PnPSettings(), conf)}" for r, n in failures))
+            typer.echo("  failed: " + ", ".join(f"{n} {failure_text(r, settings, conf)}" for r, n in failures))
     typer.echo(f"wrote {written['json']}")
 
 

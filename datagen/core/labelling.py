@@ -1,8 +1,9 @@
 """The labelling context: everything that turns a frame's poses into its labels, built once
 (from a config by :meth:`datagen.scene.resolved.Scene.resolve`, from a dataset's
 ``dataset.json`` by :class:`datagen.dataset.reader.DatasetMeta`), and the one call that
-labels a batch of frames with it. The build writes what :meth:`LabellingContext.label`
-returns and the audit recomputes with the same call, so that they agree by construction.
+labels a batch of frames with it. The build writes what :meth:`LabellingContext.label_features`
+and :meth:`~LabellingContext.label_objects` return and the audit recomputes with the same
+calls, so that they agree by construction.
 """
 
 from __future__ import annotations

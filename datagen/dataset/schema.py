@@ -14,7 +14,7 @@ documents every column; a test checks that the two agree.
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
@@ -277,7 +277,7 @@ def objects_schema() -> pa.Schema:
     ], metadata={"datagen.manifest_version": MANIFEST_VERSION})
 
 
-def write_objects(path: Path, objects: Sequence[str], hulls: dict[str, NDArray[np.float64]]) -> Path:
+def write_objects(path: Path, objects: Sequence[str], hulls: Mapping[str, NDArray[np.float64]]) -> Path:
     """One row per labeled object (its pose class): the convex-hull vertices of its mesh in
     its body frame, which bound its projection (:mod:`datagen.core.keypoints`)."""
     rows = [{"class_id": c, "object": name, "hull_points_m": np.asarray(hulls[name]).tolist()}

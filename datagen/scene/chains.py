@@ -500,30 +500,40 @@ def trace_approach(config: Config, seed: int, approach_index: int, every: int = 
     steps: ``time_s``, ``distance_m``, ``ptd_receiver_m`` (T, 3) and ``probe_drogue_m``
     (T, 3), the probe tip in the drogue-centred local frame (paper Fig. 7)."""
     a = config.approach
-    if a.model == 2:
+    if a.model == 2:  # a batch of one; its chain's arrays are brought up to date before they are read
         batch = _Chains(config, seed, [approach_index])
         chain, state = batch.chains[0], batch.load([0])
+
+        def distance() -> float:
+            return float(batch.distance(state)[0])
+
+        def sync() -> None:
+            batch.store(state, [0], [0])
+            chain._sync()
+
+        def advance() -> None:
+            batch.step(state, [0])
     else:
         chain, _ = _start_chain(config, seed, approach_index)
+
+        def distance() -> float:
+            return chain.distance
+
+        def sync() -> None:
+            pass
+
+        advance = chain.step
     rows: list[tuple] = []
     step = 0
     while True:
-        if a.model == 2:
-            distance = float(batch.distance(state)[0])
-        else:
-            distance = chain.distance
-        if step % every == 0 or distance < a.contact_m:
-            if a.model == 2:
-                batch.store(state, [0], [0])
-                chain._sync()
+        d = distance()
+        if step % every == 0 or d < a.contact_m:
+            sync()
             rotation = rotation_from_rotvec(chain.rotvec)
-            rows.append((chain.time_s, distance, rotation.T @ chain.ptd_tanker, -chain.ptd_tanker))
-        if distance < a.contact_m:
+            rows.append((chain.time_s, d, rotation.T @ chain.ptd_tanker, -chain.ptd_tanker))
+        if d < a.contact_m:
             break
-        if a.model == 2:
-            batch.step(state, [0])
-        else:
-            chain.step()
+        advance()
         step += 1
     return {
         "time_s": np.array([r[0] for r in rows]),

@@ -11,6 +11,7 @@ object; none derives any of it again.
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -69,8 +70,8 @@ class Scene(Labelled):
         return self.labelling.intrinsics
 
     @property
-    def hulls(self) -> dict[str, NDArray[np.float64]]:
-        return dict(self.labelling.hulls)
+    def hulls(self) -> Mapping[str, NDArray[np.float64]]:
+        return self.labelling.hulls
 
     @property
     def name(self) -> str:
