@@ -14,7 +14,7 @@ from datagen.assets.rig import HOSE_ATTACH_DROGUE_M, HOSE_PORT_TANKER_M, MOUNTS
 from datagen.config import Config, load_config
 from datagen.core.transforms import invert_rigid, rotvec_from_rotation
 from datagen.scene import approach as ap
-from datagen.scene import chains
+from datagen.scene import chains, flight
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = load_config(ROOT / "scenes" / "wingcam55.yaml")
@@ -213,7 +213,7 @@ def test_hose_runs_from_port_to_drogue_coupling() -> None:
 
 def test_banking_turn_is_coordinated() -> None:
     cfg = variant(tanker={"turn_probability": 1.0, "bank_deg": [25.0, 25.0]})
-    tanker = chains.TankerFlight(cfg, np.random.default_rng(0))
+    tanker = flight.TankerFlight(cfg, np.random.default_rng(0))
     assert abs(math.degrees(tanker.bank)) == pytest.approx(25.0)
     a, b = tanker.world_from_tanker(10.0), tanker.world_from_tanker(11.0)
     yaw_rate = math.atan2(b[1, 0], b[0, 0]) - math.atan2(a[1, 0], a[0, 0])
@@ -228,13 +228,13 @@ def test_turbulence_amplitude_follows_the_config() -> None:
     cfg = variant(drogue={"intensity": [1.0, 1.0], "rms_m": [0.2, 0.5, 0.3]})
     samples = []
     for seed in range(6):
-        turb = chains.DrogueTurbulence(cfg, np.random.default_rng(seed), cfg.approach.dt_s)
+        turb = flight.DrogueTurbulence(cfg, np.random.default_rng(seed), cfg.approach.dt_s)
         for _ in range(6000):
             turb.step()
             samples.append(turb.position)
     rms = np.sqrt(np.mean(np.square(samples), axis=0))
     np.testing.assert_allclose(rms, [0.2, 0.5, 0.3], rtol=0.3)
-    calm = chains.DrogueTurbulence(variant(drogue={"intensity": [0.0, 0.0]}), np.random.default_rng(0), 0.03)
+    calm = flight.DrogueTurbulence(variant(drogue={"intensity": [0.0, 0.0]}), np.random.default_rng(0), 0.03)
     calm.step()
     np.testing.assert_array_equal(calm.position, 0.0)
 
@@ -254,8 +254,8 @@ class _GustFedChain(chains._Chain):
         self._normal = normal
         super().__init__(config, rng)
 
-    def _turbulence(self) -> chains.DrogueTurbulence:
-        return chains.DrogueTurbulence(self.config, self.rng, self.dt, normals=self._normal)
+    def _turbulence(self) -> flight.DrogueTurbulence:
+        return flight.DrogueTurbulence(self.config, self.rng, self.dt, normals=self._normal)
 
 
 @settings(max_examples=15, deadline=None)

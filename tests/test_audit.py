@@ -18,6 +18,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from datagen.analysis.audit import audit, feature_normals, obliqueness_deg, tight_centre_drift_px
+from datagen.analysis.audit.frames import frames_to_draw
 from datagen.core.camera import Intrinsics
 from datagen.core.errors import DatagenError
 from datagen.core.features import FeatureTable
@@ -208,7 +209,7 @@ def test_previews_draw_on_the_frames(dataset, tmp_path: Path) -> None:
 @pytest.mark.skipif(shutil.which("chromium") is None, reason="needs Chromium (apt-get install -y chromium)")
 def test_html_report_renders_in_headless_chromium(dataset, tmp_path: Path) -> None:
     view = load_dataset(dataset)
-    written = write_report(audit(view), view, tmp_path, overlays=3)
+    written = write_report(audit(view), view, tmp_path, frames=frames_to_draw(view, 3))
     out = subprocess.run(["chromium", "--headless=new", "--no-sandbox", "--disable-gpu", "--enable-logging=stderr",
                           "--v=0", "--dump-dom", written["html"].as_uri()], capture_output=True, text=True,
                          timeout=120)
@@ -235,7 +236,7 @@ def test_duplicate_coarse_and_non_finite_lines_fail_without_a_traceback(copy, tm
     assert f"{rel}:{len(lines) - 2}: class {cls} differs from the manifest box" in line_offenders
     rules = "\n".join(by_name["ultralytics_rules"].offenders)
     assert f"{rel}:{len(lines) - 1}: not finite" in rules and f"{rel}:{len(lines)}: not finite" in rules
-    written = write_report(result, view, tmp_path, overlays=0)  # strict JSON: no NaN or inf
+    written = write_report(result, view, tmp_path)  # strict JSON: no NaN or inf
     assert json.loads(written["json"].read_text())["passed"] is False
 
 

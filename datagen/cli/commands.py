@@ -170,6 +170,7 @@ def audit(
     """Check a dataset's labels against the true centre projections; write
     report.json, plots and report.html. Exit 1 when a check fails."""
     from datagen.analysis.audit import audit as run_audit
+    from datagen.analysis.audit.frames import frames_to_draw
     from datagen.dataset.reader import open_dataset
     from datagen.pipeline.progress import BuildProgress
     from datagen.report.audit_report import write_report
@@ -179,7 +180,7 @@ def audit(
     index = source.index()
     result = run_audit(source, min_learnable=min_learnable, workers=workers, index=index,
                        progress=BuildProgress(source.root.name, verb="audit", announce=False))
-    written = write_report(result, source, folder, overlays=overlays, index=index)
+    written = write_report(result, source, folder, frames=frames_to_draw(source, overlays, index))
     for check in result.checks:
         status = "n/a " if not check.applicable else ("pass" if check.passed else "FAIL")
         if check.min_pass_share is not None:

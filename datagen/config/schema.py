@@ -27,7 +27,7 @@ from pydantic import (
 from datagen.core.conventions import CAMERA_MOUNTS, RIGID_OBJECTS
 from datagen.core.features import FEATURE_VARIANTS
 from datagen.core.keypoints import TruncatedObjects
-from datagen.core.labelling import LabelFormat, LabelRules
+from datagen.core.labelling import RULE_BOUNDS, LabelFormat, LabelRules
 from datagen.core.labels import SmallBoxes
 
 __all__ = [
@@ -644,6 +644,12 @@ class RenderConfig(_Section):
 
 
 # --- labels --------------------------------------------------------------------
+def _rule(default: float, key: str):
+    """A label rule's field, bounded as :data:`datagen.core.labelling.RULE_BOUNDS` says."""
+    lo, hi = RULE_BOUNDS[key]
+    return Field(default, ge=lo, le=hi)
+
+
 class LabelsConfig(_Section):
     """How boxes are made (paper 3.2)."""
 
@@ -651,18 +657,18 @@ class LabelsConfig(_Section):
     """Corrected boxes centred on the true 3D centre projection; false gives tight
     boxes (the paper's uncorrected ablation, model H)."""
 
-    edge_margin_px: Number = Field(10.0, ge=0.0, le=8192.0)
+    edge_margin_px: Number = _rule(10.0, "edge_margin_px")
     """A feature is labeled only if its box lies at least this far inside every border."""
 
-    min_visible_fraction: Number = Field(0.0, ge=0.0, le=1.0)
+    min_visible_fraction: Number = _rule(0.0, "min_visible_fraction")
     """Drop features whose visible share of points is below this; 0 keeps occluded
     features (the paper's choice)."""
 
-    train_imgsz: Integer = Field(864, ge=32, le=8192)
+    train_imgsz: Integer = _rule(864, "train_imgsz")
     """Ultralytics' training image size (the recipe's imgsz; the paper trained at 864):
     label sizes are judged as the trainer sees them there (datagen.core.training)."""
 
-    min_box_px: Number = Field(48.0, ge=0.0, le=512.0)
+    min_box_px: Number = _rule(48.0, "min_box_px")
     """Smallest side a label box may have at train_imgsz, in the trainer's pixels; 0 keeps
     boxes as they are. A detector learns a box only if the untrained head's assigner gives
     it a target, which needs sides of at least ASSIGNABLE_SIDE_PX there

@@ -23,11 +23,19 @@ from datagen.core.keypoints import PoseLayout, TruncatedObjects, object_boxes, o
 from datagen.core.labels import FrameLabels, SmallBoxes, compute_labels
 from datagen.core.training import TrainView
 
-__all__ = ["LabelFormat", "LabelRules", "Labelled", "LabellingContext"]
+__all__ = ["RULE_BOUNDS", "LabelFormat", "LabelRules", "Labelled", "LabellingContext"]
 
 #: Which label files a dataset has: one box per feature, one pose instance per object, or both.
 LabelFormat = Literal["detect", "pose", "both"]
 _CHOICES: Final = {"small_boxes": SmallBoxes, "format": LabelFormat, "truncated_objects": TruncatedObjects}
+#: Each numeric rule's inclusive bounds, stated once: the config's schema
+#: (:class:`datagen.config.schema.LabelsConfig`) and a dataset's reader check them.
+RULE_BOUNDS: Final[dict[str, tuple[float, float]]] = {
+    "edge_margin_px": (0.0, 8192.0),
+    "min_visible_fraction": (0.0, 1.0),
+    "train_imgsz": (32, 8192),
+    "min_box_px": (0.0, 512.0),
+}
 
 
 @dataclass(frozen=True)
@@ -63,10 +71,10 @@ class LabelRules:
                 ok = v in get_args(_CHOICES[f.name])
             elif f.type == "bool":
                 ok = isinstance(v, bool)
-            elif f.type == "int":
-                ok = isinstance(v, int) and not isinstance(v, bool) and v > 0
             else:
-                ok = isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) and v >= 0
+                lo, hi = RULE_BOUNDS[f.name]
+                kinds = int if f.type == "int" else int | float
+                ok = isinstance(v, kinds) and not isinstance(v, bool) and math.isfinite(v) and lo <= v <= hi
             if not ok:
                 raise ValueError(f"{f.name}: {v!r} is not a valid value")
             values[f.name] = float(v) if f.type == "float" else v

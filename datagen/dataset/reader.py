@@ -301,33 +301,50 @@ def open_dataset(root: str | Path) -> DatasetSource:
     if not root.is_dir():
         raise DatagenError(f"{root}: no such dataset folder")
     doc = _read_json(root / "dataset.json")
-    _check_document(doc, root / "dataset.json")
-    try:
-        LabelRules.from_mapping(doc["config"].get("labels", {}))
-    except ValueError as exc:
-        raise DatagenError(f"{root / 'dataset.json'}: config.labels.{exc}") from None
     data_yaml = parse_yaml(read_text(root / "data.yaml", "data.yaml"), root / "data.yaml")
+    _check_document(doc, root / "dataset.json")
     if not isinstance(data_yaml, dict):
         raise DatagenError(f"{root / 'data.yaml'}: expected a mapping with train, val, nc and names")
-    label_format = doc["config"].get("labels", {}).get("format", "detect")
-    pose_yaml = None
-    if label_format == "both":
+    try:
+        rules = LabelRules.from_mapping(doc["config"].get("labels", {}))
+    except ValueError as exc:
+        raise DatagenError(f"{root / 'dataset.json'}: config.labels.{exc}") from None
+    pose_yaml = data_yaml if rules.format == "pose" else None
+    if rules.format == "both":
         pose_yaml = parse_yaml(read_text(root / "pose" / "data.yaml", "data.yaml"), root / "pose" / "data.yaml")
         if not isinstance(pose_yaml, dict):
             raise DatagenError(f"{root / 'pose' / 'data.yaml'}: expected a mapping with train, val, nc, names and "
                                "kpt_shape")
-    elif label_format == "pose":
-        pose_yaml = data_yaml
-    if not (root / "features.parquet").is_file():
-        raise DatagenError(f"{root / 'features.parquet'}: missing or not a regular file")
-    try:
-        features = read_features(root / "features.parquet")
-    except Exception as exc:
-        raise DatagenError(f"{root / 'features.parquet'}: unreadable ({type(exc).__name__}: "
-                           f"{' '.join(str(exc).split())[:120]})") from None
+    features, hulls = _read_tables(root)
     k = doc["intrinsics"]
     intrinsics = Intrinsics(doc["image_width"], doc["image_height"], float(k["fx"]), float(k["fy"]),
                             float(k["cx"]), float(k["cy"]))
+    return DatasetSource(root=root, doc=doc, data_yaml=data_yaml, pose_yaml=pose_yaml, features=features,
+                         intrinsics=intrinsics, hulls=hulls, manifests=_manifest_names(root))
+
+
+def _read_tables(root: Path) -> tuple[FeatureTable, dict[str, NDArray[np.float64]]]:
+    """features.parquet's table and objects.parquet's hulls, one per labeled object (one line
+    when either is missing or wrong)."""
+    tables = []
+    for path, read in ((root / "features.parquet", read_features), (root / "objects.parquet", read_objects)):
+        if not path.is_file():
+            raise DatagenError(f"{path}: missing or not a regular file")
+        try:
+            tables.append(read(path))
+        except Exception as exc:
+            raise DatagenError(f"{path}: unreadable ({type(exc).__name__}: "
+                               f"{' '.join(str(exc).split())[:120]})") from None
+    features, hulls = tables
+    if tuple(hulls) != tuple(features.objects) or any(len(h) == 0 or not np.isfinite(h).all()
+                                                      for h in hulls.values()):
+        raise DatagenError(f"{root / 'objects.parquet'}: objects {', '.join(hulls) or 'none'} with their hull "
+                           f"points; features.parquet labels {', '.join(features.objects)}")
+    return features, hulls
+
+
+def _manifest_names(root: Path) -> tuple[str, ...]:
+    """The shards' manifests, relative to ``root`` (a dataset without one is refused)."""
     manifests = []
     for path in sorted((root / "manifests").glob("*.parquet")):
         if not MANIFEST_NAME.fullmatch(path.name):
@@ -337,9 +354,7 @@ def open_dataset(root: str | Path) -> DatasetSource:
         manifests.append(str(path.relative_to(root)))
     if not manifests:
         raise DatagenError(f"{root / 'manifests'}: no manifest; the dataset has no finished shard")
-    hulls = _read_hulls(root / "objects.parquet", features.objects)
-    return DatasetSource(root=root, doc=doc, data_yaml=data_yaml, pose_yaml=pose_yaml, features=features,
-                         intrinsics=intrinsics, hulls=hulls, manifests=tuple(manifests))
+    return tuple(manifests)
 
 
 def _read_manifest(path: Path, columns: tuple[str, ...] | None = None) -> pa.Table:
@@ -458,20 +473,6 @@ def _records(table: pa.Table, column: str, count: int, what: str, root: Path, na
         bad = int(np.argmax(lengths != count))
         raise DatagenError(f"{root / names[bad]}: frame {table.column('frame_id')[bad]}: {lengths[bad]} {what}")
     return lists.flatten()
-
-
-def _read_hulls(path: Path, objects: tuple[str, ...]) -> dict[str, NDArray[np.float64]]:
-    """objects.parquet's hulls, one per labeled object (one line when it is missing or wrong)."""
-    if not path.is_file():
-        raise DatagenError(f"{path}: missing or not a regular file")
-    try:
-        hulls = read_objects(path)
-    except Exception as exc:
-        raise DatagenError(f"{path}: unreadable ({type(exc).__name__}: {' '.join(str(exc).split())[:120]})") from None
-    if tuple(hulls) != tuple(objects) or any(len(h) == 0 or not np.isfinite(h).all() for h in hulls.values()):
-        raise DatagenError(f"{path}: objects {', '.join(hulls) or 'none'} with their hull points; features.parquet "
-                           f"labels {', '.join(objects)}")
-    return hulls
 
 
 def _distortion(table, b: int) -> NDArray[np.float64]:

@@ -10,14 +10,14 @@ from __future__ import annotations
 import base64
 import html
 import json
-from collections.abc import Iterator
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 
 from datagen.analysis.audit import AuditResult
 from datagen.core.labels import FrameLabels
-from datagen.dataset.reader import DatasetIndex, DatasetSource, DatasetView
+from datagen.dataset.reader import DatasetMeta, DatasetView
 from datagen.files import write_text
 
 __all__ = ["report_document", "write_report"]
@@ -37,33 +37,11 @@ def report_document(result: AuditResult) -> dict:
     }
 
 
-def _overlay_rows(dataset: DatasetView | DatasetSource, n: int, index: DatasetIndex | None
-                  ) -> Iterator[tuple[DatasetView, int, FrameLabels]]:
-    """``(view, row, labels)`` of ``n`` frames spread evenly over the dataset's frame order;
-    a source's shards are read, and labelled, only where a chosen frame lies."""
-    if isinstance(dataset, DatasetView):
-        if len(dataset) and n:
-            labels = dataset.recompute()
-            for b in np.linspace(0, len(dataset) - 1, min(n, len(dataset))).round().astype(int):
-                yield dataset, int(b), labels
-        return
-    index = index or dataset.index()
-    if not len(index) or not n:
-        return
-    shard = labels = None
-    for b in np.linspace(0, len(index) - 1, min(n, len(index))).round().astype(int):
-        name = index.manifest_file[b]
-        if shard is None or shard.manifest_file[0] != name:
-            shard = dataset.read_shard(name)
-            labels = shard.recompute()
-        rows = np.flatnonzero(shard.frame_id == index.frame_id[b])
-        yield shard, int(rows[0]), labels
-
-
-def write_report(result: AuditResult, dataset: DatasetView | DatasetSource, out: Path, *,
-                 overlays: int = 3, index: DatasetIndex | None = None) -> dict[str, Path]:
+def write_report(result: AuditResult, dataset: DatasetMeta, out: Path, *,
+                 frames: Iterable[tuple[DatasetView, int, FrameLabels]] = ()) -> dict[str, Path]:
     """Write report.json, plots/*.png and a self-contained report.html into ``out``
-    (``dataset``: what was audited, for the overlays; ``index``: a source's, where read)."""
+    (``dataset``: what was audited; ``frames``: the frames to draw, ``(view, row, labels)``
+    as :func:`datagen.analysis.audit.frames.frames_to_draw` gives them)."""
     import cv2
 
     from datagen.report.overlays import draw_overlay
@@ -100,7 +78,7 @@ def write_report(result: AuditResult, dataset: DatasetView | DatasetSource, out:
     figures = "".join(f"<figure><img alt='{esc(name)}' src='{data_uri(path.read_bytes(), 'png')}'>"
                       f"<figcaption>{esc(name)}</figcaption></figure>" for name, path in plots.items())
     overlay_html = []
-    for view, b, labels in _overlay_rows(dataset, overlays, index):
+    for view, b, labels in frames:
         image = draw_overlay(view, b, labels)
         scale = min(1.0, 1200 / image.shape[1])
         image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)

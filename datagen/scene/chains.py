@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from datagen.assets.rig import MOUNTS
 from datagen.config.schema import Config
-from datagen.core.conventions import GRAVITY_MPS2, approach_rng, gust_rng
+from datagen.core.conventions import approach_rng, gust_rng
 from datagen.core.transforms import (
     make_transform,
     rotation_from_rotvec,
@@ -28,123 +28,17 @@ from datagen.core.transforms import (
     rotation_rows_from_rotvecs,
     rotvec_from_rotation,
 )
+from datagen.scene.flight import (
+    DrogueTurbulence,
+    TankerFlight,
+    draw_start,
+    mount_jitter,
+    start_offset,
+)
 
-__all__ = [
-    "ApproachStart",
-    "ChainSnapshot",
-    "DrogueTurbulence",
-    "TankerFlight",
-    "draw_start",
-    "simulate_chain",
-    "simulate_chains",
-    "start_offset",
-    "trace_approach",
-]
+__all__ = ["ChainSnapshot", "simulate_chain", "simulate_chains", "trace_approach"]
 
 FloatArray = NDArray[np.float64]
-
-
-#: Turbulence runs this long before an approach starts, so the drogue starts in its stationary motion.
-TURBULENCE_WARMUP_S = 10.0
-
-
-@dataclass(frozen=True)
-class ApproachStart:
-    """The random initial conditions of one approach (tanker frame)."""
-
-    distance_m: float
-    azimuth_rad: float
-    elevation_rad: float
-    yaw_rad: float
-    pitch_rad: float
-    roll_rad: float
-
-
-# --- pieces ----------------------------------------------------------------------
-def draw_start(config: Config, rng: np.random.Generator, distance_m: float) -> ApproachStart:
-    """Initial receiver placement and attitude perturbation (paper 3.1)."""
-    a = config.approach
-    el_lo, el_hi = a.start_elevation_deg
-    return ApproachStart(
-        distance_m=distance_m,
-        azimuth_rad=math.radians(rng.uniform(-a.start_azimuth_deg, a.start_azimuth_deg)),
-        elevation_rad=math.radians(rng.uniform(el_lo, el_hi)),
-        yaw_rad=math.radians(rng.uniform(-a.yaw_deg, a.yaw_deg)),
-        pitch_rad=math.radians(rng.uniform(-a.pitch_deg, a.pitch_deg)),
-        roll_rad=math.radians(rng.uniform(-a.roll_deg, a.roll_deg)),
-    )
-
-
-def start_offset(start: ApproachStart) -> FloatArray:
-    """Probe tip minus drogue centre at the start, tanker frame: behind, off to the side, below."""
-    ce = math.cos(start.elevation_rad)
-    direction = np.array([-ce * math.cos(start.azimuth_rad), ce * math.sin(start.azimuth_rad),
-                          math.sin(start.elevation_rad)])
-    return start.distance_m * direction
-
-
-class DrogueTurbulence:
-    """Dryden-filtered gusts (first-order Gauss-Markov per axis) driving a damped
-    second-order drogue response; displacement in the tanker frame."""
-
-    def __init__(self, config: Config, rng: np.random.Generator, dt: float, normals=None, *, warmup: bool = True):
-        d = config.drogue
-        self.rng = rng
-        # Each step's three standard normals: from ``rng`` (model 1) or ``normals()``.
-        self._normals = normals or (lambda: rng.standard_normal(3))
-        self.intensity = float(rng.uniform(*d.intensity))
-        self.sigma = np.asarray(d.rms_m) * self.intensity
-        self.decay = math.exp(-dt / d.gust_time_s)
-        self.kick = math.sqrt(1.0 - self.decay**2)
-        self.omega = 2.0 * math.pi * d.natural_hz
-        self.zeta = d.damping
-        self.dt = dt
-        self.gust = self.sigma * rng.standard_normal(3)
-        self.position = self.gust.copy()
-        self.velocity = np.zeros(3)
-        self.warmup_steps = round(TURBULENCE_WARMUP_S / dt)
-        for _ in range(self.warmup_steps if warmup else 0):
-            self.step()
-
-    def step(self) -> None:
-        self.gust = self.gust * self.decay + self.sigma * self.kick * np.asarray(self._normals())
-        accel = self.omega**2 * (self.gust - self.position) - 2.0 * self.zeta * self.omega * self.velocity
-        self.velocity = self.velocity + self.dt * accel  # semi-implicit Euler: stable for omega*dt < 2
-        self.position = self.position + self.dt * self.velocity
-
-
-class TankerFlight:
-    """World pose of the tanker over time: straight and level, or a coordinated turn."""
-
-    def __init__(self, config: Config, rng: np.random.Generator):
-        t = config.tanker
-        self.speed = t.speed_mps
-        self.altitude = float(rng.uniform(*t.altitude_m))
-        self.heading0 = float(rng.uniform(0.0, 2.0 * math.pi))
-        turning = bool(rng.random() < t.turn_probability)
-        bank = math.radians(rng.uniform(*t.bank_deg)) * (1.0 if rng.random() < 0.5 else -1.0)
-        self.bank = bank if turning else 0.0
-        # Positive bank is right wing down: a right turn, heading (counter-clockwise) decreasing.
-        self.rate = -GRAVITY_MPS2 * math.tan(self.bank) / self.speed
-
-    def world_from_tanker(self, time_s: float) -> FloatArray:
-        heading = self.heading0 + self.rate * time_s
-        if abs(self.rate) < 1e-12:
-            pos = [self.speed * time_s * math.cos(heading), self.speed * time_s * math.sin(heading)]
-        else:
-            r = self.speed / self.rate
-            pos = [r * (math.sin(heading) - math.sin(self.heading0)),
-                   -r * (math.cos(heading) - math.cos(self.heading0))]
-        return make_transform(rotation_from_ypr(heading, 0.0, self.bank), [pos[0], pos[1], self.altitude])
-
-
-def _mount_jitter(config: Config, rng: np.random.Generator) -> tuple[FloatArray, FloatArray]:
-    """One approach's mount perturbation: a translation ``(3,)`` in the body frame and a
-    rotation ``(3, 3)`` about the camera's own axes, each within the configured bounds."""
-    j = config.camera.mount_jitter
-    shift = rng.uniform(-j.translation_m, j.translation_m, size=3)
-    ypr = np.radians(rng.uniform(-j.rotation_deg, j.rotation_deg, size=3))
-    return shift, rotation_from_ypr(*ypr)
 
 
 # --- the simulation ---------------------------------------------------------------
@@ -204,7 +98,7 @@ class _Chain:
         start = draw_start(self.config, self.rng, distance_m)
         self.probe = self.turbulence.position + start_offset(start)
         self.rotvec = rotvec_from_rotation(rotation_from_ypr(start.yaw_rad, start.pitch_rad, start.roll_rad))
-        shift, rot = _mount_jitter(self.config, self.rng)
+        shift, rot = mount_jitter(self.config, self.rng)
         nominal = MOUNTS[self.config.camera.mount].body_from_cam()
         self.body_from_cam = make_transform(np.eye(3), shift) @ nominal @ make_transform(rot, np.zeros(3))
 
