@@ -2,7 +2,8 @@
 
 - :func:`fractal_noise`: a tileable Gaussian field with a power-law spectrum (clouds,
   camouflage blotches, grime).
-- :func:`cloud_opacity`: a layer's opacity at a coverage (thresholded fractal noise).
+- :class:`CloudLayer`: a cloud layer's opacity at a coverage: band-limited procedural
+  noise (:mod:`datagen.assets.noise`), evaluated where it is seen, no texels.
 - :func:`wave_field`: a sea's wave normals (tangent space) from a directional
   Pierson-Moskowitz spectrum at a wind; :func:`wave_slope_variance` is the
   expected mean square slope that field resolves.
@@ -18,20 +19,27 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import dataclass
 from typing import Final
 
 import numpy as np
 from numpy.typing import NDArray
 
+from datagen.assets.noise import NUMPY, FractalField, Ops, sample_grid
 from datagen.core.conventions import GRAVITY_MPS2
 
 __all__ = [
-    "CLOUD_TEXELS",
-    "CLOUD_TILE_M",
+    "CLOUD_CORE",
+    "CLOUD_EDGE",
+    "CLOUD_GAIN",
+    "CLOUD_OCTAVES",
+    "CLOUD_WAVELENGTH_M",
+    "FOAM_ALBEDO",
     "LIVERY_TEXELS",
     "WAVE_TEXELS",
     "WAVE_TILE_M",
-    "cloud_opacity",
+    "CloudLayer",
+    "SeaSurface",
     "fractal_noise",
     "livery",
     "triplanar_uv",
@@ -39,13 +47,33 @@ __all__ = [
     "wave_slope_variance",
 ]
 
-#: A cloud layer's texture repeats every CLOUD_TILE_M metres, CLOUD_TEXELS texels across.
-CLOUD_TILE_M: Final = 24_000.0
-CLOUD_TEXELS: Final = 512
+#: A cloud layer's field: its largest features CLOUD_WAVELENGTH_M across, CLOUD_OCTAVES octaves
+#: (the finest 12 km / 2^16, 0.18 m: two pixels of podcam15, the narrowest camera, at 600 m,
+#: the nearest a layer comes to the tanker), each CLOUD_GAIN of the one before (a fractal
+#: edge); its opacity ramps up over CLOUD_EDGE of the field.
+CLOUD_WAVELENGTH_M: Final = 12_000.0
+CLOUD_OCTAVES: Final = 17
+CLOUD_GAIN: Final = 0.55
+CLOUD_EDGE: Final = 0.06
+#: How far above its threshold the field reaches a layer's thickest core (which shades the
+#: tops brighter and the bases darker than the thin parts).
+CLOUD_CORE: Final = 0.35
 #: The sea's wave field repeats every WAVE_TILE_M metres (peak wavelengths at 12 m/s are
 #: about 90 m), WAVE_TEXELS texels across (0.5 m: the shortest waves resolved are 1 m).
 WAVE_TILE_M: Final = 256.0
 WAVE_TEXELS: Final = 512
+#: Whitecaps: foam streaks of FOAM_OCTAVES octaves from FOAM_WAVELENGTH_M (down to about
+#: 0.4 m), FOAM_STRETCH times longer along the wind than across, ramping in over FOAM_EDGE
+#: of their field; foam's effective reflectance is FOAM_ALBEDO (Koepke 1984: 0.22).
+FOAM_WAVELENGTH_M: Final = 24.0
+FOAM_OCTAVES: Final = 6
+FOAM_STRETCH: Final = 3.0
+FOAM_EDGE: Final = 0.08
+FOAM_ALBEDO: Final = 0.22
+#: The sea's tint: a field of features TINT_WAVELENGTH_M across scaling its body colour by
+#: up to about TINT_DEPTH either way.
+TINT_WAVELENGTH_M: Final = 4_000.0
+TINT_DEPTH: Final = 0.6
 #: A livery texture's size (it spans the object's bounding box).
 LIVERY_TEXELS: Final = 512
 
@@ -72,16 +100,94 @@ def fractal_noise(rng: np.random.Generator, size: int, beta: float = 3.0, low_cy
     return (field / max(float(field.std()), 1e-12)).astype(np.float32)
 
 
-def cloud_opacity(rng: np.random.Generator, coverage: float, opacity: float,
-                  size: int = CLOUD_TEXELS) -> FloatArray:
-    """A cloud layer's opacity ``(size, size, 1)``: fractal noise above its ``1 - coverage``
-    quantile, ramping to ``opacity`` over a soft edge (thin at the edges, thick in the core)."""
-    field = fractal_noise(rng, size, beta=3.8, low_cycles=3.0)
-    if coverage <= 0.0:
-        return np.zeros((size, size, 1), np.float32)
-    threshold = float(np.quantile(field, 1.0 - min(coverage, 1.0)))
-    ramp = np.clip((field - threshold) / 0.35, 0.0, 1.0)
-    return (opacity * ramp * ramp * (3.0 - 2.0 * ramp))[..., None].astype(np.float32)
+@dataclass(frozen=True)
+class CloudLayer:
+    """One cloud layer's opacity over the plane: a band-limited fractal field
+    (:class:`datagen.assets.noise.FractalField`, :data:`CLOUD_OCTAVES` octaves from
+    :data:`CLOUD_WAVELENGTH_M` down to about a metre) above the level that leaves
+    ``coverage`` of the layer clear, ramping to ``opacity`` over :data:`CLOUD_EDGE` of
+    the field: thin, ragged edges, thick cores, and the field's own variation inside."""
+
+    field: FractalField
+    threshold: float
+    opacity: float
+
+    @classmethod
+    def drawn(cls, rng: np.random.Generator, coverage: float, opacity: float, span_m: float) -> CloudLayer:
+        """A layer whose cloud covers ``coverage`` of a square ``span_m`` across (the
+        threshold is the field's quantile there; no cloud at all for coverage 0)."""
+        field = FractalField.drawn(rng, CLOUD_WAVELENGTH_M, CLOUD_OCTAVES, CLOUD_GAIN)
+        if coverage <= 0.0:
+            return cls(field, math.inf, 0.0)
+        sample = sample_grid(field, span_m, 256, octaves=6)
+        return cls(field, float(np.quantile(sample, 1.0 - min(coverage, 1.0))), float(opacity))
+
+    def opacity_of(self, value, ops: Ops = NUMPY):
+        """Opacity where the field is ``value``."""
+        if not math.isfinite(self.threshold):
+            return value * ops.f32(0.0)
+        t = ops.clip((value - ops.param_f32(self.threshold)) * ops.f32(1.0 / CLOUD_EDGE), 0.0, 1.0)
+        return t * t * (ops.f32(3.0) - ops.f32(2.0) * t) * ops.param_f32(self.opacity)
+
+    def core_of(self, value, ops: Ops = NUMPY):
+        """How deep in a core (0 at the edge, 1 from :data:`CLOUD_CORE` above the threshold)
+        the field's ``value`` is."""
+        if not math.isfinite(self.threshold):
+            return value * ops.f32(0.0)
+        t = ops.clip((value - ops.param_f32(self.threshold)) * ops.f32(1.0 / CLOUD_CORE), 0.0, 1.0)
+        return t * t * (ops.f32(3.0) - ops.f32(2.0) * t)
+
+    def __call__(self, x, y, footprint_m=None, ops: Ops = NUMPY):
+        """Opacity at ``(x, y)`` metres, filtered to a pixel of ``footprint_m`` metres there."""
+        return self.opacity_of(self.field(x, y, footprint_m, ops), ops)
+
+
+@dataclass(frozen=True)
+class SeaSurface:
+    """The sea's albedo over the plane: its body ``colour``, tinted over kilometres by a
+    band-limited field where the colour randomizer is on (plankton, depth, the sky's
+    patches), and whitecaps: foam streaks a few metres long, stretched along the wind, over
+    ``whitecaps`` of the sea. Where a pixel is wider than a whitecap the foam is filtered
+    to its mean, the sea's ``(1 - W) colour + W foam`` (:data:`FOAM_ALBEDO`)."""
+
+    colour: tuple[float, float, float]
+    whitecaps: float
+    foam: FractalField
+    foam_threshold: float
+    tint: FractalField | None
+
+    @classmethod
+    def drawn(cls, rng: np.random.Generator, colour, whitecaps: float, wind_direction_deg: float, *,
+              tint: bool) -> SeaSurface:
+        foam = FractalField.drawn(rng, FOAM_WAVELENGTH_M, FOAM_OCTAVES, 0.6, stretch=FOAM_STRETCH,
+                                  direction_rad=math.radians(wind_direction_deg))
+        threshold = math.inf
+        if whitecaps > 0.0:
+            sample = sample_grid(foam, 40.0 * FOAM_WAVELENGTH_M, 256)
+            threshold = float(np.quantile(sample, 1.0 - min(whitecaps, 1.0)))
+        tint_field = FractalField.drawn(rng, TINT_WAVELENGTH_M, 4, 0.5) if tint else None
+        return cls(tuple(float(c) for c in colour), float(whitecaps), foam, threshold, tint_field)
+
+    def mean_albedo(self) -> tuple[float, float, float]:
+        """The albedo a pixel far wider than a whitecap sees (the tint's mean is 1)."""
+        w = self.whitecaps
+        return tuple(c * (1.0 - w) + FOAM_ALBEDO * w for c in self.colour)
+
+    def albedo(self, x, y, footprint_m, ops: Ops = NUMPY):
+        """The albedo ``(r, g, b)`` at ``(x, y)`` metres for a pixel of ``footprint_m`` there."""
+        f, p = ops.f32, ops.param_f32
+        if math.isfinite(self.foam_threshold):
+            value = self.foam(x, y, footprint_m, ops)
+            t = ops.clip((value - p(self.foam_threshold)) * f(1.0 / FOAM_EDGE), 0.0, 1.0)
+            sharp = t * t * (f(3.0) - f(2.0) * t)
+            seen = self.foam.weight(1, footprint_m, ops)  # how much of a whitecap's shape a pixel resolves
+            foam = p(self.whitecaps) + (sharp - p(self.whitecaps)) * seen
+        else:
+            foam = x * f(0.0)
+        body = f(1.0) - foam
+        if self.tint is not None:
+            body = body * (f(1.0) + f(TINT_DEPTH) * self.tint(x, y, footprint_m, ops))
+        return tuple(body * p(c) + foam * f(FOAM_ALBEDO) for c in self.colour)
 
 
 def _spectrum_grid(direction_rad: float, n: int, tile: float) -> tuple[NDArray[np.float64], ...]:

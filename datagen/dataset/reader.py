@@ -113,6 +113,10 @@ class DatasetView(DatasetMeta):
     def __len__(self) -> int:
         return len(self.frame_id)
 
+    @property
+    def world_texel_px(self) -> list[float | None]:
+        return self.appearance["world_texel_px"]
+
     def cam_from_objects(self) -> NDArray[np.float64]:
         """``(B, O, 4, 4)`` in the order of ``features.objects``."""
         return np.stack([self.cam_from_world @ self.world_from[o] for o in self.features.objects], axis=1)
@@ -152,6 +156,7 @@ class DatasetIndex:
     exr_path: list[str | None]
     approach_index: NDArray[np.int64]
     approach_number: NDArray[np.int64]
+    world_texel_px: list[float | None]  # the largest world texel the frame showed (schema.TEXEL_COLUMNS)
     rank: dict[str, NDArray[np.int64]]  # manifest -> each of its rows' position in frame order (its rows sorted)
 
     def __len__(self) -> int:
@@ -169,7 +174,7 @@ def _stems(rows: DatasetIndex | DatasetView) -> list[str]:
 
 
 #: The columns of :class:`DatasetIndex`.
-INDEX_COLUMNS: Final = ("frame_id", "split", *FILE_COLUMNS, "approach_index", "approach_number")
+INDEX_COLUMNS: Final = ("frame_id", "split", *FILE_COLUMNS, "approach_index", "approach_number", "world_texel_px")
 
 
 @dataclass(frozen=True, eq=False)
@@ -216,7 +221,7 @@ class DatasetSource(DatasetMeta):
 
         return DatasetIndex(self.root, self.doc, self.label_format, [names[i] for i in order], frame_ids[order],
                             column("split"), *(column(c) for c in FILE_COLUMNS), integers("approach_index"),
-                            integers("approach_number"), ranks)
+                            integers("approach_number"), column("world_texel_px"), ranks)
 
 
 def _read_json(path: Path) -> dict:

@@ -35,6 +35,7 @@ __all__ = [
     "MANIFEST_VERSION",
     "MEASURED_COLUMNS",
     "RUN_COLUMNS",
+    "TEXEL_COLUMNS",
     "FeatureColumns",
     "feature_records",
     "features_schema",
@@ -50,12 +51,16 @@ __all__ = [
 ]
 
 #: Version of the manifest and feature-table schemas (bumped on any incompatible change).
-MANIFEST_VERSION: Final = "6"
+MANIFEST_VERSION: Final = "7"
 
 #: The image statistics a manifest records per rendered frame
 #: (:func:`datagen.render.tonemap.image_statistics` measures them).
 IMAGE_STATISTICS: Final = ("image_mean_luminance", "image_rms_contrast", "share_sky", "share_sea", "share_cloud",
                            "share_object")
+#: The largest on-screen footprint (px) of a texel the frame sampled: of the world's textures
+#: (the sea's wave normals; clouds are procedural, without texels) and of the aircraft's
+#: liveries (:meth:`datagen.render.world.World.texel_footprint_px`); null where none is seen.
+TEXEL_COLUMNS: Final = ("world_texel_px", "livery_texel_px")
 #: Manifest columns that name a frame's files (relative to the dataset root; null when absent).
 FILE_COLUMNS: Final = ("image_path", "label_path", "pose_label_path", "exr_path")
 #: Manifest columns that describe the run rather than the frame: they differ between
@@ -63,7 +68,7 @@ FILE_COLUMNS: Final = ("image_path", "label_path", "pose_label_path", "exr_path"
 RUN_COLUMNS: Final = ("render_s", "denoise_s", "frame_s", "worker", "worker_rss_mib")
 #: Manifest columns measured on the rendered frame (the camera model's metering and motion,
 #: the image statistics): null where the frame was not rendered (labels-only builds).
-MEASURED_COLUMNS: Final = ("auto_exposure_ev", "motion_blur_px", "sun_in_view", *IMAGE_STATISTICS)
+MEASURED_COLUMNS: Final = ("auto_exposure_ev", "motion_blur_px", "sun_in_view", *IMAGE_STATISTICS, *TEXEL_COLUMNS)
 #: The appearance dimensions of a frame and their manifest columns, as the audit's appearance
 #: section shows their coverage (a column is null in every row where its randomizer is off).
 APPEARANCE: Final[dict[str, tuple[str, ...]]] = {
@@ -77,6 +82,7 @@ APPEARANCE: Final[dict[str, tuple[str, ...]]] = {
     "sensor": ("sensor_iso", "sensor_exposure_time_s", "sensor_vignetting", "sensor_glare", "sensor_jpeg_quality",
                "auto_exposure_ev", "motion_blur_px", "sun_in_view"),
     "image": IMAGE_STATISTICS,
+    "texels": TEXEL_COLUMNS,
 }
 
 _F64 = pa.float64()
@@ -195,6 +201,7 @@ def manifest_schema() -> pa.Schema:
         pa.field("motion_blur_px", _F64),
         pa.field("sun_in_view", pa.bool_()),
         *(pa.field(name, _F64) for name in IMAGE_STATISTICS),
+        *(pa.field(name, _F64) for name in TEXEL_COLUMNS),
         pa.field("n_labeled", pa.int32(), nullable=False),
         pa.field("features", pa.list_(FEATURE_RECORD), nullable=False),
         pa.field("objects", pa.list_(OBJECT_RECORD), nullable=False),

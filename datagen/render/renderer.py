@@ -104,10 +104,10 @@ class Renderer:
         self.variant = use_variant(variant or config.render.variant)
         self.config = config
         cam = config.camera
-        self.world = World(config, SEA_SIZE_M)
         #: The image the renderer returns; with lens distortion, the pinhole render has a margin.
         self.output_intrinsics = scene.intrinsics if width is None and height is None else \
             Intrinsics.from_hfov_deg(width or cam.width, height or cam.height, cam.hfov_deg)
+        self.world = World(config, SEA_SIZE_M, pixel_rad=1.0 / self.output_intrinsics.fx)
         sensor = config.randomization.sensor
         self.sensor = sensor if sensor.enabled else None
         self.margin_px = 0
@@ -249,8 +249,7 @@ class Renderer:
         p["sky.turbidity"] = look.turbidity
         p["sky.sun_scale"] = look.sun_scale
         p["sky.sky_scale"] = look.sky_scale
-        self.world.apply(p, look, float(origin[2]), self._sea_prefix,
-                         irradiance)
+        self.world.apply(p, look, float(origin[2]), irradiance, camera_render=self._camera_render)
         p.update()
 
     @property
@@ -350,12 +349,13 @@ class Renderer:
                 depth, ids, surface = self.geometry_pass()
             elif self.always_geometry:  # the camera model and the statistics: half resolution will do
                 depth, ids, surface = self.geometry_pass(2)
+            texels = self.world.texel_footprint_px(depth, ids, surface, self.intrinsics.fx)
         if self.sensor is None:
             with clock.stage("haze, exposure"):
                 rgb *= exposure_scale(look.exposure_ev)
                 if look.haze_visibility_m is not None:
                     rgb = haze(rgb, depth, ids, look.haze_visibility_m)
-            return RenderResult(rgb, depth, ids, render_s, denoise_s, surface, stages=clock.seconds)
+            return RenderResult(rgb, depth, ids, render_s, denoise_s, surface, texels, stages=clock.seconds)
         from datagen.render.sensor import apply_sensor
 
         with clock.stage("haze, exposure"):
@@ -369,8 +369,8 @@ class Renderer:
                            sun_cam=state.cam_from_world[:3, :3] @ sun_world,
                            sun_transmittance=float(not np.isfinite(t_sun[0])),
                            auto_exposure=self.sensor.auto_exposure, clock=clock)
-        return RenderResult(out.rgb, out.depth, out.object_id, render_s, denoise_s, out.surface, out.measured,
-                            clock.seconds)
+        return RenderResult(out.rgb, out.depth, out.object_id, render_s, denoise_s, out.surface,
+                            {**out.measured, **texels}, clock.seconds)
 
     def _denoised(self, image) -> NDArray[np.float32]:
         """OIDN on the render's linear RGB, guided by its albedo and normal channels when
@@ -407,7 +407,7 @@ class Renderer:
         todo = np.arange(n)
         backgrounds = ("sea", *CLOUD_LAYERS)
         for _ in range(len(CLOUD_LAYERS) + 1):
-            valid, hit_t, hit_ids, background, uv = self._intersect(origins[todo], directions[todo])
+            valid, hit_t, hit_ids, background = self._intersect(origins[todo], directions[todo])
             surface_now = np.where(valid, SURFACES.index("object"), SURFACES.index("sky")).astype(np.uint8)
             surface_now[background == 0] = SURFACES.index("sea")
             passing = np.zeros(len(todo), dtype=bool)
@@ -415,7 +415,9 @@ class Renderer:
                 on = background == code
                 if on.any():
                     surface_now[on] = SURFACES.index("cloud")
-                    passing[np.flatnonzero(on)[self.world.cloud_opacity_at(name, uv[on]) < 0.5]] = True
+                    at = origins[todo[on]] + directions[todo[on]] * hit_t[on, None].astype(np.float32)
+                    opacity = self.world.cloud_opacity_at(name, at[:, :2], travelled[todo[on]] + hit_t[on])
+                    passing[np.flatnonzero(on)[opacity < 0.5]] = True
             done = ~passing
             idx = todo[done]
             t[idx] = travelled[idx] + hit_t[done]
@@ -432,28 +434,28 @@ class Renderer:
 
     def _intersect(self, origins: NDArray[np.float32], directions: NDArray[np.float32]):
         """First hits of rays: (valid, t (inf on a miss), object id, background code
-        (index into ``("sea", *CLOUD_LAYERS)``, -1 for none), surface uv (N, 2))."""
+        (index into ``("sea", *CLOUD_LAYERS)``, -1 for none))."""
         mi, dr = self._mi, self._dr
         n = len(origins)
         if self.variant.startswith("scalar"):  # one ray at a time (slow): shapes go by their names
             valid, hit_t = np.zeros(n, dtype=bool), np.full(n, np.inf)
-            ids, background, uv = np.zeros(n, np.uint32), np.full(n, -1), np.zeros((n, 2))
+            ids, background = np.zeros(n, np.uint32), np.full(n, -1)
             codes = {name: c for c, name in enumerate(("sea", *CLOUD_LAYERS))}
             for i in range(n):
                 ray = mi.Ray3f(mi.Point3f(*(float(v) for v in origins[i])),
                                mi.Vector3f(*(float(v) for v in directions[i])))
                 si = self.scene.ray_intersect(ray)
                 if si.is_valid():
-                    valid[i], hit_t[i], uv[i] = True, si.t, (si.uv.x, si.uv.y)
+                    valid[i], hit_t[i] = True, si.t
                     shape = str(si.shape.id())
                     name = shape.split("_")[0]  # shape ids are object_pN or hose
                     ids[i] = object_id(name) if name in OBJECT_NAMES else 0
                     background[i] = codes.get(shape, -1)
-            return valid, hit_t, ids, background, uv
+            return valid, hit_t, ids, background
         ray = mi.Ray3f(jit_vectors(mi.Point3f, origins), jit_vectors(mi.Vector3f, directions))
-        si = self.scene.ray_intersect(ray, ray_flags=mi.RayFlags.Minimal | mi.RayFlags.UV, coherent=True)
+        si = self.scene.ray_intersect(ray, ray_flags=mi.RayFlags.Minimal, coherent=True)
         valid_dr, shape_dr = si.is_valid(), dr.reinterpret_array(mi.UInt32, si.shape)
-        dr.eval(valid_dr, si.t, shape_dr, si.uv)
+        dr.eval(valid_dr, si.t, shape_dr)
         valid = np.asarray(valid_dr, dtype=bool)
         hit_t = np.where(valid, np.asarray(si.t, dtype=np.float64), np.inf)
         shape_ids = np.where(valid, np.asarray(shape_dr, dtype=np.int64), -1)
@@ -464,9 +466,7 @@ class Renderer:
             key = next((k for k, v in self._background.items() if v == name), None)
             if key is not None:
                 background[shape_ids == key] = code
-        uv = np.stack([np.asarray(si.uv.x), np.asarray(si.uv.y)], axis=1) if (background > 0).any() \
-            else np.zeros((n, 2))
-        return valid, hit_t, ids, background, uv
+        return valid, hit_t, ids, background
 
     def geometry_pass(self, stride: int = 1) -> tuple[NDArray[np.float32], NDArray[np.uint32], NDArray[np.uint8]]:
         """Camera z-depth, object id and surface (:data:`~datagen.render.world.SURFACES`)

@@ -8,13 +8,13 @@ holds nothing of it (no mesh, texture or kernel). Texture contents change per fr
 ``to_uv`` into its kernels).
 
 - Clouds: two horizontal sheets of cells (deck and scattered layer) whose ``mask`` opacity
-  is :func:`datagen.assets.textures.cloud_opacity` (bilinear), each emitting the light its
-  tops or bases send back (:meth:`World.cloud_shapes`).
+  is a :class:`datagen.assets.textures.CloudLayer`, procedural noise evaluated at each
+  shading point and filtered to the pixel there (:mod:`datagen.render.procedural`), each
+  emitting the light its tops or bases send back (:meth:`World.cloud_shapes`).
 - Sea: the principled BSDF under a ``normalmap`` of :func:`~datagen.assets.textures.wave_field`;
-  its base colour is the drawn body colour lifted by the whitecaps: at 4-8 km a whitecap
-  (metres across) is smaller than a pixel, so what a camera sees of them is the sea's
-  mean albedo, ``(1 - W) colour + W foam`` with foam's effective reflectance
-  (:data:`FOAM_ALBEDO`) over the whitecap fraction ``W``.
+  its albedo is a :class:`~datagen.assets.textures.SeaSurface`: the drawn body colour,
+  tinted over kilometres, with whitecaps shaped where a pixel resolves them and their mean
+  where it does not.
 - Liveries: the painted parts of the receiver and the tanker get texture coordinates
   (:func:`~datagen.assets.textures.triplanar_uv`) and a base-colour texture per object.
 """
@@ -22,46 +22,51 @@ holds nothing of it (no mesh, texture or kernel). Texture contents change per fr
 from __future__ import annotations
 
 import functools
+import math
 from typing import TYPE_CHECKING, Final
 
 import numpy as np
 from numpy.typing import NDArray
 
 from datagen.assets import textures
+from datagen.assets.noise import NUMPY
 from datagen.core.conventions import texture_rng
 from datagen.scene.look import FrameLook
 
 if TYPE_CHECKING:
     from datagen.config.schema import Config
 
-__all__ = ["CLOUD_LAYERS", "CLOUD_SIZE_M", "FOAM_ALBEDO", "LIVERY_OBJECTS", "SEA_COLOUR", "SURFACES", "World"]
+__all__ = ["CLOUD_LAYERS", "CLOUD_SIZE_M", "LIVERY_OBJECTS", "SEA_COLOUR", "SURFACES", "World"]
 
 #: The cloud layers' shape names (in the scene) and the FrameLook fields that place them.
 CLOUD_LAYERS: Final = {"cloud_deck": ("cloud_deck_coverage", "cloud_deck_altitude_m"),
                        "cloud_layer": ("cloud_layer_coverage", "cloud_layer_altitude_m")}
-#: A cloud layer spans CLOUD_TILES x CLOUD_TILES texture tiles (168 km) centred under or over
-#: the camera, as a mesh of CLOUD_CELLS cells per tile side: a cell exists (has area) only
-#: where its texture has cloud, so that rays through clear sky meet nothing (a plane with
-#: a mask would cost every ray that crosses it an extra path vertex and shadow ray). 16 cells
-#: (1.5 km): the layers' 25,000 triangles rebuild with the scene's top level in 0.02 s when an
-#: aircraft moves; at 64 cells (400,000 triangles) that took 0.24 s a frame, and the finer
-#: cells saved no measurable path-tracing time.
-CLOUD_TILES: Final = 7
-CLOUD_CELLS: Final = 16
-CLOUD_SIZE_M: Final = CLOUD_TILES * textures.CLOUD_TILE_M
+#: A cloud layer is a square CLOUD_SIZE_M across, centred under or over the camera, as a mesh
+#: of cells CLOUD_CELL_M across: a cell exists (has area) only where the layer's field may
+#: reach its threshold there, so that rays through clear sky meet nothing (a plane with a
+#: mask would cost every ray that crosses it an extra path vertex and shadow ray). 1.5 km
+#: cells (25,000 triangles) rebuild with the scene's top level in 0.02 s when an aircraft
+#: moves; 375 m cells (400,000 triangles) took 0.24 s a frame and saved no measurable
+#: path-tracing time.
+CLOUD_SIZE_M: Final = 168_000.0
+CLOUD_CELL_M: Final = 1_500.0
+#: A cell's cloud is bounded from the field's first CULL_OCTAVES octaves on a grid of
+#: CULL_SAMPLES x CULL_SAMPLES points per cell, plus what the grid's spacing and the finer
+#: octaves can add (:func:`_cloudy_cells`).
+CULL_OCTAVES: Final = 7
+CULL_SAMPLES: Final = 16
+#: Bound on the slope of one octave of gradient noise, per lattice unit (measured: 2.4).
+NOISE_SLOPE_BOUND: Final = 3.0
 #: The objects that wear a livery (on their painted parts).
 LIVERY_OBJECTS: Final = ("receiver", "tanker")
 #: What a pixel's ray meets first, as the geometry pass classifies it (index = code).
 SURFACES: Final = ("sky", "sea", "cloud", "object")
-#: Effective reflectance of whitecap foam (Koepke 1984: 0.22).
-FOAM_ALBEDO: Final = 0.22
 #: The sea's body colour when it is not drawn (linear RGB).
 SEA_COLOUR: Final = (0.01, 0.03, 0.05)
 
 
 def _bitmap(data: NDArray, repeats: float, filter_type: str = "nearest") -> dict:
-    """A repeating raw bitmap; the clouds filter bilinearly (a 47 m texel seen from a few
-    hundred metres would show as a block), the wave normals by nearest texel."""
+    """A repeating raw bitmap (the wave normals, by nearest texel)."""
     import mitsuba as mi
 
     return {"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(data, dtype=np.float32)), "raw": True,
@@ -72,7 +77,7 @@ def _bitmap(data: NDArray, repeats: float, filter_type: str = "nearest") -> dict
 class World:
     """Which world pieces a config renders, their scene entries and their per-frame updates."""
 
-    def __init__(self, config: Config, sea_size_m: float) -> None:
+    def __init__(self, config: Config, sea_size_m: float, pixel_rad: float) -> None:
         r = config.randomization
         self.config = config
         self.clouds = r.clouds.enabled
@@ -84,11 +89,15 @@ class World:
         #: Any world piece on (the renderer then classifies every pixel's surface).
         self.any = self.clouds or self.waves or self.whitecaps or self.sea_colour or self.livery
         self._livery_bbox: dict[str, tuple[NDArray, NDArray]] = {}
-        self._cloud_opacity: dict[str, NDArray[np.float32]] = {}
+        self.pixel_rad = pixel_rad  # the angle one pixel subtends (1 / fx): procedural textures filter to it
+        self._cloud_layers: dict[str, textures.CloudLayer] = {}
+        self._cloud_textures: dict = {}  # layer name -> (opacity, radiance) procedural textures
+        self._cloudy: dict[str, NDArray[np.bool_]] = {}
         self._cloud_key: tuple | None = None
         self._livery_key: tuple | None = None
         self._liveries: dict = {}
         self._sea_key: tuple | None = None
+        self._sea_texture = None  # the sea's procedural albedo (whitecaps, colour), where either is on
         self.cloud_meshes: dict = {}
         self._cloud_down: dict[str, bool] = {}
         self._cloud_height: dict[str, float] = {}  # layer name -> its mi.Mesh (the geometry pass tells them apart)
@@ -111,6 +120,14 @@ class World:
     def sea_bsdf(self, principled: dict) -> tuple[dict, str]:
         """The sea's BSDF and the parameter prefix of its principled BSDF."""
         repeats = self.sea_size_m / textures.WAVE_TILE_M
+        if self.whitecaps or self.sea_colour:
+            import mitsuba as mi
+
+            from datagen.render.procedural import texture_class
+
+            self._sea_texture = texture_class(mi.variant())(pixel_rad=self.pixel_rad, colour=True)
+            self._sea_texture.shade = _clear_colour
+            principled = dict(principled, base_color=self._sea_texture)
         if not self.waves:
             return principled, "sea.bsdf"
         flat = np.zeros((textures.WAVE_TEXELS, textures.WAVE_TEXELS, 3), np.float32)
@@ -134,19 +151,27 @@ class World:
         import mitsuba as mi
 
         from datagen.render.mitsuba import mitsuba_mesh
+        from datagen.render.procedural import texture_class
 
-        verts, faces, uv = _cloud_grid()
-        empty = np.zeros((textures.CLOUD_TEXELS, textures.CLOUD_TEXELS, 1), np.float32)
+        field_texture = texture_class(mi.variant())
+        verts, faces = _cloud_grid()
         entries = {}
         for name in CLOUD_LAYERS:
+            opacity = field_texture(pixel_rad=self.pixel_rad)
+            radiance = field_texture(pixel_rad=self.pixel_rad, colour=True)
+            for texture in (opacity, radiance):
+                texture.shade = _clear
+            self._cloud_textures[name] = (opacity, radiance)
             # Behind the mask, a black mirror: a delta lobe, so that the path tracer spends no
             # shadow ray on a surface that reflects nothing (a black diffuse one would).
-            bsdf = mi.load_dict({"type": "mask", "opacity": _bitmap(empty, 1.0, "bilinear"), "bsdf": {
+            bsdf = mi.load_dict({"type": "mask", "opacity": opacity, "bsdf": {
                 "type": "conductor", "specular_reflectance": {"type": "rgb", "value": 0.0}}})
             emitter = mi.load_dict({"type": "area", "sampling_weight": 0.0,  # found by paths, never sampled
-                                    "radiance": _bitmap(np.zeros(empty.shape[:2] + (3,)), 1.0, "bilinear")})
+                                    "radiance": radiance})
             # Built with every cell in place: the acceleration structure then follows the
             # grid, which later frames only collapse cells of (mirroring it measured 2x slower).
+            # (Texture coordinates: Mitsuba's surface interactions ask every mesh for them.)
+            uv = verts[:, :2] / np.float32(CLOUD_SIZE_M) + np.float32(0.5)
             self.cloud_meshes[name] = mitsuba_mesh(name, verts, faces, bsdf, texcoords=uv, emitter=emitter)
             entries[name] = self.cloud_meshes[name]
         return entries
@@ -191,10 +216,11 @@ class World:
         self._livery_key, self._liveries = key, out
         return out
 
-    def apply(self, params, look: FrameLook, camera_z_m: float, sea_prefix: str, sky_irradiance=None) -> None:
-        """Set the frame's clouds and sea textures (the render frame has the camera at
-        the origin; ``camera_z_m`` is its altitude; ``sky_irradiance`` the sun and sky's
-        RGB irradiance on a horizontal surface, which lights the clouds)."""
+    def apply(self, params, look: FrameLook, camera_z_m: float, sky_irradiance=None,
+              camera_render=(0.0, 0.0, 0.0)) -> None:
+        """Set the frame's clouds and sea (the render frame has its origin at altitude
+        ``camera_z_m``, the camera at ``camera_render`` in it; ``sky_irradiance`` is the sun
+        and sky's RGB irradiance on a horizontal surface, which lights the clouds)."""
         import mitsuba as mi
 
         if self.clouds:
@@ -205,25 +231,30 @@ class World:
             drawn = look.cloud_seed is not None  # a look without cloud draws: clear sky
             rng = texture_rng(look.cloud_seed)
             albedo = look.cloud_albedo if drawn else 0.0
-            light = np.asarray(sky_irradiance, dtype=np.float32) / np.float32(np.pi) * np.float32(albedo)
+            light = np.asarray(sky_irradiance, dtype=np.float64) / np.pi * albedo
             for name, (coverage_key, altitude_key) in CLOUD_LAYERS.items():
-                if fresh:  # the opacity of an approach's weather, made once
-                    opacity = (textures.cloud_opacity(rng, getattr(look, coverage_key), look.cloud_opacity) if drawn
-                               else np.zeros((textures.CLOUD_TEXELS, textures.CLOUD_TEXELS, 1), np.float32))
-                    self._cloud_opacity[name] = opacity[..., 0]
-                    params[f"{name}.bsdf.opacity.data"] = mi.TensorXf(opacity)
-                opacity = self._cloud_opacity[name][..., None]
+                if fresh:  # an approach's weather, drawn once
+                    coverage = getattr(look, coverage_key) if drawn else 0.0
+                    layer = textures.CloudLayer.drawn(rng, coverage, look.cloud_opacity or 0.0, CLOUD_SIZE_M)
+                    self._cloud_layers[name] = layer
+                    self._cloudy[name] = _cloudy_cells(layer)
+                layer = self._cloud_layers[name]
                 height = (getattr(look, altitude_key) if drawn else 0.0) - camera_z_m
                 above = height > 0.0  # seen from below: a base, which lets through what its thickness does
-                radiance = light * (np.float32(1.0) - np.float32(0.7) * opacity if above else np.float32(1.0))
-                params[f"{name}.emitter.radiance.data"] = mi.TensorXf(radiance * opacity)
+                opacity, radiance = self._cloud_textures[name]
+                for texture in (opacity, radiance):
+                    texture.camera = tuple(float(c) for c in camera_render)
+                opacity.shade = functools.partial(_layer_opacity, layer)
+                radiance.shade = functools.partial(_layer_radiance, layer, tuple(float(c) for c in light), above)
                 if fresh or self._cloud_height.get(name) != height:  # the mesh moves only when it must
-                    set_buffer(params, f"{name}.vertex_positions", _cloud_cells(self._cloud_opacity[name], height))
+                    set_buffer(params, f"{name}.vertex_positions", _cloud_cells(self._cloudy[name], height))
                     self._cloud_height[name] = height
                 if self._cloud_down.get(name) != above:  # the emitting side faces the camera
                     set_buffer(params, f"{name}.faces", _cloud_faces(above))
                     self._cloud_down[name] = above
             self._cloud_key = key
+        if self._sea_texture is not None:
+            self._sea_texture.camera = tuple(float(c) for c in camera_render)
         if not (self.waves or self.whitecaps or self.sea_colour):
             return
         key = (look.sea_seed, look.sea_wind_speed_mps, look.sea_wind_direction_deg, look.sea_whitecap_fraction,
@@ -232,48 +263,99 @@ class World:
             return  # an approach's sea, made once
         self._sea_key = key
         rng = texture_rng(look.sea_seed)
-        colour = np.asarray(look.sea_colour if look.sea_colour is not None else SEA_COLOUR, dtype=np.float32)
         wind = look.sea_wind_speed_mps if look.sea_wind_speed_mps is not None else 7.0
         if self.waves:
             normals = textures.wave_field(rng, wind, look.sea_wind_direction_deg or 0.0)
             params["sea.bsdf.normalmap.data"] = mi.TensorXf(normals * 0.5 + 0.5)
-        caps = np.float32(look.sea_whitecap_fraction or 0.0)
-        albedo = colour * (np.float32(1.0) - caps) + np.float32(FOAM_ALBEDO) * caps
-        params[f"{sea_prefix}.base_color.value"] = mi.Color3f(*(float(c) for c in albedo))
+        if self._sea_texture is not None:
+            sea = textures.SeaSurface.drawn(rng, look.sea_colour if look.sea_colour is not None else SEA_COLOUR,
+                                            look.sea_whitecap_fraction or 0.0, look.sea_wind_direction_deg or 0.0,
+                                            tint=self.sea_colour)
+            self._sea_texture.shade = functools.partial(_sea_albedo, sea)
 
-    def cloud_opacity_at(self, name: str, uv: NDArray) -> NDArray[np.float32]:
-        """The opacity of cloud layer ``name`` this frame at its texture coordinates ``uv`` (N, 2)."""
-        tex = self._cloud_opacity.get(name)
-        if tex is None:
-            return np.zeros(len(uv), np.float32)
-        n = tex.shape[0]
-        # Mitsuba's bilinear filter with repeat: texel centres at (i + 0.5) / n.
-        xy = np.mod(np.asarray(uv, dtype=np.float64), 1.0) * n - 0.5
-        i0 = np.floor(xy).astype(np.int64)
-        f = (xy - i0).astype(np.float32)
-        x0, y0 = i0[:, 0] % n, i0[:, 1] % n
-        x1, y1 = (x0 + 1) % n, (y0 + 1) % n
-        top = tex[y0, x0] * (1 - f[:, 0]) + tex[y0, x1] * f[:, 0]
-        bottom = tex[y1, x0] * (1 - f[:, 0]) + tex[y1, x1] * f[:, 0]
-        return top * (1 - f[:, 1]) + bottom * f[:, 1]
+    def texel_footprint_px(self, depth: NDArray | None, ids: NDArray | None, surface: NDArray | None,
+                           fx: float) -> dict[str, float | None]:
+        """The largest on-screen size (px) of a texel the frame shows, from its geometry pass
+        (z-depth, object ids, surfaces): a texel ``s`` metres across at z-depth ``z`` spans
+        at most ``s fx / z`` pixels. ``world_texel_px``: the sea's wave normals (the clouds
+        have no texels); ``livery_texel_px``: the liveries. None where none is seen."""
+        out: dict[str, float | None] = {"world_texel_px": None, "livery_texel_px": None}
+        if depth is None or surface is None:
+            return out
+        if self.waves:
+            sea = surface == SURFACES.index("sea")
+            if sea.any():
+                out["world_texel_px"] = textures.WAVE_TILE_M / textures.WAVE_TEXELS * fx / float(depth[sea].min())
+        if self.livery and ids is not None:
+            from datagen.core.conventions import object_id
+
+            worst = [float(np.max(hi - lo)) / textures.LIVERY_TEXELS * fx / float(depth[ids == object_id(obj)].min())
+                     for obj, (lo, hi) in self._livery_bbox.items() if (ids == object_id(obj)).any()]
+            out["livery_texel_px"] = max(worst) if worst else None
+        return out
+
+    def cloud_opacity_at(self, name: str, xy: NDArray, distance_m: NDArray) -> NDArray[np.float32]:
+        """The opacity of cloud layer ``name`` this frame at render-frame points ``xy``
+        (N, 2) seen from ``distance_m`` (N,) away, as the renderer shades it."""
+        layer = self._cloud_layers.get(name)
+        if layer is None:
+            return np.zeros(len(xy), np.float32)
+        xy = np.asarray(xy, dtype=np.float32)
+        return layer(xy[:, 0], xy[:, 1], (np.asarray(distance_m) * self.pixel_rad).astype(np.float32))
+
+
+def _clear(x, y, footprint_m, ops):
+    """A layer without cloud."""
+    return x * ops.f32(0.0)
+
+
+def _clear_colour(x, y, footprint_m, ops):
+    import mitsuba as mi
+
+    return mi.Color3f(*(x * ops.f32(0.0) + ops.f32(c) for c in SEA_COLOUR))
+
+
+def _sea_albedo(sea: textures.SeaSurface, x, y, footprint_m, ops):
+    import mitsuba as mi
+
+    return mi.Color3f(*sea.albedo(x, y, footprint_m, ops))
+
+
+def _layer_opacity(layer: textures.CloudLayer, x, y, footprint_m, ops):
+    return layer(x, y, footprint_m, ops)
+
+
+def _layer_radiance(layer: textures.CloudLayer, light: tuple[float, float, float], above: bool,
+                    x, y, footprint_m, ops):
+    """What a layer's side facing the camera emits, premultiplied by its opacity: the tops
+    ``light`` (albedo / pi times the sky's irradiance) from their thick cores, a little over
+    half of it from their thin parts; a base (``above`` the camera) the part its thickness
+    lets through, 0.3 of it at full opacity and half that again in a core."""
+    import mitsuba as mi
+
+    value = layer.field(x, y, footprint_m, ops)
+    opacity, core = layer.opacity_of(value, ops), layer.core_of(value, ops)
+    f = ops.f32
+    if above:
+        shade = opacity * (f(1.0) - f(0.7) * opacity) * (f(1.0) - f(0.5) * core)
+    else:
+        shade = opacity * (f(0.55) + f(0.45) * core)
+    return mi.Color3f(*(shade * ops.param_f32(c) for c in light))
 
 
 @functools.cache
-def _cloud_grid() -> tuple[NDArray[np.float32], NDArray[np.uint32], NDArray[np.float32]]:
+def _cloud_grid() -> tuple[NDArray[np.float32], NDArray[np.uint32]]:
     """The cell layout of a cloud layer: every cell its own quad (4 vertices, 2 faces),
-    texture coordinates in tiles (the bitmap repeats), vertex positions at z = 0."""
-    cells = CLOUD_TILES * CLOUD_CELLS
-    i, j = np.meshgrid(np.arange(cells), np.arange(cells))  # j: rows (v), i: columns (u)
+    vertex positions at z = 0, cells in rows along y."""
+    cells = round(CLOUD_SIZE_M / CLOUD_CELL_M)
+    i, j = np.meshgrid(np.arange(cells), np.arange(cells))  # j: rows (y), i: columns (x)
     corners = np.array([[0, 0], [1, 0], [1, 1], [0, 1]])
-    u = (i.reshape(-1, 1) + corners[:, 0]) / CLOUD_CELLS  # (cells^2, 4), in tiles
-    v = (j.reshape(-1, 1) + corners[:, 1]) / CLOUD_CELLS
-    uv = np.stack([u, v], axis=-1).reshape(-1, 2).astype(np.float32)
-    x = (uv[:, 0] - CLOUD_TILES / 2) * textures.CLOUD_TILE_M
-    y = (uv[:, 1] - CLOUD_TILES / 2) * textures.CLOUD_TILE_M
-    verts = np.stack([x, y, np.zeros_like(x)], axis=-1).astype(np.float32)
+    x = (i.reshape(-1, 1) + corners[:, 0]) * CLOUD_CELL_M - CLOUD_SIZE_M / 2  # (cells^2, 4)
+    y = (j.reshape(-1, 1) + corners[:, 1]) * CLOUD_CELL_M - CLOUD_SIZE_M / 2
+    verts = np.stack([x.reshape(-1), y.reshape(-1), np.zeros(x.size)], axis=-1).astype(np.float32)
     base = (np.arange(cells * cells) * 4)[:, None]
     faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]], axis=1).reshape(-1, 3).astype(np.uint32)
-    return verts, faces, uv
+    return verts, faces
 
 
 def _cloud_faces(facing_down: bool) -> NDArray[np.uint32]:
@@ -282,20 +364,41 @@ def _cloud_faces(facing_down: bool) -> NDArray[np.uint32]:
     return faces[:, ::-1].copy() if facing_down else faces
 
 
-def _cloud_cells(opacity: NDArray[np.float32], height: float) -> NDArray[np.float32]:
-    """Vertex positions of a cloud layer at ``height`` over the camera: cells that hold
-    cloud anywhere keep their quad, the others collapse to their centre (no area: no ray
-    meets them)."""
-    verts = _cloud_grid()[0]
-    n = opacity.shape[0]
-    per_cell = n // CLOUD_CELLS
-    # A texel's cloud reaches half a texel into its neighbours through the bilinear filter.
-    grown = opacity
-    for axis in (0, 1):
-        grown = np.maximum(grown, np.maximum(np.roll(grown, 1, axis), np.roll(grown, -1, axis)))
-    cloudy = grown.reshape(CLOUD_CELLS, per_cell, CLOUD_CELLS, per_cell).max(axis=(1, 3)) > 0.0
-    cloudy = np.tile(cloudy, (CLOUD_TILES, CLOUD_TILES)).reshape(-1)
-    out = verts.reshape(-1, 4, 3).copy()
+def _cloudy_cells(layer: textures.CloudLayer) -> NDArray[np.bool_]:
+    """Which cells of the layer (rows along y) may hold cloud: the field's first
+    :data:`CULL_OCTAVES` octaves at the centres of a :data:`CULL_SAMPLES`-square grid per
+    cell, whose largest value per cell, plus how far those octaves can rise within half a
+    sample's diagonal and all the finer octaves can add, reaches the threshold. Evaluated
+    by Dr.Jit (3.2 million points)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from datagen.render.procedural import drjit_ops
+
+    cells = round(CLOUD_SIZE_M / CLOUD_CELL_M)
+    if not math.isfinite(layer.threshold):
+        return np.zeros(cells * cells, dtype=bool)
+    n = cells * CULL_SAMPLES
+    spacing = CLOUD_SIZE_M / n
+    c = ((np.arange(n) + 0.5) * spacing - CLOUD_SIZE_M / 2).astype(np.float32)
+    x, y = np.meshgrid(c, c)
+    ops = drjit_ops()
+    if ops is NUMPY:  # a scalar variant: numpy arrays
+        value = layer.field(x, y, octaves=CULL_OCTAVES)
+    else:
+        value = layer.field(mi.Float(x.reshape(-1)), mi.Float(y.reshape(-1)), ops=ops, octaves=CULL_OCTAVES)
+        dr.eval(value)
+    value = np.asarray(value).reshape(cells, CULL_SAMPLES, cells, CULL_SAMPLES).max(axis=(1, 3))
+    field = layer.field
+    rise = sum(NOISE_SLOPE_BOUND * field.amplitude(o) * 2.0**o / field.wavelength_m for o in range(CULL_OCTAVES))
+    slack = rise * spacing / math.sqrt(2.0) + field.bound(CULL_OCTAVES)
+    return (value + slack > layer.threshold).reshape(-1)
+
+
+def _cloud_cells(cloudy: NDArray[np.bool_], height: float) -> NDArray[np.float32]:
+    """Vertex positions of a cloud layer at ``height`` over the camera: cells that may hold
+    cloud keep their quad, the others collapse to their centre (no area: no ray meets them)."""
+    out = _cloud_grid()[0].reshape(-1, 4, 3).copy()
     out[~cloudy] = out[~cloudy].mean(axis=1, keepdims=True)
     out[..., 2] = height
     return out.reshape(-1)

@@ -88,6 +88,26 @@ def check_files(view: DatasetIndex | DatasetView) -> Check:
 
 #: Bytes read to find an image's size in its header (a JPEG's frame header may follow its EXIF).
 _HEADER_BYTES: Final = 65536
+#: The largest on-screen footprint a world texel may have (px): above about 1.5 px a texture's
+#: grid starts to show.
+MAX_WORLD_TEXEL_PX: Final = 1.5
+
+
+def check_texels(view: DatasetIndex | DatasetView) -> Check:
+    """No rendered frame shows a world texture's texel (the sea's wave normals) larger than
+    :data:`MAX_WORLD_TEXEL_PX` on screen (the manifest's ``world_texel_px``)."""
+    check = Check("world_texels", f"no rendered frame shows a world texel over {MAX_WORLD_TEXEL_PX:g} px "
+                  "(clouds are procedural; the sea's wave normals are a texture)")
+    values = np.array([np.nan if v is None else v for v in view.world_texel_px], dtype=np.float64)
+    seen = np.isfinite(values)
+    check.checked = int(seen.sum())
+    check.applicable = check.checked > 0
+    check.worst = float(values[seen].max()) if check.checked else None
+    for b in np.flatnonzero(seen & (values > MAX_WORLD_TEXEL_PX)):
+        check.fail(f"{view.manifest_file[b]} frame {view.frame_id[b]}", f"a world texel spans {values[b]:.2f} px",
+                   float(values[b]), row=int(b))
+    return check
+
 
 
 def check_images(view: DatasetIndex | DatasetView, k: Intrinsics) -> Check:

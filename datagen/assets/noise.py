@@ -1,0 +1,182 @@
+"""Procedural noise evaluated where it is seen: band-limited fractal gradient noise on the
+plane, written once for two array kinds, numpy's on the CPU and Dr.Jit's inside a
+Mitsuba kernel (:mod:`datagen.render.procedural`), so that what the renderer shades and
+what the geometry pass classifies are the same field.
+
+A field is a sum of octaves of gradient noise, each half the wavelength of the one
+before, rotated and offset so that no lattice lines up. An octave whose wavelength is
+under a few pixels at the point where it is evaluated fades to its mean (zero): far away
+the field is filtered instead of aliased, close up it carries detail down to about a
+pixel. There is no texel anywhere: nothing to magnify into blocks.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["NOISE_BOUND", "NUMPY", "FractalField", "Ops", "gradient_noise"]
+
+#: |gradient_noise| never exceeds this: Perlin's noise with unit gradients peaks at sqrt(1/2)
+#: in two dimensions, and a corner gradient here is at most sqrt(2) long ([-1, 1]^2).
+NOISE_BOUND: Final = 1.0
+#: An octave is whole while its wavelength spans at least FADE_HI pixel footprints, and gone
+#: (at its mean) below FADE_LO: a wavelength of two pixels is the finest a pixel grid holds.
+FADE_LO: Final = 2.0
+FADE_HI: Final = 4.0
+# Rotation between successive octaves (radians): an irrational share of a turn, so that no two
+# octaves' lattices share an axis.
+_TURN: Final = 2.3999632297286533  # the golden angle
+
+
+@dataclass(frozen=True)
+class Ops:
+    """The few operations the noise needs that numpy and Dr.Jit spell differently.
+
+    ``f32``/``u32`` make a constant of the build (a literal in a kernel); ``param_f32``/
+    ``param_u32`` a value that changes between frames or approaches (an opaque input of a
+    kernel, so that a new value compiles no new kernel)."""
+
+    floor: object
+    to_u32: object  # float (already floored) -> uint32, wrapping negatives
+    to_f32: object  # uint32 -> float
+    clip: object
+    f32: object
+    u32: object
+    param_f32: object
+    param_u32: object
+
+
+#: numpy's spelling (float32 and uint32 arrays; uint32 products wrap, as in a kernel).
+NUMPY: Final = Ops(
+    floor=np.floor,
+    to_u32=lambda f: np.asarray(f, dtype=np.float32).astype(np.int32).view(np.uint32),
+    to_f32=lambda u: np.asarray(u).astype(np.float32),
+    clip=lambda x, lo, hi: np.clip(x, np.float32(lo), np.float32(hi)),
+    f32=np.float32,
+    u32=np.uint32,
+    param_f32=np.float32,
+    param_u32=np.uint32,
+)
+
+
+def _hash(ix, iy, seed, ops: Ops):
+    """A 32-bit hash of a lattice corner (uint32 arrays; ``seed`` a uint32 scalar or array)."""
+    u = ops.u32
+    h = ix * u(0x8DA6B343) ^ iy * u(0xD8163841) ^ seed
+    h = (h ^ (h >> u(15))) * u(0x2C1B3C6D)
+    h = (h ^ (h >> u(12))) * u(0x297A2D39)
+    return h ^ (h >> u(15))
+
+
+def _corner(h, dx, dy, ops: Ops):
+    """The corner's random gradient (two 16-bit halves of its hash, in [-1, 1]) dotted with
+    the offset from the corner."""
+    scale, one = ops.f32(2.0 / 65535.0), ops.f32(1.0)
+    gx = ops.to_f32(h & ops.u32(0xFFFF)) * scale - one
+    gy = ops.to_f32(h >> ops.u32(16)) * scale - one
+    return gx * dx + gy * dy
+
+
+def _fade(t, ops: Ops):
+    f = ops.f32
+    return t * t * t * (t * (t * f(6.0) - f(15.0)) + f(10.0))
+
+
+def gradient_noise(x, y, seed, ops: Ops = NUMPY):
+    """Gradient noise at ``(x, y)`` (lattice units, float32 arrays), in about [-0.7, 0.7]
+    and never beyond :data:`NOISE_BOUND`; zero at every lattice corner."""
+    xf, yf = ops.floor(x), ops.floor(y)
+    fx, fy = x - xf, y - yf
+    ix, iy = ops.to_u32(xf), ops.to_u32(yf)
+    one_u, one_f = ops.u32(1), ops.f32(1.0)
+    n00 = _corner(_hash(ix, iy, seed, ops), fx, fy, ops)
+    n10 = _corner(_hash(ix + one_u, iy, seed, ops), fx - one_f, fy, ops)
+    n01 = _corner(_hash(ix, iy + one_u, seed, ops), fx, fy - one_f, ops)
+    n11 = _corner(_hash(ix + one_u, iy + one_u, seed, ops), fx - one_f, fy - one_f, ops)
+    u, v = _fade(fx, ops), _fade(fy, ops)
+    bottom = n00 + (n10 - n00) * u
+    top = n01 + (n11 - n01) * u
+    return bottom + (top - bottom) * v
+
+
+@dataclass(frozen=True)
+class FractalField:
+    """A band-limited fractal field on the plane (metres): ``octaves`` of gradient noise
+    from ``wavelength_m`` down, each ``gain`` times the amplitude of the one before,
+    ``stretch`` > 1 elongating features along ``direction_rad`` (streaks, wave crests).
+
+    ``offsets`` ``(octaves, 2)`` (lattice units) and ``seed`` make one realization; they
+    come from a generator through :meth:`drawn`."""
+
+    wavelength_m: float
+    octaves: int
+    gain: float
+    offsets: tuple[tuple[float, float], ...]
+    seed: int
+    stretch: float = 1.0
+    direction_rad: float = 0.0
+
+    @classmethod
+    def drawn(cls, rng: np.random.Generator, wavelength_m: float, octaves: int, gain: float, *,
+              stretch: float = 1.0, direction_rad: float = 0.0) -> FractalField:
+        offsets = tuple((float(a), float(b)) for a, b in rng.uniform(0.0, 4096.0, size=(octaves, 2)))
+        return cls(wavelength_m, octaves, gain, offsets, int(rng.integers(0, 2**32)), stretch, direction_rad)
+
+    def amplitude(self, octave: int) -> float:
+        return self.gain**octave
+
+    def bound(self, first: int = 0) -> float:
+        """The most the octaves from ``first`` on can add, in absolute value."""
+        return NOISE_BOUND * sum(self.amplitude(o) for o in range(first, self.octaves))
+
+    def octave_frames(self) -> list[tuple[float, float, float, float]]:
+        """Per octave, the linear map from metres to lattice units: ``(a, b, c, d)`` with
+        lattice ``(a x + b y, c x + d y)``: rotated by the golden angle per octave on top of
+        the field's direction, squeezed across it by ``stretch``, scaled by the wavelength."""
+        out = []
+        for o in range(self.octaves):
+            k = 2.0**o / self.wavelength_m
+            angle = self.direction_rad + (_TURN * o if self.stretch == 1.0 else 0.0)
+            c, s = math.cos(angle), math.sin(angle)
+            along, across = k / self.stretch, k
+            out.append((along * c, along * s, -across * s, across * c))
+        return out
+
+    def weight(self, octave: int, footprint_m, ops: Ops = NUMPY):
+        """How much of ``octave`` a pixel of ``footprint_m`` metres holds: 1 while its
+        wavelength (the shorter axis's) spans :data:`FADE_HI` footprints, 0 under
+        :data:`FADE_LO`, smooth between."""
+        f = ops.f32
+        wavelength = self.wavelength_m / 2.0**octave / self.stretch
+        t = ops.clip((f(wavelength) / footprint_m - f(FADE_LO)) * f(1.0 / (FADE_HI - FADE_LO)), 0.0, 1.0)
+        return t * t * (f(3.0) - f(2.0) * t)
+
+    def __call__(self, x, y, footprint_m=None, ops: Ops = NUMPY, octaves: int | None = None):
+        """The field at ``(x, y)`` metres (float32 arrays): every octave (``footprint_m``
+        None) or each weighted by :meth:`weight` at that pixel footprint; ``octaves``: only
+        the first that many."""
+        total = None
+        p = ops.param_f32
+        for o, (a, b, c, d) in enumerate(self.octave_frames()[:octaves]):
+            ox, oy = self.offsets[o]
+            lx = x * p(a) + y * p(b) + p(ox)
+            ly = x * p(c) + y * p(d) + p(oy)
+            seed = ops.param_u32((self.seed + o) % 2**32)
+            term = gradient_noise(lx, ly, seed, ops) * ops.f32(self.amplitude(o))
+            if footprint_m is not None:
+                term = term * self.weight(o, footprint_m, ops)
+            total = term if total is None else total + term
+        return total
+
+
+def sample_grid(field: FractalField, span_m: float, n: int, octaves: int | None = None) -> NDArray[np.float32]:
+    """``field`` on an ``n`` x ``n`` grid of cell centres spanning ``span_m`` about the origin
+    (rows along y)."""
+    c = ((np.arange(n, dtype=np.float64) + 0.5) / n - 0.5) * span_m
+    x, y = np.meshgrid(c.astype(np.float32), c.astype(np.float32))
+    return field(x, y, octaves=octaves)

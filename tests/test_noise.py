@@ -1,0 +1,166 @@
+"""The procedural world: band-limited noise written once for numpy and Dr.Jit, cloud layers
+without a texel grid, and the cells that bound where their cloud can be."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from datagen.assets.noise import FADE_HI, FADE_LO, NOISE_BOUND, FractalField, gradient_noise
+from datagen.assets.textures import CLOUD_EDGE, CloudLayer
+
+coordinates = st.floats(-1e5, 1e5, allow_nan=False, width=32)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), x=coordinates, y=coordinates)
+def test_gradient_noise_stays_within_its_bound_and_vanishes_on_the_lattice(seed: int, x: float, y: float) -> None:
+    xs = np.float32(x) + np.linspace(0, 1, 64, dtype=np.float32)
+    value = gradient_noise(xs, np.full(64, np.float32(y)), np.uint32(seed))
+    assert np.all(np.abs(value) <= NOISE_BOUND)
+    corner = gradient_noise(np.floor(xs), np.floor(np.full(64, np.float32(y))), np.uint32(seed))
+    assert np.all(corner == 0.0)
+
+
+def test_gradient_noise_over_a_million_points_stays_within_its_bound_and_varies() -> None:
+    rng = np.random.default_rng(3)
+    x, y = rng.uniform(-1e4, 1e4, (2, 1_000_000)).astype(np.float32)
+    value = gradient_noise(x, y, np.uint32(11))
+    assert np.abs(value).max() <= NOISE_BOUND and 0.1 < value.std() < 0.3 and abs(value.mean()) < 0.01
+
+
+def test_a_field_far_away_keeps_only_the_octaves_a_pixel_can_hold() -> None:
+    field = FractalField.drawn(np.random.default_rng(5), 6000.0, 10, 0.55)
+    rng = np.random.default_rng(6)
+    x, y = rng.uniform(-3e4, 3e4, (2, 4096)).astype(np.float32)
+    # A footprint at which octaves 0-2 are whole (wavelength >= FADE_HI footprints), octave 3
+    # is in between, and octaves 4 on are gone (wavelength <= FADE_LO footprints).
+    footprint = np.float32(6000.0 / 2**3 / 3.0)
+    assert 6000.0 / 2**2 >= FADE_HI * footprint and 6000.0 / 2**4 <= FADE_LO * footprint
+    filtered = field(x, y, np.full_like(x, footprint))
+    partial = field(x, y, octaves=3)
+    octave3 = field(x, y, octaves=4) - partial
+    weight = field.weight(3, footprint)
+    np.testing.assert_allclose(filtered, partial + weight * octave3, atol=1e-5)
+    assert 0.0 < weight < 1.0
+
+
+def test_the_kernel_evaluates_the_same_field_as_numpy() -> None:
+    mi = pytest.importorskip("mitsuba")
+    import drjit as dr
+
+    from datagen.render.procedural import texture_class
+    from datagen.render.runtime import use_variant
+
+    variant = use_variant("llvm_ad_rgb")
+    layer = CloudLayer.drawn(np.random.default_rng(8), 0.5, 0.9, 168_000.0)
+    texture = texture_class(variant)(pixel_rad=1.0 / 1500.0)
+    texture.camera = (0.0, 0.0, 20.0)
+    texture.shade = lambda x, y, footprint, ops: layer(x, y, footprint, ops)
+    rng = np.random.default_rng(9)
+    x, y = rng.uniform(-2e4, 2e4, (2, 20_000)).astype(np.float32)
+    z = np.full_like(x, 900.0)
+    si = dr.zeros(mi.SurfaceInteraction3f, len(x))
+    si.p = mi.Point3f(mi.Float(x), mi.Float(y), mi.Float(z))
+    kernel = np.asarray(texture.eval_1(si))
+    footprint = (np.sqrt(x.astype(np.float64)**2 + y**2 + (z - 20.0)**2) / 1500.0).astype(np.float32)
+    np.testing.assert_allclose(kernel, layer(x, y, footprint), atol=1e-5)
+    assert 0.0 < (kernel > 0.0).mean() < 1.0
+
+
+@pytest.mark.parametrize("coverage", [0.1, 0.4, 0.8])
+def test_a_cloud_layer_covers_the_share_of_sky_it_was_drawn_with(coverage: float) -> None:
+    span = 168_000.0
+    layer = CloudLayer.drawn(np.random.default_rng(int(coverage * 10)), coverage, 1.0, span)
+    rng = np.random.default_rng(1)
+    x, y = rng.uniform(-span / 2, span / 2, (2, 200_000)).astype(np.float32)
+    cloudy = (layer(x, y) > 0.0).mean()
+    assert abs(cloudy - coverage) < 0.05
+
+
+def test_a_layer_without_coverage_has_no_cloud_anywhere() -> None:
+    layer = CloudLayer.drawn(np.random.default_rng(0), 0.0, 1.0, 168_000.0)
+    x = np.linspace(-8e4, 8e4, 1000, dtype=np.float32)
+    assert not np.any(layer(x, x[::-1]))
+
+
+def test_cloud_edges_have_no_preferred_direction() -> None:
+    """Where a layer's opacity ramps up (its edges), the directions of its gradient are
+    spread evenly: the old textures' edges followed the texel grid (peaks at 0 and 90
+    degrees). Along each axis and diagonal lies the same share of edge pixels, within 20%."""
+    layer = CloudLayer.drawn(np.random.default_rng(12), 0.4, 1.0, 168_000.0)
+    n, spacing = 1024, 12.0
+    c = (np.arange(n, dtype=np.float32) - n / 2) * np.float32(spacing)
+    x, y = np.meshgrid(c, c)
+    opacity = layer(x, y)
+    gy, gx = np.gradient(opacity)
+    edge = (opacity > 0.05) & (opacity < 0.95 * layer.opacity) & (np.hypot(gx, gy) > 1e-4)
+    assert edge.sum() > 5000
+    angle = np.degrees(np.arctan2(gy[edge], gx[edge])) % 180.0
+    shares = [np.mean(np.abs((angle - centre + 90.0) % 180.0 - 90.0) < 7.5) for centre in (0, 45, 90, 135)]
+    assert max(shares) < 1.2 * min(shares), shares
+    assert all(abs(s - 15.0 / 180.0) < 0.3 * 15.0 / 180.0 for s in shares), shares
+
+
+def test_every_point_with_cloud_lies_in_a_cell_the_layer_keeps() -> None:
+    pytest.importorskip("mitsuba")
+    from datagen.render.runtime import use_variant
+    from datagen.render.world import CLOUD_CELL_M, CLOUD_SIZE_M, _cloudy_cells
+
+    use_variant("llvm_ad_rgb")
+    for seed, coverage in ((1, 0.15), (2, 0.5)):
+        layer = CloudLayer.drawn(np.random.default_rng(seed), coverage, 1.0, CLOUD_SIZE_M)
+        kept = _cloudy_cells(layer)
+        cells = round(CLOUD_SIZE_M / CLOUD_CELL_M)
+        assert 0 < kept.sum() < kept.size
+        x, y = np.random.default_rng(seed).uniform(-CLOUD_SIZE_M / 2, CLOUD_SIZE_M / 2, (2, 400_000)).astype(
+            np.float32)
+        cloudy = layer(x, y) > 0.0  # every octave: the finest detail there is
+        i = np.clip(((x + CLOUD_SIZE_M / 2) // CLOUD_CELL_M).astype(int), 0, cells - 1)
+        j = np.clip(((y + CLOUD_SIZE_M / 2) // CLOUD_CELL_M).astype(int), 0, cells - 1)
+        assert kept[j * cells + i][cloudy].all()
+
+
+def test_opacity_ramps_over_the_edge_width_of_the_field() -> None:
+    layer = CloudLayer(FractalField.drawn(np.random.default_rng(0), 1000.0, 2, 0.5), 0.1, 0.8)
+    values = np.array([0.1, 0.1 + CLOUD_EDGE / 2, 0.1 + CLOUD_EDGE, 1.0], dtype=np.float32)
+    np.testing.assert_allclose(layer.opacity_of(values), [0.0, 0.4, 0.8, 0.8], atol=1e-6)
+    assert math.isinf(CloudLayer.drawn(np.random.default_rng(0), 0.0, 1.0, 1e4).threshold)
+
+
+def test_the_texel_check_fails_each_frame_whose_world_texel_exceeds_the_limit() -> None:
+    from types import SimpleNamespace
+
+    from datagen.analysis.audit.files import MAX_WORLD_TEXEL_PX, check_texels
+
+    rows = SimpleNamespace(world_texel_px=[0.2, None, MAX_WORLD_TEXEL_PX, 3.0], frame_id=np.arange(4),
+                           manifest_file=["manifests/shard-00000.parquet"] * 4)
+    check = check_texels(rows).finish()
+    assert (check.checked, check.failures, check.worst) == (3, 1, 3.0)
+    assert "frame 3" in check.offenders[0] and not check.passed
+    labels_only = check_texels(SimpleNamespace(world_texel_px=[None, None], frame_id=np.arange(2),
+                                               manifest_file=["m"] * 2)).finish()
+    assert not labels_only.applicable and labels_only.checked == 0
+
+
+def test_a_texel_spans_its_size_times_fx_over_the_nearest_depth_of_its_surface() -> None:
+    from datagen.assets.textures import LIVERY_TEXELS, WAVE_TEXELS, WAVE_TILE_M
+    from datagen.config import load_config
+    from datagen.core.conventions import object_id
+    from datagen.render.world import SURFACES, World
+
+    world = World(load_config("wingcam55"), 2e7, pixel_rad=1e-3)
+    world._livery_bbox["tanker"] = (np.zeros(3), np.array([50.0, 40.0, 12.0]))
+    depth = np.array([[5000.0, 4200.0], [80.0, np.inf]])
+    ids = np.array([[0, 0], [object_id("tanker"), 0]], dtype=np.uint32)
+    surface = np.array([[1, 1], [3, 0]], dtype=np.uint8)
+    assert SURFACES[1] == "sea" and SURFACES[3] == "object"
+    out = world.texel_footprint_px(depth, ids, surface, fx=2000.0)
+    assert out["world_texel_px"] == pytest.approx(WAVE_TILE_M / WAVE_TEXELS * 2000.0 / 4200.0)
+    assert out["livery_texel_px"] == pytest.approx(50.0 / LIVERY_TEXELS * 2000.0 / 80.0)
+    assert world.texel_footprint_px(None, None, None, fx=2000.0) == {"world_texel_px": None,
+                                                                     "livery_texel_px": None}
