@@ -64,13 +64,18 @@ NUMPY: Final = Ops(
 )
 
 
-def _hash(ix, iy, seed, ops: Ops):
-    """A 32-bit hash of a lattice corner (uint32 arrays; ``seed`` a uint32 scalar or array)."""
+def _hash(hx, hy, seed, ops: Ops):
+    """A 32-bit hash of a lattice corner from its coordinates already multiplied by
+    :data:`_HX` and :data:`_HY` (uint32 arrays; ``seed`` a uint32 scalar or array): two
+    xor-shift-multiply rounds, enough for the 16-bit halves a gradient takes."""
     u = ops.u32
-    h = ix * u(0x8DA6B343) ^ iy * u(0xD8163841) ^ seed
+    h = hx ^ hy ^ seed
     h = (h ^ (h >> u(15))) * u(0x2C1B3C6D)
-    h = (h ^ (h >> u(12))) * u(0x297A2D39)
-    return h ^ (h >> u(15))
+    return h ^ (h >> u(13))
+
+
+_HX: Final = 0x8DA6B343
+_HY: Final = 0xD8163841
 
 
 def _corner(h, dx, dy, ops: Ops):
@@ -92,12 +97,14 @@ def gradient_noise(x, y, seed, ops: Ops = NUMPY):
     and never beyond :data:`NOISE_BOUND`; zero at every lattice corner."""
     xf, yf = ops.floor(x), ops.floor(y)
     fx, fy = x - xf, y - yf
-    ix, iy = ops.to_u32(xf), ops.to_u32(yf)
-    one_u, one_f = ops.u32(1), ops.f32(1.0)
-    n00 = _corner(_hash(ix, iy, seed, ops), fx, fy, ops)
-    n10 = _corner(_hash(ix + one_u, iy, seed, ops), fx - one_f, fy, ops)
-    n01 = _corner(_hash(ix, iy + one_u, seed, ops), fx, fy - one_f, ops)
-    n11 = _corner(_hash(ix + one_u, iy + one_u, seed, ops), fx - one_f, fy - one_f, ops)
+    hx0, hy0 = ops.to_u32(xf) * ops.u32(_HX), ops.to_u32(yf) * ops.u32(_HY)
+    hx1, hy1 = hx0 + ops.u32(_HX), hy0 + ops.u32(_HY)  # the next corners': (i + 1) * H wraps as i * H + H
+    one = ops.f32(1.0)
+    fx1, fy1 = fx - one, fy - one
+    n00 = _corner(_hash(hx0, hy0, seed, ops), fx, fy, ops)
+    n10 = _corner(_hash(hx1, hy0, seed, ops), fx1, fy, ops)
+    n01 = _corner(_hash(hx0, hy1, seed, ops), fx, fy1, ops)
+    n11 = _corner(_hash(hx1, hy1, seed, ops), fx1, fy1, ops)
     u, v = _fade(fx, ops), _fade(fy, ops)
     bottom = n00 + (n10 - n00) * u
     top = n01 + (n11 - n01) * u

@@ -376,13 +376,24 @@ def gallery(
     out: Annotated[Path, typer.Option("--out", help="Gallery image (JPEG or PNG).")] = Path("docs/gallery.jpg"),
     spp: Annotated[int | None, typer.Option("--spp", min=1, max=MAX_SPP,
                                             help="Samples per pixel (default: each config's render.spp).")] = None,
+    closeups: Annotated[Path | None, typer.Option("--closeups", help="Also write full-resolution close-ups of "
+                                                  "clouds and sea, one row per camera type, to this image.")] = None,
+    before: Annotated[Path | None, typer.Option("--before", help="Folder of `datagen render` images of the "
+                                                "close-up frames made by another datagen: shown beside each "
+                                                "close-up.")] = None,
 ) -> None:
     """Render four frames each of wingcam55, podcam15 and dashcam75 into one sheet."""
-    from datagen.report.gallery import GALLERY_SCENES, write_gallery
+    from datagen.report.gallery import GALLERY_SCENES, write_closeups, write_gallery
 
     output_path(out, "--out")
+    if closeups is not None:
+        output_path(closeups, "--closeups")
+    if before is not None and not before.is_dir():
+        raise DatagenError(f"--before: {before}: no such folder")
     configs = [load_config(name) for name in GALLERY_SCENES]
     typer.echo(f"wrote {write_gallery(configs, out, spp=spp)}")
+    if closeups is not None:
+        typer.echo(f"wrote {write_closeups(closeups, before=before, spp=spp)}")
 
 
 def _frame_list(text: str) -> list[int]:

@@ -23,7 +23,8 @@ from datagen.scene.resolved import Scene
 if TYPE_CHECKING:
     from datagen.config.schema import Config
 
-__all__ = ["GALLERY_FRAMES", "GALLERY_SCENES", "WORLD_FRAME", "render_frames", "world_tiles", "write_gallery"]
+__all__ = ["CLOSEUP_FRAMES", "GALLERY_FRAMES", "GALLERY_SCENES", "WORLD_FRAME", "render_frames", "world_tiles",
+           "write_closeups", "write_gallery"]
 
 #: The shipped scenes of the gallery, a row each.
 GALLERY_SCENES: Final = ("wingcam55", "podcam15", "dashcam75")
@@ -80,10 +81,7 @@ def _tile(config: Config, renderer: Renderer, i: int, tile, caption: str) -> np.
     state = FrameStates(config, config.dataset.seed)(i)
     look = frame_look(config, state)
     srgb, _ = training_image(renderer.render(state, look, render_seed(config.dataset.seed, i)), look)
-    image = cv2.resize(srgb[..., ::-1], tile, interpolation=cv2.INTER_AREA)
-    for colour, width in (((0, 0, 0), 3), ((255, 255, 255), 1)):  # legible on sky, cloud and sea
-        cv2.putText(image, caption, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, colour, width, cv2.LINE_AA)
-    return image
+    return _caption(cv2.resize(srgb[..., ::-1], tile, interpolation=cv2.INTER_AREA), caption)
 
 
 def write_gallery(configs, out: Path, *, spp: int | None = None, tile=(512, 270)) -> Path:
@@ -106,3 +104,73 @@ def write_gallery(configs, out: Path, *, spp: int | None = None, tile=(512, 270)
     world += [np.zeros_like(world[0])] * (-len(world) % per_row)
     rows += [np.concatenate(world[j:j + per_row], axis=1) for j in range(0, len(world), per_row)]
     return write_image(out, np.concatenate(rows, axis=0), jpeg_quality=90)
+
+
+#: The frames of the close-ups, one per camera type: where clouds, sea and cloud shadows
+#: come closest (the frames the blocky clouds showed worst on).
+CLOSEUP_FRAMES: Final = {"wingcam55": 0, "podcam15": 21, "dashcam75": 12}
+#: A close-up's size at the frame's own resolution (pixels for pixels).
+CLOSEUP: Final = (640, 360)
+
+
+def _windows(surface: np.ndarray, size: tuple[int, int]) -> dict[str, tuple[int, int]]:
+    """Top-left corners of the close-up windows of a frame from its surface map
+    (:data:`datagen.render.world.SURFACES`): the one with the most cloud edge (cloud pixels
+    beside others), the one with the most sea, and the one with the most sky-lit sea or
+    cloud deck under a shadow edge (the steepest luminance steps are found later; here the
+    most surface of any kind). Windows lie on a grid of half their size."""
+    from datagen.render.world import SURFACES
+
+    h, w = surface.shape
+    cloud = surface == SURFACES.index("cloud")
+    edge = cloud ^ np.roll(cloud, 1, 0) | cloud ^ np.roll(cloud, 1, 1)
+    sea = surface == SURFACES.index("sea")
+    best: dict[str, tuple[float, tuple[int, int]]] = {}
+    for y in range(0, max(h - size[1], 0) + 1, size[1] // 2):
+        for x in range(0, max(w - size[0], 0) + 1, size[0] // 2):
+            box = (slice(y, y + size[1]), slice(x, x + size[0]))
+            for name, score in (("clouds", edge[box].mean()), ("sea", sea[box].mean())):
+                if score > best.get(name, (-1.0, (0, 0)))[0]:
+                    best[name] = (float(score), (x, y))
+    return {name: corner for name, (_, corner) in best.items()}
+
+
+def write_closeups(out: Path, *, before: Path | None = None, spp: int | None = None) -> Path:
+    """Close-ups of :data:`CLOSEUP_FRAMES` at full resolution: per camera type, the frame
+    scaled down, its cloud edges and its sea (cloud shadows lie on both), pixel for pixel.
+    ``before``: a folder of ``datagen render`` images of the same frames made by another
+    datagen (``{name}-{frame:06d}.png``): its crops of the same windows go beside each."""
+    import cv2
+
+    from datagen.config import load_config
+
+    rows = []
+    for name, i in CLOSEUP_FRAMES.items():
+        config = load_config(name)
+        renderer = Renderer(Scene.resolve(config), spp=spp)
+        state = FrameStates(config, config.dataset.seed)(i)
+        look = frame_look(config, state)
+        result = renderer.render(state, look, render_seed(config.dataset.seed, i), geometry=True)
+        after = training_image(result, look)[0][..., ::-1]
+        earlier = cv2.imread(str(Path(before) / f"{name}-{i:06d}.png")) if before is not None else None
+        overview = cv2.resize(after, (CLOSEUP[0], round(CLOSEUP[0] * after.shape[0] / after.shape[1])),
+                              interpolation=cv2.INTER_AREA)
+        overview = np.pad(overview, ((0, max(CLOSEUP[1] - overview.shape[0], 0)), (0, 0), (0, 0)))[:CLOSEUP[1]]
+        tiles = [_caption(overview, f"{name} #{i}")]
+        for what, (x, y) in _windows(result.surface, CLOSEUP).items():
+            box = (slice(y, y + CLOSEUP[1]), slice(x, x + CLOSEUP[0]))
+            if earlier is not None:
+                tiles.append(_caption(earlier[box].copy(), f"{what}, before"))
+            tiles.append(_caption(after[box].copy(), f"{what}{', now' if earlier is not None else ''}"))
+        rows.append(np.concatenate(tiles, axis=1))
+    width = max(r.shape[1] for r in rows)
+    rows = [np.pad(r, ((0, 0), (0, width - r.shape[1]), (0, 0))) for r in rows]
+    return write_image(out, np.concatenate(rows, axis=0), jpeg_quality=90)
+
+
+def _caption(image: np.ndarray, caption: str) -> np.ndarray:
+    import cv2
+
+    for colour, width in (((0, 0, 0), 3), ((255, 255, 255), 1)):  # legible on sky, cloud and sea
+        cv2.putText(image, caption, (8, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.65, colour, width, cv2.LINE_AA)
+    return image
