@@ -296,12 +296,21 @@ class World:
 
     def cloud_opacity_at(self, name: str, xy: NDArray, distance_m: NDArray) -> NDArray[np.float32]:
         """The opacity of cloud layer ``name`` this frame at render-frame points ``xy``
-        (N, 2) seen from ``distance_m`` (N,) away, as the renderer shades it."""
+        (N, 2) seen from ``distance_m`` (N,) away, as the renderer shades it (evaluated by
+        Dr.Jit: the geometry pass classifies hundreds of thousands of pixels a frame)."""
         layer = self._cloud_layers.get(name)
         if layer is None:
             return np.zeros(len(xy), np.float32)
         xy = np.asarray(xy, dtype=np.float32)
-        return layer(xy[:, 0], xy[:, 1], (np.asarray(distance_m) * self.pixel_rad).astype(np.float32))
+        footprint = (np.asarray(distance_m) * self.pixel_rad).astype(np.float32)
+        from datagen.render.procedural import drjit_ops
+
+        ops = drjit_ops()
+        if ops is NUMPY:
+            return layer(xy[:, 0], xy[:, 1], footprint)
+        import mitsuba as mi
+
+        return np.asarray(layer(mi.Float(xy[:, 0]), mi.Float(xy[:, 1]), mi.Float(footprint), ops), dtype=np.float32)
 
 
 def _clear(x, y, footprint_m, ops):
