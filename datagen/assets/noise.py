@@ -49,6 +49,9 @@ class Ops:
     u32: object
     param_f32: object
     param_u32: object
+    #: Sums a field's octaves at a footprint, octave by octave until the rest are filtered
+    #: away in every lane (None: every octave, :meth:`FractalField.__call__`'s loop).
+    octave_loop: object = None
 
 
 #: numpy's spelling (float32 and uint32 arrays; uint32 products wrap, as in a kernel).
@@ -154,19 +157,25 @@ class FractalField:
             out.append((along * c, along * s, -across * s, across * c))
         return out
 
-    def weight(self, octave: int, footprint_m, ops: Ops = NUMPY):
+    def shortest_wavelength_m(self, octave: int) -> float:
+        """An octave's wavelength across the stretch (its finest detail)."""
+        return self.wavelength_m / 2.0**octave / self.stretch
+
+    def weight(self, octave: int, footprint_m, ops: Ops = NUMPY, wavelength_m=None):
         """How much of ``octave`` a pixel of ``footprint_m`` metres holds: 1 while its
         wavelength (the shorter axis's) spans :data:`FADE_HI` footprints, 0 under
-        :data:`FADE_LO`, smooth between."""
+        :data:`FADE_LO`, smooth between (``wavelength_m``: the octave's, where it is an array)."""
         f = ops.f32
-        wavelength = self.wavelength_m / 2.0**octave / self.stretch
-        t = ops.clip((f(wavelength) / footprint_m - f(FADE_LO)) * f(1.0 / (FADE_HI - FADE_LO)), 0.0, 1.0)
+        wavelength = f(self.shortest_wavelength_m(octave)) if wavelength_m is None else wavelength_m
+        t = ops.clip((wavelength / footprint_m - f(FADE_LO)) * f(1.0 / (FADE_HI - FADE_LO)), 0.0, 1.0)
         return t * t * (f(3.0) - f(2.0) * t)
 
     def __call__(self, x, y, footprint_m=None, ops: Ops = NUMPY, octaves: int | None = None):
         """The field at ``(x, y)`` metres (float32 arrays): every octave (``footprint_m``
         None) or each weighted by :meth:`weight` at that pixel footprint; ``octaves``: only
         the first that many."""
+        if footprint_m is not None and ops.octave_loop is not None and octaves is None:
+            return ops.octave_loop(self, x, y, footprint_m)
         total = None
         p = ops.param_f32
         for o, (a, b, c, d) in enumerate(self.octave_frames()[:octaves]):

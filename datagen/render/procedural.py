@@ -13,12 +13,13 @@ for what it sees through a reflection.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from typing import Final
 
 import numpy as np
 
-from datagen.assets.noise import NUMPY, Ops
+from datagen.assets.noise import FADE_LO, NUMPY, FractalField, Ops, gradient_noise
 
 __all__ = ["drjit_ops", "texture_class"]
 
@@ -42,7 +43,7 @@ def _ops(variant: str) -> Ops:
     if variant.startswith("scalar"):
         return NUMPY
 
-    return Ops(
+    ops = Ops(
         floor=dr.floor,
         to_u32=lambda f: mi.UInt32(mi.Int32(f)),
         to_f32=mi.Float,
@@ -52,6 +53,41 @@ def _ops(variant: str) -> Ops:
         param_f32=lambda v: dr.opaque(mi.Float, float(v)),
         param_u32=lambda v: dr.opaque(mi.UInt32, int(v)),
     )
+    return dataclasses.replace(ops, octave_loop=functools.partial(_octave_loop, ops))
+
+
+def _octave_loop(ops: Ops, field: FractalField, x, y, footprint_m):
+    """``field`` at a footprint as a loop over octaves that each lane leaves at its first
+    octave a pixel cannot hold (every later one is finer): far away, few octaves cost
+    anything. The octaves' maps, offsets and seeds are opaque arrays gathered per step; the
+    sum is the same, term by term, as :meth:`FractalField.__call__`'s."""
+    import drjit as dr
+    import mitsuba as mi
+
+    frames = field.octave_frames()
+    table = {name: mi.Float(np.asarray(values, dtype=np.float32))
+             for name, values in (("a", [f[0] for f in frames]), ("b", [f[1] for f in frames]),
+                                  ("c", [f[2] for f in frames]), ("d", [f[3] for f in frames]),
+                                  ("ox", [o[0] for o in field.offsets]), ("oy", [o[1] for o in field.offsets]),
+                                  ("amplitude", [field.amplitude(o) for o in range(field.octaves)]),
+                                  ("wavelength", [field.shortest_wavelength_m(o) for o in range(field.octaves)]))}
+    seeds = mi.UInt32(np.array([(field.seed + o) % 2**32 for o in range(field.octaves)], dtype=np.uint32))
+    dr.make_opaque(seeds, *table.values())  # device arrays, not literals: a new draw compiles no kernel
+    limit = footprint_m * FADE_LO  # an octave whose wavelength is at most this adds nothing
+
+    def cond(o, total):
+        wavelength = dr.gather(mi.Float, table["wavelength"], dr.minimum(o, field.octaves - 1))
+        return (o < field.octaves) & (wavelength > limit)
+
+    def body(o, total):
+        g = {name: dr.gather(mi.Float, values, o) for name, values in table.items()}
+        lx = x * g["a"] + y * g["b"] + g["ox"]
+        ly = x * g["c"] + y * g["d"] + g["oy"]
+        term = gradient_noise(lx, ly, dr.gather(mi.UInt32, seeds, o), ops) * g["amplitude"]
+        return o + 1, total + term * field.weight(0, footprint_m, ops, wavelength_m=g["wavelength"])
+
+    _, total = dr.while_loop(state=(mi.UInt32(0), dr.zeros(mi.Float, dr.width(x))), cond=cond, body=body)
+    return total
 
 
 @functools.cache
