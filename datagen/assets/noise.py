@@ -19,7 +19,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["NOISE_BOUND", "NUMPY", "FractalField", "Ops", "gradient_noise"]
+__all__ = ["NOISE_BOUND", "NUMPY", "FractalField", "Ops", "gradient_noise", "ramp"]
 
 #: |gradient_noise| never exceeds this: Perlin's noise with unit gradients peaks at sqrt(1/2)
 #: in two dimensions, and a corner gradient here is at most sqrt(2) long ([-1, 1]^2).
@@ -88,6 +88,14 @@ def _corner(h, dx, dy, ops: Ops):
     gx = ops.to_f32(h & ops.u32(0xFFFF)) * scale - one
     gy = ops.to_f32(h >> ops.u32(16)) * scale - one
     return gx * dx + gy * dy
+
+
+def ramp(value, start, width: float, ops: Ops = NUMPY):
+    """0 up to ``start``, 1 from ``start + width``, smoothstep between (``start`` a constant
+    or a kernel parameter already made by ``ops``)."""
+    f = ops.f32
+    t = ops.clip((value - start) * f(1.0 / width), 0.0, 1.0)
+    return t * t * (f(3.0) - f(2.0) * t)
 
 
 def _fade(t, ops: Ops):
@@ -167,8 +175,7 @@ class FractalField:
         :data:`FADE_LO`, smooth between (``wavelength_m``: the octave's, where it is an array)."""
         f = ops.f32
         wavelength = f(self.shortest_wavelength_m(octave)) if wavelength_m is None else wavelength_m
-        t = ops.clip((wavelength / footprint_m - f(FADE_LO)) * f(1.0 / (FADE_HI - FADE_LO)), 0.0, 1.0)
-        return t * t * (f(3.0) - f(2.0) * t)
+        return ramp(wavelength / footprint_m, f(FADE_LO), FADE_HI - FADE_LO, ops)
 
     def __call__(self, x, y, footprint_m=None, ops: Ops = NUMPY, octaves: int | None = None):
         """The field at ``(x, y)`` metres (float32 arrays): every octave (``footprint_m``

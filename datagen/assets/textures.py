@@ -25,7 +25,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.assets.noise import NUMPY, FractalField, Ops, sample_grid
+from datagen.assets.noise import NUMPY, FractalField, Ops, ramp, sample_grid
 from datagen.core.conventions import GRAVITY_MPS2
 
 __all__ = [
@@ -127,16 +127,14 @@ class CloudLayer:
         """Opacity where the field is ``value``."""
         if not math.isfinite(self.threshold):
             return value * ops.f32(0.0)
-        t = ops.clip((value - ops.param_f32(self.threshold)) * ops.f32(1.0 / CLOUD_EDGE), 0.0, 1.0)
-        return t * t * (ops.f32(3.0) - ops.f32(2.0) * t) * ops.param_f32(self.opacity)
+        return ramp(value, ops.param_f32(self.threshold), CLOUD_EDGE, ops) * ops.param_f32(self.opacity)
 
     def core_of(self, value, ops: Ops = NUMPY):
         """How deep in a core (0 at the edge, 1 from :data:`CLOUD_CORE` above the threshold)
         the field's ``value`` is."""
         if not math.isfinite(self.threshold):
             return value * ops.f32(0.0)
-        t = ops.clip((value - ops.param_f32(self.threshold)) * ops.f32(1.0 / CLOUD_CORE), 0.0, 1.0)
-        return t * t * (ops.f32(3.0) - ops.f32(2.0) * t)
+        return ramp(value, ops.param_f32(self.threshold), CLOUD_CORE, ops)
 
     def __call__(self, x, y, footprint_m=None, ops: Ops = NUMPY):
         """Opacity at ``(x, y)`` metres, filtered to a pixel of ``footprint_m`` metres there."""
@@ -179,8 +177,7 @@ class SeaSurface:
         f, p = ops.f32, ops.param_f32
         if math.isfinite(self.foam_threshold):
             value = self.foam(x, y, footprint_m, ops)
-            t = ops.clip((value - p(self.foam_threshold)) * f(1.0 / FOAM_EDGE), 0.0, 1.0)
-            sharp = t * t * (f(3.0) - f(2.0) * t)
+            sharp = ramp(value, p(self.foam_threshold), FOAM_EDGE, ops)
             seen = self.foam.weight(1, footprint_m, ops)  # how much of a whitecap's shape a pixel resolves
             foam = p(self.whitecaps) + (sharp - p(self.whitecaps)) * seen
         else:

@@ -14,6 +14,7 @@ from datagen.cli.common import (
     MAX_OVERLAYS,
     MAX_PRINTED_FRAMES,
     MAX_SPP,
+    ConfigOption,
     app,
     output_path,
     user_errors,
@@ -75,8 +76,7 @@ def scenes() -> None:
 @app.command()
 @user_errors
 def approach(
-    config: Annotated[Path, typer.Option("--config", help="Scene config file (YAML), or a shipped scene by name "
-                                              "(datagen scenes).")],
+    config: ConfigOption,
     plot: Annotated[Path | None, typer.Option("--plot", help="Write a PNG of the approaches here.")] = None,
     approaches: Annotated[int, typer.Option("--approaches", min=1, max=50, help="Approaches to draw.")] = 5,
     frames: Annotated[int, typer.Option("--frames", min=0, max=MAX_PRINTED_FRAMES,
@@ -108,8 +108,7 @@ def approach(
 @app.command()
 @user_errors
 def build(
-    config: Annotated[Path, typer.Option("--config", help="Scene config file (YAML), or a shipped scene by name "
-                                              "(datagen scenes).")],
+    config: ConfigOption,
     out: Annotated[Path | None, typer.Option("--out", help="Dataset folder (default: datasets/<config name>).")] = None,
     frames: Annotated[int | None, typer.Option("--frames", min=1, help="Override dataset.frames.")] = None,
     seed: Annotated[int | None, typer.Option("--seed", min=0, help="Override dataset.seed.")] = None,
@@ -350,8 +349,7 @@ def _px(value: float | None) -> str:
 @app.command()
 @user_errors
 def render(
-    config: Annotated[Path, typer.Option("--config", help="Scene config file (YAML), or a shipped scene by name "
-                                              "(datagen scenes).")],
+    config: ConfigOption,
     frames: Annotated[str, typer.Option("--frames", help="Frame indices, e.g. 0,5,9 or 0-7.")] = "0",
     out: Annotated[Path, typer.Option("--out", help="Folder for the images.")] = Path("renders"),
     spp: Annotated[int | None, typer.Option("--spp", min=1, max=MAX_SPP,

@@ -41,6 +41,10 @@ MAX_OVERLAYS = 100
 
 F = TypeVar("F", bound=Callable[..., object])
 
+#: The ``--config`` option of the commands that read a scene config.
+ConfigOption = Annotated[Path, typer.Option("--config", help="Scene config file (YAML), or a shipped scene by name "
+                                                             "(datagen scenes).")]
+
 
 def user_errors(func: F) -> F:
     """Turn :class:`DatagenError` into one line per problem on stderr and exit 2."""

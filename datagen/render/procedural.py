@@ -21,7 +21,7 @@ import numpy as np
 
 from datagen.assets.noise import FADE_LO, NUMPY, FractalField, Ops, gradient_noise
 
-__all__ = ["drjit_ops", "texture_class"]
+__all__ = ["drjit_ops", "evaluate", "texture_class"]
 
 #: The area a texture's field is evaluated on: its surface's render-frame x and y (metres).
 PLANE_AXES: Final = (0, 1)
@@ -54,6 +54,22 @@ def _ops(variant: str) -> Ops:
         param_u32=lambda v: dr.opaque(mi.UInt32, int(v)),
     )
     return dataclasses.replace(ops, octave_loop=functools.partial(_octave_loop, ops))
+
+
+def evaluate(fn, *arrays: np.ndarray) -> np.ndarray:
+    """``fn(*arrays, ops)`` over numpy float32 arrays, evaluated by the current variant's
+    Dr.Jit (by numpy under a scalar variant); the result as a numpy array of their shape."""
+    import drjit as dr
+    import mitsuba as mi
+
+    ops = drjit_ops()
+    flat = [np.ascontiguousarray(a, dtype=np.float32).reshape(-1) for a in arrays]
+    if ops is NUMPY:
+        out = fn(*flat, ops)
+    else:
+        out = fn(*(mi.Float(a) for a in flat), ops)
+        dr.eval(out)
+    return np.asarray(out, dtype=np.float32).reshape(np.shape(arrays[0]))
 
 
 def _octave_loop(ops: Ops, field: FractalField, x, y, footprint_m):

@@ -29,7 +29,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.assets import textures
-from datagen.assets.noise import NUMPY
 from datagen.core.conventions import texture_rng
 from datagen.scene.look import FrameLook
 
@@ -244,7 +243,7 @@ class World:
                 opacity, radiance = self._cloud_textures[name]
                 for texture in (opacity, radiance):
                     texture.camera = tuple(float(c) for c in camera_render)
-                opacity.shade = functools.partial(_layer_opacity, layer)
+                opacity.shade = layer  # CloudLayer(x, y, footprint_m, ops): the opacity
                 radiance.shade = functools.partial(_layer_radiance, layer, tuple(float(c) for c in light), above)
                 if fresh or self._cloud_height.get(name) != height:  # the mesh moves only when it must
                     set_buffer(params, f"{name}.vertex_positions", _cloud_cells(self._cloudy[name], height))
@@ -301,17 +300,10 @@ class World:
         layer = self._cloud_layers.get(name)
         if layer is None:
             return np.zeros(len(xy), np.float32)
-        xy = np.asarray(xy, dtype=np.float32)
-        footprint = (np.asarray(distance_m) * self.pixel_rad).astype(np.float32)
-        from datagen.render.procedural import drjit_ops
+        from datagen.render.procedural import evaluate
 
-        ops = drjit_ops()
-        if ops is NUMPY:
-            return layer(xy[:, 0], xy[:, 1], footprint)
-        import mitsuba as mi
-
-        return np.asarray(layer(mi.Float(xy[:, 0]), mi.Float(xy[:, 1]), mi.Float(footprint), ops), dtype=np.float32)
-
+        footprint = np.asarray(distance_m) * self.pixel_rad
+        return evaluate(layer, np.asarray(xy)[:, 0], np.asarray(xy)[:, 1], footprint)
 
 def _clear(x, y, footprint_m, ops):
     """A layer without cloud."""
@@ -328,10 +320,6 @@ def _sea_albedo(sea: textures.SeaSurface, x, y, footprint_m, ops):
     import mitsuba as mi
 
     return mi.Color3f(*sea.albedo(x, y, footprint_m, ops))
-
-
-def _layer_opacity(layer: textures.CloudLayer, x, y, footprint_m, ops):
-    return layer(x, y, footprint_m, ops)
 
 
 def _layer_radiance(layer: textures.CloudLayer, light: tuple[float, float, float], above: bool,
@@ -379,10 +367,7 @@ def _cloudy_cells(layer: textures.CloudLayer) -> NDArray[np.bool_]:
     cell, whose largest value per cell, plus how far those octaves can rise within half a
     sample's diagonal and all the finer octaves can add, reaches the threshold. Evaluated
     by Dr.Jit (12.8 million points)."""
-    import drjit as dr
-    import mitsuba as mi
-
-    from datagen.render.procedural import drjit_ops
+    from datagen.render.procedural import evaluate
 
     cells = round(CLOUD_SIZE_M / CLOUD_CELL_M)
     if not math.isfinite(layer.threshold):
@@ -391,13 +376,8 @@ def _cloudy_cells(layer: textures.CloudLayer) -> NDArray[np.bool_]:
     spacing = CLOUD_SIZE_M / n
     c = ((np.arange(n) + 0.5) * spacing - CLOUD_SIZE_M / 2).astype(np.float32)
     x, y = np.meshgrid(c, c)
-    ops = drjit_ops()
-    if ops is NUMPY:  # a scalar variant: numpy arrays
-        value = layer.field(x, y, octaves=CULL_OCTAVES)
-    else:
-        value = layer.field(mi.Float(x.reshape(-1)), mi.Float(y.reshape(-1)), ops=ops, octaves=CULL_OCTAVES)
-        dr.eval(value)
-    value = np.asarray(value).reshape(cells, CULL_SAMPLES, cells, CULL_SAMPLES).max(axis=(1, 3))
+    value = evaluate(lambda x, y, ops: layer.field(x, y, ops=ops, octaves=CULL_OCTAVES), x, y)
+    value = value.reshape(cells, CULL_SAMPLES, cells, CULL_SAMPLES).max(axis=(1, 3))
     field = layer.field
     rise = sum(NOISE_SLOPE_BOUND * field.amplitude(o) * 2.0**o / field.wavelength_m for o in range(CULL_OCTAVES))
     slack = rise * spacing / math.sqrt(2.0) + field.bound(CULL_OCTAVES)

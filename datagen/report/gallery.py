@@ -115,10 +115,9 @@ CLOSEUP: Final = (640, 360)
 
 def _windows(surface: np.ndarray, size: tuple[int, int]) -> dict[str, tuple[int, int]]:
     """Top-left corners of the close-up windows of a frame from its surface map
-    (:data:`datagen.render.world.SURFACES`): the one with the most cloud edge (cloud pixels
-    beside others), the one with the most sea, and the one with the most sky-lit sea or
-    cloud deck under a shadow edge (the steepest luminance steps are found later; here the
-    most surface of any kind). Windows lie on a grid of half their size."""
+    (:data:`datagen.render.world.SURFACES`): ``clouds``, the window with the most cloud
+    edge (cloud pixels beside others), and ``sea``, the one with the most sea. Windows lie
+    on a grid of half their size."""
     from datagen.render.world import SURFACES
 
     h, w = surface.shape
