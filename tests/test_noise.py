@@ -1,5 +1,6 @@
 """The procedural world: band-limited noise written once for numpy and Dr.Jit, cloud layers
-without a texel grid, and the cells that bound where their cloud can be."""
+without a texel grid, the cells that bound where their cloud can be, and the sea's wave
+trains and the roughness that stands for the waves a pixel cannot hold."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from datagen.assets.noise import FADE_HI, FADE_LO, NOISE_BOUND, FractalField, gradient_noise
-from datagen.assets.textures import CLOUD_EDGE, CloudLayer
+from datagen.assets.textures import CLOUD_EDGE, WAVE_SHARE_MAX, CloudLayer, SeaWaves, wave_slope_variance
+from datagen.scene.look import cox_munk_roughness, cox_munk_slope_variance
 
 coordinates = st.floats(-1e5, 1e5, allow_nan=False, width=32)
 
@@ -148,7 +150,7 @@ def test_the_texel_check_fails_each_frame_whose_world_texel_exceeds_the_limit() 
 
 
 def test_a_texel_spans_its_size_times_fx_over_the_nearest_depth_of_its_surface() -> None:
-    from datagen.assets.textures import LIVERY_TEXELS, WAVE_TEXELS, WAVE_TILE_M
+    from datagen.assets.textures import LIVERY_TEXELS
     from datagen.config import load_config
     from datagen.core.conventions import object_id
     from datagen.render.world import SURFACES, World
@@ -160,7 +162,90 @@ def test_a_texel_spans_its_size_times_fx_over_the_nearest_depth_of_its_surface()
     surface = np.array([[1, 1], [3, 0]], dtype=np.uint8)
     assert SURFACES[1] == "sea" and SURFACES[3] == "object"
     out = world.texel_footprint_px(depth, ids, surface, fx=2000.0)
-    assert out["world_texel_px"] == pytest.approx(WAVE_TILE_M / WAVE_TEXELS * 2000.0 / 4200.0)
+    assert out["world_texel_px"] == 0.0  # sea and clouds are procedural: no texel
     assert out["livery_texel_px"] == pytest.approx(50.0 / LIVERY_TEXELS * 2000.0 / 80.0)
     assert world.texel_footprint_px(None, None, None, fx=2000.0) == {"world_texel_px": None,
                                                                      "livery_texel_px": None}
+
+
+def _sea_grid(n: int, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    c = (np.arange(n, dtype=np.float32) - n / 2) * np.float32(spacing)
+    return np.meshgrid(c, c)
+
+
+@settings(max_examples=12, deadline=None)
+@given(wind=st.floats(0.5, 30.0), direction=st.floats(0.0, 360.0), seed=st.integers(0, 2**32 - 1))
+def test_resolved_waves_and_roughness_together_hold_cox_and_munks_slope_variance(
+        wind: float, direction: float, seed: int) -> None:
+    """Close up (every train resolved) the trains' mean square slope, measured on the
+    surface, plus the roughness's (roughness ** 4) is Cox and Munk's total at the wind;
+    far away (nothing resolved) the roughness alone is: one sea at every range."""
+    waves = SeaWaves.drawn(np.random.default_rng(seed), wind, direction)
+    shortest = float(waves.rows()["wavelength"].min())
+    x, y = _sea_grid(384, shortest / 3.0)
+    x = x + np.float32(37.0)
+    sx, sy = waves.slope(x, y, np.float32(shortest / 8.0))  # every train whole
+    measured = float(np.mean(sx**2 + sy**2))
+    carried = wave_slope_variance(wind)
+    assert measured == pytest.approx(carried, rel=0.35)  # one realization: trains beat against each other
+    total = cox_munk_slope_variance(wind)
+    close, far = waves.roughness(np.float32([shortest / 8.0, 1e6]), cox_munk_roughness(wind))
+    assert close**4 + carried == pytest.approx(total, rel=1e-4)
+    assert far**4 == pytest.approx(total, rel=1e-4)
+    assert carried <= WAVE_SHARE_MAX * total * (1 + 1e-9)
+
+
+def test_waves_a_pixel_cannot_hold_are_filtered_out_of_the_normals() -> None:
+    """At a footprint, no wave shorter than FADE_LO footprints is left in the slope field:
+    its spectrum beyond that wavenumber is empty."""
+    waves = SeaWaves.drawn(np.random.default_rng(4), 9.0, 20.0)
+    footprint = 4.0
+    n, spacing = 512, 1.0
+    x, y = _sea_grid(n, spacing)
+    sx, _ = waves.slope(x, y, np.float32(footprint))
+    window = np.outer(np.hanning(n), np.hanning(n))  # the trains are not periodic in the window
+    power = np.abs(np.fft.fft2(sx * window)) ** 2
+    k = 2 * np.pi * np.fft.fftfreq(n, d=spacing)
+    kk = np.hypot(*np.meshgrid(k, k))
+    cutoff = 2 * np.pi / (FADE_LO * footprint)
+    beyond = power[kk > cutoff * 1.1].sum() / power.sum()
+    assert power.sum() > 0 and beyond < 1e-3, beyond
+
+
+def test_the_kernel_evaluates_the_same_sea_as_numpy() -> None:
+    mi = pytest.importorskip("mitsuba")
+    import drjit as dr
+
+    from datagen.render.procedural import texture_class
+    from datagen.render.runtime import use_variant
+
+    variant = use_variant("llvm_ad_rgb")
+    waves = SeaWaves.drawn(np.random.default_rng(14), 11.0, 250.0)
+    texture = texture_class(variant)(pixel_rad=1.0 / 4000.0)
+    texture.camera = (0.0, 0.0, 0.0)
+    texture.shade = lambda x, y, footprint, ops: waves.slope(x, y, footprint, ops)[0]
+    rng = np.random.default_rng(15)
+    x, y = rng.uniform(-3e3, 3e3, (2, 20_000)).astype(np.float32)
+    z = np.full_like(x, -1500.0)
+    si = dr.zeros(mi.SurfaceInteraction3f, len(x))
+    si.p = mi.Point3f(mi.Float(x), mi.Float(y), mi.Float(z))
+    kernel = np.asarray(texture.eval_1(si))
+    footprint = (np.sqrt(x.astype(np.float64)**2 + y**2 + z**2) / 4000.0).astype(np.float32)
+    np.testing.assert_allclose(kernel, waves.slope(x, y, footprint)[0], atol=2e-4)
+    assert np.std(kernel) > 0.01
+
+
+def test_wave_crests_have_no_preferred_grid_axis() -> None:
+    """The waves run with the wind, but not along a grid: rotating the wind rotates the
+    slopes' orientation histogram with it (no texel axes pin it)."""
+    x, y = _sea_grid(512, 0.5)
+
+    def histogram(direction: float) -> np.ndarray:
+        sx, sy = SeaWaves.drawn(np.random.default_rng(21), 9.0, direction).slope(x, y, np.float32(0.05))
+        angle = np.degrees(np.arctan2(sy, sx)) % 180.0
+        return np.histogram(angle, bins=36, range=(0, 180), weights=np.hypot(sx, sy))[0]
+
+    base = histogram(0.0)
+    rotated = histogram(25.0)
+    assert np.argmax(base) != np.argmax(rotated)
+    np.testing.assert_allclose(np.roll(base, 5), rotated, rtol=0.35, atol=0.05 * base.max())

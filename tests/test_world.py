@@ -172,22 +172,6 @@ def test_the_materials_drawn_in_one_call_equal_each_drawn_from_the_generator(see
     assert len({lk.materials["receiver"]["paint"].base_color for lk in batched}) == 40  # the draws do vary
 
 
-@pytest.mark.parametrize("wind", [0.0, 0.4, 3.7, 12.0, 24.5])
-@pytest.mark.parametrize("direction_deg", [0.0, 37.0, 90.0, 180.0, 301.5])
-def test_the_sea_variance_from_distinct_bins_equals_the_whole_grid_bit_for_bit(wind: float,
-                                                                               direction_deg: float) -> None:
-    import math
-
-    from datagen.assets.textures import _bin_variance, _spectrum_grid, _wave_variance
-
-    n, tile = 128, 64.0
-    fast = _wave_variance(wind, math.radians(direction_deg), n, tile)
-    whole = _bin_variance(*_spectrum_grid(math.radians(direction_deg), n, tile), wind, tile)  # every bin computed
-    whole[0, 0] = 0.0  # the mean
-    np.testing.assert_array_equal(fast, whole)
-    assert np.array_equal(np.signbit(fast), np.signbit(whole)) and fast.sum() > 0
-
-
 def test_looks_drawn_with_a_shared_approach_dict_equal_looks_drawn_alone() -> None:
     """The writer keeps each chain's weather and liveries for its other frames: the looks
     are those each frame gets alone, with every world randomizer on, in any frame order."""

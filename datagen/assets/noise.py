@@ -19,7 +19,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["NOISE_BOUND", "NUMPY", "FractalField", "Ops", "gradient_noise", "ramp"]
+__all__ = ["NOISE_BOUND", "NUMPY", "FractalField", "Ops", "Slant", "band_weight", "gradient_noise", "ramp", "series"]
 
 #: |gradient_noise| never exceeds this: Perlin's noise with unit gradients peaks at sqrt(1/2)
 #: in two dimensions, and a corner gradient here is at most sqrt(2) long ([-1, 1]^2).
@@ -49,9 +49,11 @@ class Ops:
     u32: object
     param_f32: object
     param_u32: object
-    #: Sums a field's octaves at a footprint, octave by octave until the rest are filtered
-    #: away in every lane (None: every octave, :meth:`FractalField.__call__`'s loop).
-    octave_loop: object = None
+    sin: object
+    sqrt: object
+    #: Sums a :func:`series` at a footprint, term by term until the rest are filtered away
+    #: in every lane (None: every term, in a Python loop).
+    series_loop: object = None
 
 
 #: numpy's spelling (float32 and uint32 arrays; uint32 products wrap, as in a kernel).
@@ -64,6 +66,8 @@ NUMPY: Final = Ops(
     u32=np.uint32,
     param_f32=np.float32,
     param_u32=np.uint32,
+    sin=np.sin,
+    sqrt=np.sqrt,
 )
 
 
@@ -96,6 +100,54 @@ def ramp(value, start, width: float, ops: Ops = NUMPY):
     f = ops.f32
     t = ops.clip((value - start) * f(1.0 / width), 0.0, 1.0)
     return t * t * (f(3.0) - f(2.0) * t)
+
+
+@dataclass(frozen=True)
+class Slant:
+    """A pixel's footprint on a horizontal plane seen at a slant: an ellipse ``across``
+    metres wide across the view and longer along the view's horizontal direction, by the
+    factor ``sqrt(1 + s^2)`` with ``s = (sx, sy)``, the view's horizontal part over its
+    vertical part (the tangent of its angle from the vertical)."""
+
+    across: object
+    sx: object
+    sy: object
+
+    def along(self, dx, dy, ops: Ops = NUMPY):
+        """The footprint's extent along the unit direction ``(dx, dy)``."""
+        t = self.sx * dx + self.sy * dy
+        return self.across * ops.sqrt(ops.f32(1.0) + t * t)
+
+    def longest(self, ops: Ops = NUMPY):
+        return self.across * ops.sqrt(ops.f32(1.0) + self.sx * self.sx + self.sy * self.sy)
+
+
+def band_weight(wavelength_m, footprint_m, ops: Ops = NUMPY):
+    """How much of a wave of ``wavelength_m`` a pixel of ``footprint_m`` metres holds: 1
+    while it spans :data:`FADE_HI` footprints, 0 under :data:`FADE_LO`, smooth between
+    (``wavelength_m`` a kernel value made by ``ops``)."""
+    return ramp(wavelength_m / footprint_m, ops.f32(FADE_LO), FADE_HI - FADE_LO, ops)
+
+
+def series(rows: dict[str, NDArray], term, outputs: int, footprint_m=None, ops: Ops = NUMPY,
+           count: int | None = None):
+    """The sum over the rows of a table of ``term(row, footprint_m, ops)`` (each a tuple of
+    ``outputs`` arrays, summed element-wise): ``rows`` maps a column name to its values per row
+    (float32 or uint32), with a ``wavelength`` column in decreasing order. At a footprint,
+    a term whose wavelength is at most :data:`FADE_LO` footprints is taken to add nothing,
+    so a kernel stops at the first such row (``ops.series_loop``); ``count``: only the
+    first that many rows. A row's values enter a kernel as parameters (a new table
+    compiles nothing). A :class:`Slant` footprint stops the kernel at its narrowest axis."""
+    if footprint_m is not None and ops.series_loop is not None and count is None:
+        return ops.series_loop(rows, term, footprint_m, outputs)
+    total = None
+    n = len(rows["wavelength"]) if count is None else count
+    for i in range(n):
+        row = {name: (ops.param_u32 if values.dtype == np.uint32 else ops.param_f32)(values[i])
+               for name, values in rows.items()}
+        t = term(row, footprint_m, ops)
+        total = t if total is None else tuple(a + b for a, b in zip(total, t, strict=True))
+    return total
 
 
 def _fade(t, ops: Ops):
@@ -169,32 +221,36 @@ class FractalField:
         """An octave's wavelength across the stretch (its finest detail)."""
         return self.wavelength_m / 2.0**octave / self.stretch
 
-    def weight(self, octave: int, footprint_m, ops: Ops = NUMPY, wavelength_m=None):
-        """How much of ``octave`` a pixel of ``footprint_m`` metres holds: 1 while its
-        wavelength (the shorter axis's) spans :data:`FADE_HI` footprints, 0 under
-        :data:`FADE_LO`, smooth between (``wavelength_m``: the octave's, where it is an array)."""
-        f = ops.f32
-        wavelength = f(self.shortest_wavelength_m(octave)) if wavelength_m is None else wavelength_m
-        return ramp(wavelength / footprint_m, f(FADE_LO), FADE_HI - FADE_LO, ops)
+    def weight(self, octave: int, footprint_m, ops: Ops = NUMPY):
+        """How much of ``octave`` a pixel of ``footprint_m`` metres holds (:func:`band_weight`
+        of its wavelength across the stretch)."""
+        return band_weight(ops.f32(self.shortest_wavelength_m(octave)), footprint_m, ops)
+
+    def rows(self) -> dict[str, NDArray]:
+        """The octaves as a :func:`series` table: lattice map, offsets, seed, amplitude and
+        wavelength per octave."""
+        frames = np.asarray(self.octave_frames(), dtype=np.float32).reshape(-1, 4)
+        offsets = np.asarray(self.offsets, dtype=np.float32).reshape(-1, 2)
+        return {"a": frames[:, 0], "b": frames[:, 1], "c": frames[:, 2], "d": frames[:, 3],
+                "ox": offsets[:, 0], "oy": offsets[:, 1],
+                "seed": np.array([(self.seed + o) % 2**32 for o in range(self.octaves)], dtype=np.uint32),
+                "amplitude": np.array([self.amplitude(o) for o in range(self.octaves)], dtype=np.float32),
+                "wavelength": np.array([self.shortest_wavelength_m(o) for o in range(self.octaves)],
+                                       dtype=np.float32)}
 
     def __call__(self, x, y, footprint_m=None, ops: Ops = NUMPY, octaves: int | None = None):
         """The field at ``(x, y)`` metres (float32 arrays): every octave (``footprint_m``
         None) or each weighted by :meth:`weight` at that pixel footprint; ``octaves``: only
         the first that many."""
-        if footprint_m is not None and ops.octave_loop is not None and octaves is None:
-            return ops.octave_loop(self, x, y, footprint_m)
-        total = None
-        p = ops.param_f32
-        for o, (a, b, c, d) in enumerate(self.octave_frames()[:octaves]):
-            ox, oy = self.offsets[o]
-            lx = x * p(a) + y * p(b) + p(ox)
-            ly = x * p(c) + y * p(d) + p(oy)
-            seed = ops.param_u32((self.seed + o) % 2**32)
-            term = gradient_noise(lx, ly, seed, ops) * ops.f32(self.amplitude(o))
+        def octave(row, footprint_m, ops):
+            lx = x * row["a"] + y * row["b"] + row["ox"]
+            ly = x * row["c"] + y * row["d"] + row["oy"]
+            term = gradient_noise(lx, ly, row["seed"], ops) * row["amplitude"]
             if footprint_m is not None:
-                term = term * self.weight(o, footprint_m, ops)
-            total = term if total is None else total + term
-        return total
+                term = term * band_weight(row["wavelength"], footprint_m, ops)
+            return (term,)
+
+        return series(self.rows(), octave, 1, footprint_m, ops, count=octaves)[0]
 
 
 def sample_grid(field: FractalField, span_m: float, n: int, octaves: int | None = None) -> NDArray[np.float32]:

@@ -4,15 +4,14 @@
   camouflage blotches, grime).
 - :class:`CloudLayer`: a cloud layer's opacity at a coverage: band-limited procedural
   noise (:mod:`datagen.assets.noise`), evaluated where it is seen, no texels.
-- :func:`wave_field`: a sea's wave normals (tangent space) from a directional
-  Pierson-Moskowitz spectrum at a wind; :func:`wave_slope_variance` is the
-  expected mean square slope that field resolves.
+- :class:`SeaWaves`: a sea's waves, wave trains of a directional Pierson-Moskowitz
+  spectrum at a wind, summed where they are seen (no texels); what a pixel cannot
+  hold is roughness. :class:`SeaSurface`: its whitecaps and colour.
 - :func:`livery`: an aircraft livery (scheme, panel lines, markings, weathering) as
   linear RGB, mapped onto a mesh by :func:`triplanar_uv`.
 
-Textures tile (their spectra live on the FFT grid), so that a layer or the sea repeats
-without seams. Sizes and physical tile lengths are the constants below: Mitsuba bakes
-a texture's ``to_uv`` into its kernels, so they are fixed for a build.
+The bitmap textures (:func:`fractal_noise`, liveries) tile (their spectra live on the FFT
+grid); the world's fields are procedural and have no tile.
 """
 
 from __future__ import annotations
@@ -25,7 +24,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.assets.noise import NUMPY, FractalField, Ops, ramp, sample_grid
+from datagen.assets.noise import NUMPY, FractalField, Ops, Slant, band_weight, ramp, sample_grid, series
 from datagen.core.conventions import GRAVITY_MPS2
 
 __all__ = [
@@ -36,14 +35,16 @@ __all__ = [
     "CLOUD_WAVELENGTH_M",
     "FOAM_ALBEDO",
     "LIVERY_TEXELS",
-    "WAVE_TEXELS",
-    "WAVE_TILE_M",
+    "WAVE_DIRECTIONS",
+    "WAVE_OCTAVES",
     "CloudLayer",
     "SeaSurface",
+    "SeaWaves",
     "fractal_noise",
     "livery",
+    "peak_wavelength_m",
+    "pierson_moskowitz",
     "triplanar_uv",
-    "wave_field",
     "wave_slope_variance",
 ]
 
@@ -59,10 +60,14 @@ CLOUD_EDGE: Final = 0.06
 #: How far above its threshold the field reaches a layer's thickest core (which shades the
 #: tops brighter and the bases darker than the thin parts).
 CLOUD_CORE: Final = 0.35
-#: The sea's wave field repeats every WAVE_TILE_M metres (peak wavelengths at 12 m/s are
-#: about 90 m), WAVE_TEXELS texels across (0.5 m: the shortest waves resolved are 1 m).
-WAVE_TILE_M: Final = 256.0
-WAVE_TEXELS: Final = 512
+#: The sea's waves (:class:`SeaWaves`): WAVE_OCTAVES octaves of wavelength from twice the
+#: spectrum's peak down (240 m to 0.47 m at 12 m/s, 33 m to 0.07 m at 3 m/s), each
+#: WAVE_DIRECTIONS wave trains.
+WAVE_OCTAVES: Final = 9
+WAVE_DIRECTIONS: Final = 4
+#: The most of Cox and Munk's slope variance the wave trains carry (the rest, at least the
+#: waves shorter than the last octave, is always roughness).
+WAVE_SHARE_MAX: Final = 0.8
 #: Whitecaps: foam streaks of FOAM_OCTAVES octaves from FOAM_WAVELENGTH_M (down to about
 #: 0.4 m), FOAM_STRETCH times longer along the wind than across, ramping in over FOAM_EDGE
 #: of their field; foam's effective reflectance is FOAM_ALBEDO (Koepke 1984: 0.22).
@@ -79,11 +84,6 @@ TINT_DEPTH: Final = 0.6
 LIVERY_TEXELS: Final = 512
 
 FloatArray = NDArray[np.float32]
-
-
-def _wavenumbers(n: int, tile: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    k = 2.0 * np.pi * np.fft.fftfreq(n, d=tile / n)
-    return np.meshgrid(k, k)  # kx varies along columns (u), ky along rows (v)
 
 
 def fractal_noise(rng: np.random.Generator, size: int, beta: float = 3.0, low_cycles: float = 2.0,
@@ -188,95 +188,149 @@ class SeaSurface:
         return tuple(body * p(c) + foam * f(FOAM_ALBEDO) for c in self.colour)
 
 
-def _spectrum_grid(direction_rad: float, n: int, tile: float) -> tuple[NDArray[np.float64], ...]:
-    """What the sea's variance needs of every bin of the FFT grid before the wind enters:
-    the angular frequency, Pierson-Moskowitz's ``alpha g^2 omega^-5`` factor, ``2 omega``,
-    the spreading (0 against the wind) and the wavenumber."""
+def pierson_moskowitz(k: NDArray, wind_mps: float) -> NDArray[np.float64]:
+    """The height spectrum of a fully developed sea per unit wavenumber (m^3) at wavenumbers
+    ``k`` (rad/m) under a wind of ``wind_mps``: S(omega) = alpha g^2 omega^-5
+    exp(-0.74 (omega_0 / omega)^4), alpha = 8.1e-3, omega_0 = g / W, deep water
+    omega^2 = g k, S(k) = S(omega) d omega / dk."""
     g = GRAVITY_MPS2
-    kx, ky = _wavenumbers(n, tile)
-    k = np.hypot(kx, ky)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        omega = np.sqrt(g * k)
-        alpha = 8.1e-3 * g**2 * omega**-5.0
-        cos = (kx * math.cos(direction_rad) + ky * math.sin(direction_rad)) / k
-        spread = np.where(cos > 0.0, 2.0 / np.pi * cos**2, 0.0)
-    return omega, alpha, 2.0 * omega, spread, k
+    omega = np.sqrt(g * np.asarray(k, dtype=np.float64))
+    omega0 = g / max(float(wind_mps), 0.5)
+    s = 8.1e-3 * g**2 * omega**-5.0 * np.exp(-0.74 * (omega0 / omega) ** 4)
+    return s * g / (2.0 * omega)
 
 
-def _bin_variance(omega: NDArray, alpha: NDArray, two_omega: NDArray, spread: NDArray, k: NDArray,
-                  wind_mps: float, tile: float) -> NDArray[np.float64]:
-    """Each bin's height variance (m^2) at ``wind_mps`` from its :func:`_spectrum_grid` values
-    (element by element: any selection of bins gives those bins' numbers).
-
-    S(omega) = alpha g^2 omega^-5 exp(-0.74 (omega_0 / omega)^4), alpha = 8.1e-3, omega_0 = g / W;
-    deep water omega^2 = g k; spreading 2/pi cos^2 of the angle to the wind (waves running
-    with it); the variance of a bin is F(kx, ky) dkx dky with F = S(omega) (d omega / dk) D / k."""
-    g = GRAVITY_MPS2
-    dk = 2.0 * np.pi / tile
-    with np.errstate(divide="ignore", invalid="ignore"):
-        omega0 = g / max(wind_mps, 0.5)
-        s = alpha * np.exp(-0.74 * (omega0 / omega) ** 4)
-        s_k = s * g / two_omega
-        return np.nan_to_num(s_k * spread / k) * dk * dk
+def peak_wavelength_m(wind_mps: float) -> float:
+    """Pierson-Moskowitz's peak wavelength: omega_p = 0.877 g / W, lambda = 2 pi g / omega_p^2."""
+    omega_p = 0.877 * GRAVITY_MPS2 / max(float(wind_mps), 0.5)
+    return 2.0 * math.pi * GRAVITY_MPS2 / omega_p**2
 
 
-@functools.lru_cache(maxsize=8)
-def _wave_spectrum_parts(direction_rad: float, n: int, tile: float) -> tuple[NDArray, ...]:
-    """:func:`_spectrum_grid` for the bins the spreading keeps (``cos > 0``), each distinct
-    bin once; then the kept bins' flat indices and, per kept bin, its distinct bin. Bins
-    mirrored about the wind have the same inputs, so the same variance: computing each
-    once gives the same numbers, bit for bit, for a quarter of the work."""
-    omega, alpha, two_omega, spread, k = _spectrum_grid(direction_rad, n, tile)
-    kept = np.flatnonzero(spread.ravel() > 0.0)
-    inputs = np.stack([omega, alpha, two_omega, spread, k], axis=-1).reshape(-1, 5)[kept]
-    distinct, bin_of = np.unique(inputs, axis=0, return_inverse=True)
-    parts = (*np.ascontiguousarray(distinct.T), kept, bin_of.ravel())
-    for part in parts:
-        part.setflags(write=False)
-    return parts
+def _sector_spread(lo: float, hi: float) -> float:
+    """The share of a cos^2 spreading (2/pi cos^2 of the angle to the wind, waves running
+    with it) between angles ``lo`` and ``hi`` (radians from the wind, within +-pi/2)."""
+    def primitive(t: float) -> float:
+        return 2.0 / math.pi * (t / 2.0 + math.sin(2.0 * t) / 4.0)
 
-
-@functools.lru_cache(maxsize=64)
-def _wave_variance(wind_mps: float, direction_rad: float, n: int, tile: float) -> NDArray[np.float64]:
-    """Per-bin height variance (m^2) of a directional Pierson-Moskowitz sea on the FFT grid
-    (:func:`_bin_variance`, computed once per distinct bin). Bins against the wind (and the
-    mean) hold 0."""
-    *inputs, kept, bin_of = _wave_spectrum_parts(direction_rad, n, tile)
-    variance = np.zeros(n * n)
-    variance[kept] = _bin_variance(*inputs, wind_mps, tile)[bin_of]
-    variance = variance.reshape(n, n)
-    variance[0, 0] = 0.0
-    return variance
+    return primitive(hi) - primitive(lo)
 
 
 @functools.lru_cache(maxsize=256)
-def wave_slope_variance(wind_mps: float, n: int = WAVE_TEXELS, tile: float = WAVE_TILE_M) -> float:
-    """Expected mean square slope (both axes) of :func:`wave_field` at ``wind_mps``: the
-    part of Cox and Munk's slope variance that the normal map resolves."""
-    variance = _wave_variance(float(wind_mps), 0.0, n, tile)
-    return float(np.sum(_wavenumber_squared(n, tile) * variance))
+def _octave_slope_variance(wind_mps: float) -> tuple[float, ...]:
+    """Per octave of :class:`SeaWaves` (longest first), the mean square slope its trains
+    carry, all directions together: the integral of k^2 S(k) over the octave (log-spaced
+    trapezoids), scaled down where the octaves would carry more than
+    :data:`WAVE_SHARE_MAX` of Cox and Munk's total (light winds: Pierson-Moskowitz's
+    k^-3 tail overstates short waves that Cox and Munk's glitter measured)."""
+    from datagen.scene.look import cox_munk_slope_variance
+
+    top = 2.0 * math.pi / (2.0 * peak_wavelength_m(wind_mps))
+    out = []
+    for o in range(WAVE_OCTAVES):
+        k = top * 2.0 ** (o + np.linspace(0.0, 1.0, 257))
+        density = k**2 * pierson_moskowitz(k, wind_mps)
+        out.append(float(np.sum((density[1:] + density[:-1]) / 2.0 * np.diff(k))))
+    scale = min(1.0, WAVE_SHARE_MAX * cox_munk_slope_variance(wind_mps) / sum(out))
+    return tuple(v * scale for v in out)
 
 
-@functools.lru_cache(maxsize=4)
-def _wavenumber_squared(n: int, tile: float) -> NDArray[np.float64]:
-    kx, ky = _wavenumbers(n, tile)
-    return kx**2 + ky**2
+def wave_slope_variance(wind_mps: float) -> float:
+    """The mean square slope (both axes) the sea's wave trains (:class:`SeaWaves`) carry at
+    ``wind_mps``: what a pixel that resolves every one of them sees as waves rather than as
+    the BSDF's roughness."""
+    return float(sum(_octave_slope_variance(float(wind_mps))))
 
 
-def wave_field(rng: np.random.Generator, wind_mps: float, direction_deg: float,
-               n: int = WAVE_TEXELS, tile: float = WAVE_TILE_M) -> FloatArray:
-    """A sea's tangent-space normal map ``(n, n, 3)`` (x along u, y along v, in [-1, 1]):
-    one Gaussian sea of the directional spectrum, with random phases."""
-    variance = _wave_variance(float(wind_mps), math.radians(direction_deg), n, tile)
-    kx, ky = _wavenumbers(n, tile)
-    # A Gaussian sea: complex amplitudes with the bins' variance (the real part keeps half).
-    amp = np.sqrt(variance) * (rng.standard_normal((n, n)) + 1j * rng.standard_normal((n, n)))
-    scale = n * n  # numpy's ifft2 divides by n^2
-    height_dx = np.fft.ifft2(1j * kx * amp).real * scale
-    height_dy = np.fft.ifft2(1j * ky * amp).real * scale
-    normal = np.stack([-height_dx, -height_dy, np.ones_like(height_dx)], axis=-1)
-    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
-    return normal.astype(np.float32)
+@dataclass(frozen=True)
+class SeaWaves:
+    """The sea's waves as :data:`WAVE_OCTAVES` x :data:`WAVE_DIRECTIONS` wave trains of a
+    directional Pierson-Moskowitz sea, summed where the sea is seen: no texels and no tile.
+
+    The octaves run from twice the spectrum's peak wavelength down; each octave's trains
+    cover sectors of the half-plane the wind drives (cos^2 spreading), with a wavenumber
+    drawn log-uniformly in the octave, a direction in the sector and a phase. A train's
+    amplitude gives it its cell's mean square slope, so the trains together carry the
+    spectrum's slope variance over their octaves (:func:`wave_slope_variance`). A pixel
+    holds a train while its wavelength spans a few footprints (:func:`band_weight`); the
+    slope variance it cannot hold, and that of every wave shorter than the last octave
+    (Cox and Munk's total minus what is resolved), is the BSDF's roughness there
+    (:meth:`roughness`): one sea, whether a pixel sees its waves or their glitter."""
+
+    kx: tuple[float, ...]
+    ky: tuple[float, ...]
+    phase: tuple[float, ...]
+    amplitude: tuple[float, ...]
+    slope_variance: tuple[float, ...]  # each train's mean square slope
+
+    @classmethod
+    def drawn(cls, rng: np.random.Generator, wind_mps: float, direction_deg: float) -> SeaWaves:
+        top = 2.0 * math.pi / (2.0 * peak_wavelength_m(wind_mps))
+        sector = math.pi / WAVE_DIRECTIONS
+        trains = []
+        for o, octave_variance in enumerate(_octave_slope_variance(float(wind_mps))):
+            for d in range(WAVE_DIRECTIONS):
+                lo = -math.pi / 2.0 + d * sector
+                variance = octave_variance * _sector_spread(lo, lo + sector)
+                k = top * 2.0 ** (o + rng.random())
+                angle = math.radians(direction_deg) + lo + sector * rng.random()
+                phase = 2.0 * math.pi * rng.random()
+                trains.append((k, angle, phase, math.sqrt(2.0 * variance) / k, variance))
+        trains.sort(key=lambda t: t[0])  # longest first: a kernel stops at the first a pixel cannot hold
+        return cls(tuple(t[0] * math.cos(t[1]) for t in trains), tuple(t[0] * math.sin(t[1]) for t in trains),
+                   tuple(t[2] for t in trains), tuple(t[3] for t in trains), tuple(t[4] for t in trains))
+
+    def rows(self) -> dict[str, NDArray]:
+        """The trains as a :func:`datagen.assets.noise.series` table."""
+        k = np.hypot(self.kx, self.ky)
+        return {"kx": np.asarray(self.kx, np.float32), "ky": np.asarray(self.ky, np.float32),
+                "dx": (np.asarray(self.kx) / k).astype(np.float32), "dy": (np.asarray(self.ky) / k).astype(np.float32),
+                "phase": np.asarray(self.phase, np.float32), "amplitude": np.asarray(self.amplitude, np.float32),
+                "slope_variance": np.asarray(self.slope_variance, np.float32),
+                "wavelength": (2.0 * np.pi / k).astype(np.float32)}
+
+    @staticmethod
+    def _weight(row, footprint_m, ops: Ops):
+        """How much of a train a pixel holds: by its footprint along the train's direction
+        where the footprint is a :class:`~datagen.assets.noise.Slant`."""
+        if isinstance(footprint_m, Slant):
+            footprint_m = footprint_m.along(row["dx"], row["dy"], ops)
+        return band_weight(row["wavelength"], footprint_m, ops)
+
+    def slope(self, x, y, footprint_m, ops: Ops = NUMPY):
+        """The sea surface's slope ``(dh/dx, dh/dy)`` at ``(x, y)`` metres, holding the
+        trains a pixel of ``footprint_m`` (metres, or a Slant) there resolves."""
+        def train(row, footprint_m, ops):
+            sin = ops.sin(x * row["kx"] + y * row["ky"] + row["phase"])
+            s = sin * row["amplitude"] * self._weight(row, footprint_m, ops)
+            return -s * row["kx"], -s * row["ky"]  # h = a cos(k.x + phase)
+
+        return series(self.rows(), train, 2, footprint_m, ops)
+
+    def normal(self, x, y, footprint_m, ops: Ops = NUMPY):
+        """The surface normal ``(x, y, z)`` (unit, z up) at a footprint."""
+        sx, sy = self.slope(x, y, footprint_m, ops)
+        norm = ops.sqrt(sx * sx + sy * sy + ops.f32(1.0))
+        return -sx / norm, -sy / norm, ops.f32(1.0) / norm
+
+    def roughness(self, footprint_m, roughness: float, ops: Ops = NUMPY):
+        """The principled BSDF's roughness for a pixel of ``footprint_m`` on a sea whose
+        roughness without waves is ``roughness`` (its slope variance ``roughness ** 4``,
+        :func:`datagen.scene.look.cox_munk_roughness`): that slope variance less what the
+        pixel resolves of the trains, and at least ``1 - WAVE_SHARE_MAX`` of it, ** (1/4).
+        A :class:`~datagen.assets.noise.Slant` footprint counts by its long axis: a train
+        seen across the view's width but not along it stays in the roughness too (the lobe
+        errs wide, never sharp: a sharp lobe under resolved waves makes fireflies)."""
+        def resolved(row, footprint_m, ops):
+            w = band_weight(row["wavelength"], footprint_m, ops)
+            return (w * w * row["slope_variance"],)
+
+        if isinstance(footprint_m, Slant):
+            footprint_m = footprint_m.longest(ops)
+
+        total = ops.param_f32(roughness**4)
+        unresolved = total - series(self.rows(), resolved, 1, footprint_m, ops)[0]
+        unresolved = ops.clip(unresolved, total * ops.f32(1.0 - WAVE_SHARE_MAX), np.inf)
+        return ops.sqrt(ops.sqrt(unresolved))
 
 
 # --- liveries ------------------------------------------------------------------------

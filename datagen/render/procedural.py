@@ -8,7 +8,11 @@ values, so that a new frame reuses the compiled kernel.
 
 The footprint of a pixel at a point is its distance from the camera times the angle a
 pixel subtends (``1 / fx``): exact for what the camera sees directly, and a lower bound
-for what it sees through a reflection.
+for what it sees through a reflection. On a ``slant`` texture (the sea) it is the
+ellipse a pixel covers on the horizontal plane (:class:`datagen.assets.noise.Slant`,
+stretched at most :data:`SLANT_STRETCH_MAX` times along the view): a wave running
+across the view fades where the view is edge-on to it, one running along it where the
+pixel's width is.
 """
 
 from __future__ import annotations
@@ -19,12 +23,14 @@ from typing import Final
 
 import numpy as np
 
-from datagen.assets.noise import FADE_LO, NUMPY, FractalField, Ops, gradient_noise
+from datagen.assets.noise import FADE_LO, NUMPY, Ops, Slant
 
 __all__ = ["drjit_ops", "evaluate", "texture_class"]
 
 #: The area a texture's field is evaluated on: its surface's render-frame x and y (metres).
 PLANE_AXES: Final = (0, 1)
+#: A slant footprint's length along the view: 1 / cos of the view's angle to the vertical, up to this.
+SLANT_STRETCH_MAX: Final = 50.0
 
 
 def drjit_ops() -> Ops:
@@ -52,8 +58,10 @@ def _ops(variant: str) -> Ops:
         u32=int,
         param_f32=lambda v: dr.opaque(mi.Float, float(v)),
         param_u32=lambda v: dr.opaque(mi.UInt32, int(v)),
+        sin=dr.sin,
+        sqrt=dr.sqrt,
     )
-    return dataclasses.replace(ops, octave_loop=functools.partial(_octave_loop, ops))
+    return dataclasses.replace(ops, series_loop=functools.partial(_series_loop, ops))
 
 
 def evaluate(fn, *arrays: np.ndarray) -> np.ndarray:
@@ -72,38 +80,31 @@ def evaluate(fn, *arrays: np.ndarray) -> np.ndarray:
     return np.asarray(out, dtype=np.float32).reshape(np.shape(arrays[0]))
 
 
-def _octave_loop(ops: Ops, field: FractalField, x, y, footprint_m):
-    """``field`` at a footprint as a loop over octaves that each lane leaves at its first
-    octave a pixel cannot hold (every later one is finer): far away, few octaves cost
-    anything. The octaves' maps, offsets and seeds are opaque arrays gathered per step; the
-    sum is the same, term by term, as :meth:`FractalField.__call__`'s."""
+def _series_loop(ops: Ops, rows: dict[str, np.ndarray], term, footprint_m, outputs: int):
+    """:func:`datagen.assets.noise.series` at a footprint as a loop over rows that each lane
+    leaves at its first row a pixel cannot hold (every later one is shorter): far away, few
+    terms cost anything. The rows are opaque arrays gathered per step; the sum is the same,
+    term by term, as the Python loop's."""
     import drjit as dr
     import mitsuba as mi
 
-    frames = field.octave_frames()
-    table = {name: mi.Float(np.asarray(values, dtype=np.float32))
-             for name, values in (("a", [f[0] for f in frames]), ("b", [f[1] for f in frames]),
-                                  ("c", [f[2] for f in frames]), ("d", [f[3] for f in frames]),
-                                  ("ox", [o[0] for o in field.offsets]), ("oy", [o[1] for o in field.offsets]),
-                                  ("amplitude", [field.amplitude(o) for o in range(field.octaves)]),
-                                  ("wavelength", [field.shortest_wavelength_m(o) for o in range(field.octaves)]))}
-    seeds = mi.UInt32(np.array([(field.seed + o) % 2**32 for o in range(field.octaves)], dtype=np.uint32))
-    dr.make_opaque(seeds, *table.values())  # device arrays, not literals: a new draw compiles no kernel
-    limit = footprint_m * FADE_LO  # an octave whose wavelength is at most this adds nothing
+    n = len(rows["wavelength"])
+    table = {name: (mi.UInt32 if values.dtype == np.uint32 else mi.Float)(values) for name, values in rows.items()}
+    dr.make_opaque(*table.values())  # device arrays, not literals: a new draw compiles no kernel
+    narrowest = footprint_m.across if isinstance(footprint_m, Slant) else footprint_m
+    limit = narrowest * FADE_LO  # a term whose wavelength is at most this adds nothing
+    width = dr.width(narrowest)
 
-    def cond(o, total):
-        wavelength = dr.gather(mi.Float, table["wavelength"], dr.minimum(o, field.octaves - 1))
-        return (o < field.octaves) & (wavelength > limit)
+    def cond(i, *total):
+        wavelength = dr.gather(mi.Float, table["wavelength"], dr.minimum(i, n - 1))
+        return (i < n) & (wavelength > limit)
 
-    def body(o, total):
-        g = {name: dr.gather(mi.Float, values, o) for name, values in table.items()}
-        lx = x * g["a"] + y * g["b"] + g["ox"]
-        ly = x * g["c"] + y * g["d"] + g["oy"]
-        term = gradient_noise(lx, ly, dr.gather(mi.UInt32, seeds, o), ops) * g["amplitude"]
-        return o + 1, total + term * field.weight(0, footprint_m, ops, wavelength_m=g["wavelength"])
+    def body(i, *total):
+        row = {name: dr.gather(type(values), values, i) for name, values in table.items()}
+        return i + 1, *(a + b for a, b in zip(total, term(row, footprint_m, ops), strict=True))
 
-    _, total = dr.while_loop(state=(mi.UInt32(0), dr.zeros(mi.Float, dr.width(x))), cond=cond, body=body)
-    return total
+    state = (mi.UInt32(0), *(dr.zeros(mi.Float, width) for _ in range(outputs)))
+    return dr.while_loop(state=state, cond=cond, body=body)[1:]
 
 
 @functools.cache
@@ -111,15 +112,18 @@ def texture_class(variant: str):
     """A :class:`mitsuba.Texture` whose value is ``shade(x, y, footprint_m, ops)``, a
     callable the owner sets (and replaces per frame) on the instance's ``shade``; the
     camera's render-frame position goes in ``camera`` and a pixel's angle in
-    ``pixel_rad``. ``eval`` returns what ``shade`` does (a colour or a value)."""
+    ``pixel_rad``. ``eval`` returns what ``shade`` does (a colour or a value); ``slant``: the
+    texture lies on a horizontal plane, and ``shade`` gets its footprint there as a
+    :class:`~datagen.assets.noise.Slant`."""
     import drjit as dr
     import mitsuba as mi
 
     class FieldTexture(mi.Texture):
-        def __init__(self, props=None, *, pixel_rad: float = 1e-3, colour: bool = False):
+        def __init__(self, props=None, *, pixel_rad: float = 1e-3, colour: bool = False, slant: bool = False):
             super().__init__(props if props is not None else mi.Properties())
             self.pixel_rad = float(pixel_rad)
             self.colour = colour
+            self.slant = slant
             self.camera = (0.0, 0.0, 0.0)
             self.shade = None  # (x, y, footprint_m, ops) -> value (Float, or Color3f when colour)
 
@@ -127,11 +131,21 @@ def texture_class(variant: str):
             ops = drjit_ops()
             if ops is NUMPY:  # a scalar variant: one point, numpy's wrapping uint32 arithmetic
                 p = np.array([si.p.x, si.p.y, si.p.z], dtype=np.float64)
-                footprint = np.float32(np.linalg.norm(p - np.asarray(self.camera)) * self.pixel_rad)
+                view = p - np.asarray(self.camera)
+                distance = np.linalg.norm(view)
+                footprint = np.float32(distance * self.pixel_rad)
+                if self.slant:
+                    height = max(abs(view[2]), distance / SLANT_STRETCH_MAX)
+                    footprint = Slant(footprint, np.float32(view[0] / height), np.float32(view[1] / height))
                 with np.errstate(over="ignore"):
                     return self.shade(np.float32(p[0]), np.float32(p[1]), footprint, ops)
             camera = mi.Point3f(*(dr.opaque(mi.Float, float(c)) for c in self.camera))
-            footprint = dr.norm(si.p - camera) * self.pixel_rad
+            view = si.p - camera
+            distance = dr.norm(view)
+            footprint = distance * self.pixel_rad
+            if self.slant:
+                height = dr.maximum(dr.abs(view.z), distance * (1.0 / SLANT_STRETCH_MAX))
+                footprint = Slant(footprint, view.x / height, view.y / height)
             return self.shade(si.p.x, si.p.y, footprint, ops)
 
         def eval(self, si, active=True):

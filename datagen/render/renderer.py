@@ -127,7 +127,7 @@ class Renderer:
 
             oidn_version()  # one line saying how to install it, before any rendering
         first = neutral_look(config)
-        sea_bsdf, self._sea_prefix = self.world.sea_bsdf(_principled(Material(SEA_COLOUR, 0.1, 0.0, 0.5)))
+        sea_bsdf = self.world.sea_bsdf(_principled(Material(SEA_COLOUR, 0.1, 0.0, 0.5)))
         integrator: dict = {"type": self.world.integrator, "max_depth": config.render.max_depth}
         if self.guides:  # the beauty channels are the path tracer's own (same samples, same bytes)
             from datagen.render.denoise import guided_integrator
@@ -244,7 +244,6 @@ class Renderer:
         p["sensor.to_world"] = mi.Transform4f(sensor.tolist())
         sea = make_transform(np.eye(3), [0.0, 0.0, -origin[2]]) @ np.diag([SEA_SIZE_M / 2, SEA_SIZE_M / 2, 1.0, 1.0])
         p["sea.to_world"] = mi.Transform4f(sea.tolist())
-        p[f"{self._sea_prefix}.roughness.value"] = look.sea_roughness_applied
         p["sky.sun_direction"] = mi.Vector3f(*sun_dir)
         p["sky.turbidity"] = look.turbidity
         p["sky.sun_scale"] = look.sun_scale

@@ -4,15 +4,16 @@ aircraft liveries, built into the scene once and re-dressed per frame through
 
 Each piece exists in the scene only when its randomizer is on: with it off, the scene
 holds nothing of it (no mesh, texture or kernel). Texture contents change per frame
-(data updates, no new kernel); texture tilings are fixed per build (Mitsuba bakes
-``to_uv`` into its kernels).
+(data updates and opaque kernel inputs: no new kernel).
 
 - Clouds: two horizontal sheets of cells (deck and scattered layer) whose ``mask`` opacity
   is a :class:`datagen.assets.textures.CloudLayer`, procedural noise evaluated at each
   shading point and filtered to the pixel there (:mod:`datagen.render.procedural`), each
   emitting the light its tops or bases send back (:meth:`World.cloud_shapes`).
-- Sea: the principled BSDF under a ``normalmap`` of :func:`~datagen.assets.textures.wave_field`;
-  its albedo is a :class:`~datagen.assets.textures.SeaSurface`: the drawn body colour,
+- Sea: the principled BSDF under a ``normalmap`` of :class:`~datagen.assets.textures.SeaWaves`,
+  wave trains summed at each shading point as far as the pixel there resolves them, the
+  rest of the sea's slope variance its roughness there; its albedo is a
+  :class:`~datagen.assets.textures.SeaSurface`: the drawn body colour,
   tinted over kilometres, with whitecaps shaped where a pixel resolves them and their mean
   where it does not.
 - Liveries: the painted parts of the receiver and the tanker get texture coordinates
@@ -64,15 +65,6 @@ SURFACES: Final = ("sky", "sea", "cloud", "object")
 SEA_COLOUR: Final = (0.01, 0.03, 0.05)
 
 
-def _bitmap(data: NDArray, repeats: float, filter_type: str = "nearest") -> dict:
-    """A repeating raw bitmap (the wave normals, by nearest texel)."""
-    import mitsuba as mi
-
-    return {"type": "bitmap", "data": mi.TensorXf(np.ascontiguousarray(data, dtype=np.float32)), "raw": True,
-            "wrap_mode": "repeat", "filter_type": filter_type,
-            "to_uv": mi.ScalarTransform4f().scale([repeats, repeats, 1.0])}
-
-
 class World:
     """Which world pieces a config renders, their scene entries and their per-frame updates."""
 
@@ -97,6 +89,8 @@ class World:
         self._liveries: dict = {}
         self._sea_key: tuple | None = None
         self._sea_texture = None  # the sea's procedural albedo (whitecaps, colour), where either is on
+        self._wave_textures = None  # the sea's procedural (normals, roughness), where waves are on
+        self._waves: textures.SeaWaves | None = None
         self.cloud_meshes: dict = {}
         self._cloud_down: dict[str, bool] = {}
         self._cloud_height: dict[str, float] = {}  # layer name -> its mi.Mesh (the geometry pass tells them apart)
@@ -116,22 +110,27 @@ class World:
         scene has no null surfaces, and ``path``, the cheaper of the two, renders it."""
         return "volpath" if self.clouds else "path"
 
-    def sea_bsdf(self, principled: dict) -> tuple[dict, str]:
-        """The sea's BSDF and the parameter prefix of its principled BSDF."""
-        repeats = self.sea_size_m / textures.WAVE_TILE_M
+    def sea_bsdf(self, principled: dict) -> dict:
+        """The sea's BSDF: ``principled`` with the procedural albedo where whitecaps or colour
+        are on, under the waves' normals and with their roughness where waves are."""
+        if not (self.waves or self.whitecaps or self.sea_colour):
+            return principled
+        import mitsuba as mi
+
+        from datagen.render.procedural import texture_class
+
+        field_texture = texture_class(mi.variant())
         if self.whitecaps or self.sea_colour:
-            import mitsuba as mi
-
-            from datagen.render.procedural import texture_class
-
-            self._sea_texture = texture_class(mi.variant())(pixel_rad=self.pixel_rad, colour=True)
+            self._sea_texture = field_texture(pixel_rad=self.pixel_rad, colour=True, slant=True)
             self._sea_texture.shade = _clear_colour
             principled = dict(principled, base_color=self._sea_texture)
         if not self.waves:
-            return principled, "sea.bsdf"
-        flat = np.zeros((textures.WAVE_TEXELS, textures.WAVE_TEXELS, 3), np.float32)
-        flat[..., 2] = 1.0
-        return {"type": "normalmap", "normalmap": _bitmap(flat, repeats), "bsdf": principled}, "sea.bsdf.nested_bsdf"
+            return principled
+        normals = field_texture(pixel_rad=self.pixel_rad, colour=True, slant=True)
+        roughness = field_texture(pixel_rad=self.pixel_rad, slant=True)
+        normals.shade, roughness.shade = _flat_normal, _clear
+        self._wave_textures = (normals, roughness)
+        return {"type": "normalmap", "normalmap": normals, "bsdf": dict(principled, roughness=roughness)}
 
     def cloud_shapes(self) -> dict:
         """Scene entries of the cloud layers (none when clouds are off): fixed-topology
@@ -220,7 +219,6 @@ class World:
         """Set the frame's clouds and sea (the render frame has its origin at altitude
         ``camera_z_m``, the camera at ``camera_render`` in it; ``sky_irradiance`` is the sun
         and sky's RGB irradiance on a horizontal surface, which lights the clouds)."""
-        import mitsuba as mi
 
         if self.clouds:
             from datagen.render.mitsuba import set_buffer
@@ -252,39 +250,42 @@ class World:
                     set_buffer(params, f"{name}.faces", _cloud_faces(above))
                     self._cloud_down[name] = above
             self._cloud_key = key
-        if self._sea_texture is not None:
-            self._sea_texture.camera = tuple(float(c) for c in camera_render)
+        sea_textures = [t for t in (self._sea_texture, *(self._wave_textures or ())) if t is not None]
+        for texture in sea_textures:
+            texture.camera = tuple(float(c) for c in camera_render)
+        if self._wave_textures is None:
+            params["sea.bsdf.roughness.value"] = look.sea_roughness
         if not (self.waves or self.whitecaps or self.sea_colour):
             return
         key = (look.sea_seed, look.sea_wind_speed_mps, look.sea_wind_direction_deg, look.sea_whitecap_fraction,
                look.sea_colour)
-        if key == self._sea_key:
-            return  # an approach's sea, made once
-        self._sea_key = key
-        rng = texture_rng(look.sea_seed)
-        wind = look.sea_wind_speed_mps if look.sea_wind_speed_mps is not None else 7.0
-        if self.waves:
-            normals = textures.wave_field(rng, wind, look.sea_wind_direction_deg or 0.0)
-            params["sea.bsdf.normalmap.data"] = mi.TensorXf(normals * 0.5 + 0.5)
-        if self._sea_texture is not None:
-            sea = textures.SeaSurface.drawn(rng, look.sea_colour if look.sea_colour is not None else SEA_COLOUR,
-                                            look.sea_whitecap_fraction or 0.0, look.sea_wind_direction_deg or 0.0,
-                                            tint=self.sea_colour)
-            self._sea_texture.shade = functools.partial(_sea_albedo, sea)
+        if key != self._sea_key:  # an approach's sea, made once
+            self._sea_key = key
+            rng = texture_rng(look.sea_seed)
+            wind = look.sea_wind_speed_mps if look.sea_wind_speed_mps is not None else 7.0
+            if self.waves:
+                self._waves = textures.SeaWaves.drawn(rng, wind, look.sea_wind_direction_deg or 0.0)
+                self._wave_textures[0].shade = functools.partial(_wave_normal, self._waves)
+            if self._sea_texture is not None:
+                sea = textures.SeaSurface.drawn(rng, look.sea_colour if look.sea_colour is not None else SEA_COLOUR,
+                                                look.sea_whitecap_fraction or 0.0, look.sea_wind_direction_deg or 0.0,
+                                                tint=self.sea_colour)
+                self._sea_texture.shade = functools.partial(_sea_albedo, sea)
+        if self._waves is not None:  # the frame's roughness (a uniform sea model draws it per frame)
+            self._wave_textures[1].shade = functools.partial(_wave_roughness, self._waves, float(look.sea_roughness))
 
     def texel_footprint_px(self, depth: NDArray | None, ids: NDArray | None, surface: NDArray | None,
                            fx: float) -> dict[str, float | None]:
         """The largest on-screen size (px) of a texel the frame shows, from its geometry pass
         (z-depth, object ids, surfaces): a texel ``s`` metres across at z-depth ``z`` spans
-        at most ``s fx / z`` pixels. ``world_texel_px``: the sea's wave normals (the clouds
-        have no texels); ``livery_texel_px``: the liveries. None where none is seen."""
+        at most ``s fx / z`` pixels. ``world_texel_px``: the sea's and the clouds' (0: they
+        are procedural, no texel anywhere); ``livery_texel_px``: the liveries. None where
+        none is seen."""
         out: dict[str, float | None] = {"world_texel_px": None, "livery_texel_px": None}
         if depth is None or surface is None:
             return out
-        if self.waves:
-            sea = surface == SURFACES.index("sea")
-            if sea.any():
-                out["world_texel_px"] = textures.WAVE_TILE_M / textures.WAVE_TEXELS * fx / float(depth[sea].min())
+        if np.isin(surface, (SURFACES.index("sea"), SURFACES.index("cloud"))).any():
+            out["world_texel_px"] = 0.0
         if self.livery and ids is not None:
             from datagen.core.conventions import object_id
 
@@ -316,10 +317,31 @@ def _clear_colour(x, y, footprint_m, ops):
     return mi.Color3f(*(x * ops.f32(0.0) + ops.f32(c) for c in SEA_COLOUR))
 
 
-def _sea_albedo(sea: textures.SeaSurface, x, y, footprint_m, ops):
+def _flat_normal(x, y, footprint_m, ops):
+    """A calm sea's normal, encoded as a normal map's colour."""
     import mitsuba as mi
 
-    return mi.Color3f(*sea.albedo(x, y, footprint_m, ops))
+    return mi.Color3f(x * ops.f32(0.0) + ops.f32(0.5), ops.f32(0.5), ops.f32(1.0))
+
+
+def _wave_normal(waves: textures.SeaWaves, x, y, footprint_m, ops):
+    """The waves' normal at a footprint, encoded as a normal map's colour (n / 2 + 1/2)."""
+    import mitsuba as mi
+
+    half = ops.f32(0.5)
+    return mi.Color3f(*(c * half + half for c in waves.normal(x, y, footprint_m, ops)))
+
+
+def _wave_roughness(waves: textures.SeaWaves, roughness: float, x, y, footprint_m, ops):
+    return waves.roughness(footprint_m, roughness, ops) + x * ops.f32(0.0)
+
+
+def _sea_albedo(sea: textures.SeaSurface, x, y, footprint_m, ops):
+    """The sea's albedo, filtered to the long axis of a pixel's footprint (whitecaps seen
+    edge-on fade to their mean rather than flicker)."""
+    import mitsuba as mi
+
+    return mi.Color3f(*sea.albedo(x, y, footprint_m.longest(ops), ops))
 
 
 def _layer_radiance(layer: textures.CloudLayer, light: tuple[float, float, float], above: bool,

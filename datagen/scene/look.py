@@ -54,7 +54,7 @@ def cox_munk_slope_variance(wind_speed_mps: float) -> float:
     return 0.003 + 5.12e-3 * float(wind_speed_mps)
 
 
-def cox_munk_roughness(wind_speed_mps: float, resolved: float = 0.0) -> float:
+def cox_munk_roughness(wind_speed_mps: float) -> float:
     """The principled-BSDF roughness of a sea under a wind of ``wind_speed_mps``.
 
     Cox and Munk (1954) measured the mean square slope of the open sea from sun
@@ -63,8 +63,10 @@ def cox_munk_roughness(wind_speed_mps: float, resolved: float = 0.0) -> float:
     alpha^2, and the principled BSDF's alpha is its roughness squared, so
     roughness = sigma^2 ** (1/4): 0.37 at 3 m/s, 0.50 at 12 m/s. The lobe stands
     for wave facets smaller than a pixel; the sun's glint then spreads over the
-    area of the sea whose slopes reflect it, as it does in photographs."""
-    return float((0.003 + 5.12e-3 * float(wind_speed_mps)) ** 0.25)
+    area of the sea whose slopes reflect it, as it does in photographs. With waves on,
+    the waves a pixel resolves are taken out of the lobe there
+    (:meth:`datagen.assets.textures.SeaWaves.roughness`)."""
+    return float(cox_munk_slope_variance(wind_speed_mps) ** 0.25)
 
 
 @dataclass(frozen=True)
@@ -99,7 +101,7 @@ class FrameLook:
     cloud_albedo: float | None = None
     cloud_seed: int | None = None  # seeds the layers' noise fields
     sea_wind_direction_deg: float | None = None  # the wind blows towards (waves)
-    sea_wave_slope_variance: float | None = None  # mean square slope the wave normal map resolves
+    sea_wave_slope_variance: float | None = None  # mean square slope the wave trains carry
     sea_whitecap_fraction: float | None = None
     sea_colour: tuple[float, float, float] | None = None  # linear RGB body colour
     sea_seed: int | None = None  # seeds the wave phases and whitecaps
@@ -114,14 +116,6 @@ class FrameLook:
     sensor_distortion: tuple[float, float, float, float, float] | None = None  # OpenCV k1, k2, p1, p2, k3
     sensor_jpeg_quality: int | None = None
     sensor_seed: int | None = None  # seeds the sensor noise
-
-    @property
-    def sea_roughness_applied(self) -> float:
-        """The sea's microfacet roughness the renderer uses: with waves, the slope variance
-        the normal map resolves is taken out of Cox and Munk's total (one sea, not two)."""
-        if self.sea_wave_slope_variance is None or self.sea_wind_speed_mps is None:
-            return self.sea_roughness
-        return cox_munk_roughness(self.sea_wind_speed_mps, resolved=self.sea_wave_slope_variance)
 
 
 def _uniform(rng: np.random.Generator | _Uniforms, bounds) -> float:
