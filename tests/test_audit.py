@@ -194,13 +194,28 @@ def test_tight_drift_and_obliqueness_match_a_hand_computation(a, depth, theta_de
 
 # --- preview and the HTML report ---------------------------------------------------------------------
 @pytest.mark.render
-def test_previews_draw_on_the_frames(dataset, tmp_path: Path) -> None:
+def test_preview_sheets_show_each_frame_and_its_crops_pixel_for_pixel(dataset, tmp_path: Path) -> None:
+    """A sheet holds the frame and, per object, magnified crops registered to it: a sheet
+    pixel of a panel shows the image pixel its centre maps back to (where nothing is
+    drawn over it), and the boxes and crosshairs are drawn on top."""
+    from datagen.report.overlays import draw_sheet
+
     view = load_dataset(dataset)
     paths = write_previews(view, [int(view.frame_id[0])], tmp_path)
-    overlay = cv2.imread(str(paths[0]))
+    assert cv2.imread(str(paths[0])).shape[1] >= 1600
     original = cv2.imread(str(dataset / view.image_path[0]))
-    assert overlay.shape == original.shape
-    assert np.abs(overlay.astype(int) - original.astype(int)).max() > 100  # boxes and crosshairs drawn
+    sheet = draw_sheet(view, 0, view.recompute())
+    magnified = [p for p in sheet.panels if p.scale >= 3]
+    assert magnified  # the tiny frames' objects are small: their crops magnify
+    for panel in magnified:
+        x, y = np.meshgrid(np.arange(panel.size[0]), np.arange(panel.size[1]))
+        u = np.floor(panel.crop[0] + (x + 0.5) / panel.scale).astype(int)
+        v = np.floor(panel.crop[1] + (y + 0.5) / panel.scale).astype(int)
+        inside = (u >= 0) & (v >= 0) & (u < original.shape[1]) & (v < original.shape[0])
+        ox, oy = (int(c) for c in panel.origin)
+        shown = sheet.image[oy:oy + panel.size[1], ox:ox + panel.size[0]][inside]
+        same = np.all(shown == original[v[inside], u[inside]], axis=1).mean()
+        assert same > 0.8, (panel.kind, same)
     with pytest.raises(DatagenError, match="--frames: frame 999 is not in"):
         write_previews(view, [999], tmp_path)
 

@@ -244,41 +244,6 @@ def test_a_drawn_crosshair_is_centred_on_its_continuous_point(u, v) -> None:
     np.testing.assert_allclose(crosshair_centre(image, np.array([u, v])), [u, v], atol=0.1)
 
 
-@pytest.fixture(scope="module")
-def labels_only(tmp_path_factory):
-    from datagen.pipeline.run import build_dataset
-
-    from .support import tiny_config
-
-    tmp = tmp_path_factory.mktemp("overlay")
-    build_dataset(tiny_config(tmp, **{"camera.width": 1024, "camera.height": 540}), tmp / "ds", render=False)
-    return tmp / "ds"
-
-
-def test_the_overlay_draws_the_true_centre_where_it_is(labels_only) -> None:
-    """Fig. 11 overlays: the magenta crosshair of a feature lies on its true centre projection
-    within 0.1 px (it used to be drawn half a pixel right of and below it)."""
-    import dataclasses
-
-    from datagen.core.labels import Exclusion
-    from datagen.dataset.reader import load_dataset
-    from datagen.report.overlays import draw_overlay
-
-    view = load_dataset(labels_only)
-    labels = view.recompute()
-    b, f = next((b, f) for b in range(len(view)) for f in np.flatnonzero(labels.labeled[b])
-                if 30 < labels.center_px[b, f, 0] < 990 and 30 < labels.center_px[b, f, 1] < 500)
-    # Only that feature, its boxes drawn far enough out that they stay clear of the crosshair.
-    only = np.full_like(labels.exclusion, Exclusion.BEHIND_CAMERA)
-    only[b, f] = Exclusion.NONE
-    centre = labels.center_px[b, f]
-    wide = np.concatenate([centre - 20.0, centre + 20.0])
-    boxes = {name: np.broadcast_to(wide, labels.tight_xyxy.shape).copy()
-             for name in ("tight_xyxy", "corrected_xyxy", "label_xyxy")}
-    image = draw_overlay(view, b, dataclasses.replace(labels, exclusion=only, **boxes), names=False)
-    np.testing.assert_allclose(crosshair_centre(image, centre, radius=10), centre, atol=0.1)
-
-
 def test_write_bytes_makes_its_folder_replaces_atomically_and_leaves_no_temporary(tmp_path) -> None:
     from datagen.files import is_temporary, write_bytes, write_text
 

@@ -44,7 +44,7 @@ def write_report(result: AuditResult, dataset: DatasetMeta, out: Path, *,
     as :func:`datagen.analysis.audit.frames.frames_to_draw` gives them)."""
     import cv2
 
-    from datagen.report.overlays import draw_overlay
+    from datagen.report.overlays import draw_sheet
     from datagen.report.plots import plot_audit
 
     out = Path(out)
@@ -79,8 +79,8 @@ def write_report(result: AuditResult, dataset: DatasetMeta, out: Path, *,
                       f"<figcaption>{esc(name)}</figcaption></figure>" for name, path in plots.items())
     overlay_html = []
     for view, b, labels in frames:
-        image = draw_overlay(view, b, labels)
-        scale = min(1.0, 1200 / image.shape[1])
+        image = draw_sheet(view, b, labels).image
+        scale = min(1.0, 2600 / image.shape[1])
         image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
         _, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 85])
         overlay_html.append(f"<figure><img alt='overlay frame {view.frame_id[b]}' "
@@ -90,7 +90,7 @@ def write_report(result: AuditResult, dataset: DatasetMeta, out: Path, *,
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>datagen audit: {esc(result.name)}</title>
 <style>
-body {{ font: 14px/1.4 system-ui, sans-serif; margin: 2em; max-width: 1300px; }}
+body {{ font: 14px/1.4 system-ui, sans-serif; margin: 2em; max-width: 2650px; }}
 table {{ border-collapse: collapse; margin: 1em 0; }} td, th {{ border: 1px solid #ccc; padding: 3px 8px; }}
 tr.fail td {{ background: #fdd; }} tr.pass td:nth-child(2) {{ color: #080; }} code {{ font-size: 12px; }}
 td.hist {{ font-family: monospace; letter-spacing: 1px; }}

@@ -1,15 +1,29 @@
-"""``datagen preview``: overlays in the style of the paper's Fig. 11.
+"""``datagen preview``: label sheets a person can read at any range, after the paper's Fig. 11.
 
-On each frame's image: the projection of every feature's true 3D centre (a
-crosshair), its tight box (the perceived extent), its corrected box (centred
-on the true centre) and, where it was grown to the minimum training size, the
-box written to the label file, with the class name; features that are excluded but in
-view (edge margin, occluded) are drawn in another colour with their reason.
+A sheet shows one frame: on top the whole image with each object's region outlined and
+named; below, per object in view, that region cropped and magnified (every image pixel a
+block of pixels) in the three panels of Fig. 11:
+
+- *points*: the projection of every feature's true 3D centre (a crosshair);
+- *tight boxes*: the perceived extent of each feature's projected points;
+- *labels*: the corrected box (centred on the true centre), the box written to the label
+  file where it was grown to the minimum training size, and the true centres.
+
+Each feature has a number, the same in the three panels; the numbers stand in columns
+beside each panel, joined to their features by leader lines, so that no two overlap
+however close the features are, and a key beside the panels names them (excluded
+features that are still in view, by edge margin or occlusion, in grey with their reason).
+Colours are Okabe and Ito's (2008), told apart under every common colour-vision
+deficiency; crosshairs are drawn with sub-pixel precision on the continuous-pixel
+convention (:func:`datagen.core.conventions.drawing_px`).
 """
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,18 +32,37 @@ from datagen.core.conventions import drawing_px
 from datagen.core.labels import Exclusion, FrameLabels
 from datagen.dataset.reader import DatasetView
 
-__all__ = ["draw_crosshair", "draw_overlay", "write_previews"]
+__all__ = ["COLOURS", "PANELS", "Sheet", "draw_crosshair", "draw_sheet", "write_previews"]
 
-# BGR colours.
-TIGHT = (0, 200, 255)  # amber: the tight box
-CORRECTED = (80, 220, 60)  # green: the corrected box (the paper's label)
-WRITTEN = (255, 200, 0)  # cyan: the label box when grown to labels.min_box_px
-CENTRE = (255, 80, 255)  # magenta: true centre crosshair
-EXCLUDED = (160, 160, 160)  # grey: excluded features still in view
+# Okabe-Ito colours (BGR).
+TIGHT: Final = (0, 159, 230)  # orange: the tight box
+CORRECTED: Final = (178, 114, 0)  # blue: the corrected box (the paper's label)
+WRITTEN: Final = (233, 180, 86)  # sky blue: the label box when grown to labels.min_box_px
+CENTRE: Final = (255, 255, 255)  # white (on a dark halo): the true centre
+REGION: Final = (66, 228, 240)  # yellow: an object's region in the whole frame
+EXCLUDED: Final = (128, 128, 128)  # grey: excluded features still in view
+INK: Final = (235, 235, 235)
+LEADER: Final = (96, 96, 96)
+PAPER: Final = (24, 24, 24)
 
-
-#: OpenCV's sub-pixel drawing: coordinates in 1/16 px.
-_SHIFT = 4
+#: The colours a sheet tells apart (BGR), by what they mark.
+COLOURS: Final = {"true centre": CENTRE, "tight box": TIGHT, "corrected box": CORRECTED,
+                  "label box grown to the minimum size": WRITTEN, "excluded": EXCLUDED}
+#: The three panels of Fig. 11, in order, and what each draws.
+PANELS: Final = ("points", "tight boxes", "labels")
+#: A panel's size (px), the height of a number's tag and of a line of the key, and the
+#: widths of a column of tags and of the key.
+PANEL_W: Final = 600
+PANEL_H: Final = 450
+TAG_H: Final = 17
+TAG_W: Final = 34
+KEY_W: Final = 250
+#: An object's crop is its features' boxes with this margin (share of its size, and px).
+MARGIN: Final = (0.15, 6.0)
+#: The most a crop magnifies (a single small feature would otherwise fill a panel).
+MAX_SCALE: Final = 24.0
+_FONT: Final = 0  # cv2.FONT_HERSHEY_SIMPLEX
+_SHIFT: Final = 4  # OpenCV's sub-pixel drawing: coordinates in 1/16 px
 
 
 def _fixed(x: float, y: float) -> tuple[int, int]:
@@ -38,17 +71,52 @@ def _fixed(x: float, y: float) -> tuple[int, int]:
     return round(u * (1 << _SHIFT)), round(v * (1 << _SHIFT))
 
 
-def draw_crosshair(image: NDArray[np.uint8], uv_px, colour, *, arm: float, thickness: int = 1) -> None:
-    """A crosshair centred on continuous pixel coordinates ``uv_px`` (anti-aliased, sub-pixel)."""
+def draw_crosshair(image: NDArray[np.uint8], uv_px, colour, *, arm: float, thickness: int = 1,
+                   halo: bool = False) -> None:
+    """A crosshair centred on continuous pixel coordinates ``uv_px`` (anti-aliased,
+    sub-pixel); ``halo``: on a dark outline first, to read on any background."""
     import cv2
 
     u, v = (float(c) for c in uv_px)
-    cv2.line(image, _fixed(u - arm, v), _fixed(u + arm, v), colour, thickness, cv2.LINE_AA, _SHIFT)
-    cv2.line(image, _fixed(u, v - arm), _fixed(u, v + arm), colour, thickness, cv2.LINE_AA, _SHIFT)
+    strokes = [((0, 0, 0), thickness + 2)] if halo else []
+    for c, t in (*strokes, (colour, thickness)):
+        cv2.line(image, _fixed(u - arm, v), _fixed(u + arm, v), c, t, cv2.LINE_AA, _SHIFT)
+        cv2.line(image, _fixed(u, v - arm), _fixed(u, v + arm), c, t, cv2.LINE_AA, _SHIFT)
 
 
-def draw_overlay(view: DatasetView, b: int, labels: FrameLabels, *, names: bool = True) -> NDArray[np.uint8]:
-    """The overlay of row ``b`` of ``view`` (a black canvas when the frame has no image)."""
+@dataclass(frozen=True)
+class Panel:
+    """Where a crop of the frame lies on the sheet: frame pixel ``(u, v)`` (continuous) is
+    sheet pixel ``origin + (uv - crop) * scale``."""
+
+    obj: str
+    kind: str
+    origin: tuple[float, float]
+    crop: tuple[float, float]
+    scale: float
+    size: tuple[int, int] = (PANEL_W, PANEL_H)
+
+    def to_sheet(self, uv) -> NDArray[np.float64]:
+        uv = np.asarray(uv, dtype=np.float64)
+        return np.asarray(self.origin) + (uv - np.asarray(self.crop)) * self.scale
+
+
+@dataclass
+class Sheet:
+    """A drawn sheet and where everything on it is: the panels, each number's tag
+    ``(panel index, feature index, (x0, y0, x1, y1))``, each key line the same way, and
+    the leader lines."""
+
+    image: NDArray[np.uint8]
+    panels: list[Panel] = field(default_factory=list)
+    tags: list[tuple[int, int, tuple[int, int, int, int]]] = field(default_factory=list)
+    keys: list[tuple[str, int, tuple[int, int, int, int]]] = field(default_factory=list)
+    #: ``(panel index, feature index, (x0, y0, x1, y1))``: the leader from a feature to its tag in the margin.
+    leaders: list[tuple[int, int, tuple[float, float, float, float]]] = field(default_factory=list)
+
+
+def _frame_image(view: DatasetView, b: int) -> NDArray[np.uint8]:
+    """The frame's image (a black canvas when it has none or it does not match the camera)."""
     import cv2
 
     k = view.intrinsics
@@ -57,44 +125,239 @@ def draw_overlay(view: DatasetView, b: int, labels: FrameLabels, *, names: bool 
         image = cv2.imread(str(view.root / view.image_path[b]), cv2.IMREAD_COLOR)
         if image is not None and image.shape[:2] != (k.height, k.width):
             image = None
-    if image is None:
-        image = np.zeros((k.height, k.width, 3), np.uint8)
-    scale = max(1.0, k.width / 1024)
-    thick = max(1, round(scale))
-    font = 0.35 * scale
-    pt, shift = _fixed, _SHIFT
+    return image if image is not None else np.zeros((k.height, k.width, 3), np.uint8)
 
-    frame = labels.frame(b)
-    for f in range(len(view.features)):
+
+def _in_view(exclusion: NDArray) -> NDArray[np.bool_]:
+    return ~np.isin(exclusion, (Exclusion.BEHIND_CAMERA, Exclusion.OFF_FRAME))
+
+
+def _crop(boxes: NDArray[np.float64]) -> tuple[float, float, float]:
+    """The crop ``(x0, y0, scale)`` of a panel that shows ``boxes`` (N, 4) with a margin."""
+    x0, y0 = boxes[:, 0].min(), boxes[:, 1].min()
+    x1, y1 = boxes[:, 2].max(), boxes[:, 3].max()
+    w, h = x1 - x0, y1 - y0
+    pad = MARGIN[0] * max(w, h) + MARGIN[1]
+    w, h = w + 2 * pad, h + 2 * pad
+    scale = min(PANEL_W / w, PANEL_H / h, MAX_SCALE)
+    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+    return cx - PANEL_W / scale / 2, cy - PANEL_H / scale / 2, scale
+
+
+def _magnified(image: NDArray[np.uint8], panel: Panel) -> NDArray[np.uint8]:
+    """The panel's crop of ``image``, exactly registered: sheet pixel centre ``i + 0.5`` shows
+    frame point ``crop + (i + 0.5) / scale`` (whole image pixels as blocks when magnified)."""
+    import cv2
+
+    s = panel.scale
+    # OpenCV samples source index coordinates (pixel centres at integers): continuous - 0.5.
+    m = np.array([[1 / s, 0, panel.crop[0] + 0.5 / s - 0.5], [0, 1 / s, panel.crop[1] + 0.5 / s - 0.5]])
+    flags = (cv2.INTER_NEAREST if s >= 3 else cv2.INTER_LINEAR) | cv2.WARP_INVERSE_MAP
+    return cv2.warpAffine(image, m, panel.size, flags=flags, borderMode=cv2.BORDER_CONSTANT, borderValue=PAPER)
+
+
+def _slots(desired: NDArray[np.float64], top: float, bottom: float) -> tuple[list[int], NDArray[np.float64]]:
+    """Tags of height :data:`TAG_H` for points at heights ``desired``: each tag's column and
+    top, as near its point as the tags before it allow; columns of at most as many tags
+    as fit between ``top`` and ``bottom``, in order of height, never overlapping."""
+    n = len(desired)
+    capacity = max(1, int((bottom - top) // TAG_H))
+    columns = max(1, math.ceil(n / capacity))
+    order = np.argsort(desired, kind="stable")
+    column = np.empty(n, dtype=int)
+    y = np.empty(n)
+    for c in range(columns):
+        members = order[c::columns]  # each column spans the whole height
+        ys = np.clip(desired[members] - TAG_H / 2, top, bottom - TAG_H)
+        for i in range(1, len(ys)):  # push down past the one above
+            ys[i] = max(ys[i], ys[i - 1] + TAG_H)
+        ys[-1:] = np.minimum(ys[-1:], bottom - TAG_H)
+        for i in range(len(ys) - 2, -1, -1):  # and back up from the bottom
+            ys[i] = min(ys[i], ys[i + 1] - TAG_H)
+        column[members], y[members] = c, ys
+    return column.tolist(), y
+
+
+def _text(image, text: str, xy: tuple[int, int], colour, scale: float = 0.45) -> None:
+    import cv2
+
+    cv2.putText(image, text, xy, _FONT, scale, (0, 0, 0), 3, cv2.LINE_AA)
+    cv2.putText(image, text, xy, _FONT, scale, colour, 1, cv2.LINE_AA)
+
+
+def _draw_panel(sheet: Sheet, crop: NDArray[np.uint8], panel: Panel, frame: FrameLabels, features: NDArray,
+                numbers: dict[int, int]) -> int:
+    """Draw one panel with its tag columns; returns the width used right of the panel."""
+    import cv2
+
+    image, (px, py) = sheet.image, (int(panel.origin[0]), int(panel.origin[1]))
+    image[py:py + PANEL_H, px:px + PANEL_W] = crop
+    thick = 1
+    index = len(sheet.panels)
+    sheet.panels.append(panel)
+    marks = np.array([panel.to_sheet(frame.center_px[f]) for f in features]).reshape(-1, 2)
+    def box(xyxy, colour):
+        (x0, y0), (x1, y1) = panel.to_sheet(xyxy[:2]), panel.to_sheet(xyxy[2:])
+        cv2.rectangle(image, _fixed(x0, y0), _fixed(x1, y1), colour, thick, cv2.LINE_AA, _SHIFT)
+
+    for f, mark in zip(features, marks, strict=True):
+        excluded = Exclusion(int(frame.exclusion[f])) != Exclusion.NONE
+        if panel.kind == "tight boxes":
+            box(frame.tight_xyxy[f], EXCLUDED if excluded else TIGHT)
+        elif panel.kind == "labels":
+            box(frame.corrected_xyxy[f], EXCLUDED if excluded else CORRECTED)
+            if not excluded and not np.array_equal(frame.label_xyxy[f], frame.corrected_xyxy[f]):
+                box(frame.label_xyxy[f], WRITTEN)
+        if panel.kind != "tight boxes":
+            draw_crosshair(image, mark, EXCLUDED if excluded else CENTRE, arm=7.0, halo=True)
+    placed = _place_tags(marks, [_tag_width(numbers[f]) for f in features], (px, py, px + PANEL_W, py + PANEL_H))
+    for f, mark, (rect, leader) in zip(features, marks, placed, strict=True):
+        excluded = Exclusion(int(frame.exclusion[f])) != Exclusion.NONE
+        colour = EXCLUDED if excluded else INK
+        if leader:  # a tag in the margin: a faint line from the feature to it
+            end = (float(rect[0]), (rect[1] + rect[3] + 1) / 2)
+            cv2.line(image, _fixed(*mark), _fixed(*end), LEADER, 1, cv2.LINE_AA, _SHIFT)
+            sheet.leaders.append((index, int(f), (float(mark[0]), float(mark[1]), *end)))
+        _text(image, str(numbers[f]), (rect[0] + 2, rect[3] - 3), colour)
+        sheet.tags.append((index, int(f), rect))
+    right = max([r[2] for r, _ in placed] + [px + PANEL_W])
+    return right - (px + PANEL_W) + 12
+
+
+def _tag_width(number: int) -> int:
+    return 9 * len(str(number)) + 5
+
+
+def _place_tags(marks: NDArray[np.float64], widths: list[int], bounds: tuple[int, int, int, int]
+                ) -> list[tuple[tuple[int, int, int, int], bool]]:
+    """A tag ``(x0, y0, x1, y1)`` per mark, and whether it needs a leader: beside its mark
+    (right, left, above, below, then the diagonals) where that overlaps no other tag, no
+    mark's crosshair and stays in ``bounds``; otherwise in columns right of ``bounds``
+    (:func:`_slots`), joined by a leader line. No two tags overlap."""
+    x0b, y0b, x1b, y1b = bounds
+    arm = 9
+    crosses = [(m[0] - arm, m[1] - arm, m[0] + arm, m[1] + arm) for m in marks]
+    taken: list[tuple[float, float, float, float]] = []
+
+    def free(r) -> bool:
+        inside = r[0] >= x0b and r[1] >= y0b and r[2] < x1b and r[3] < y1b
+        return inside and not any(_overlap(r, o) for o in (*taken, *crosses))
+
+    out: list = [None] * len(marks)
+    for i in np.argsort(marks[:, 1], kind="stable"):
+        (u, v), w, h = marks[i], widths[i], TAG_H
+        for dx, dy in ((arm, -h / 2), (-arm - w, -h / 2), (-w / 2, -arm - h), (-w / 2, arm),
+                       (arm, -arm - h), (-arm - w, -arm - h), (arm, arm), (-arm - w, arm)):
+            x, y = round(u + dx), round(v + dy)
+            r = (x, y, x + w - 1, y + h - 1)
+            if free(r):
+                taken.append(r)
+                out[i] = (r, False)
+                break
+    rest = [i for i in range(len(marks)) if out[i] is None]
+    if rest:
+        columns, tops = _slots(marks[rest, 1], y0b, y1b)
+        for i, c, top in zip(rest, columns, tops, strict=True):
+            x = x1b + 6 + c * TAG_W
+            y = round(top)
+            out[i] = ((x, y, x + widths[i] - 1, y + TAG_H - 1), True)
+    return out
+
+
+def _overlap(a, b) -> bool:
+    return a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3]
+
+
+def _draw_key(sheet: Sheet, x: int, y: int, view: DatasetView, frame: FrameLabels, features: NDArray,
+              numbers: dict[int, int]) -> int:
+    """The numbers' names in columns of at most a panel's height; returns its width."""
+    capacity = PANEL_H // TAG_H
+    for i, f in enumerate(features):
         reason = Exclusion(int(frame.exclusion[f]))
-        if reason in (Exclusion.BEHIND_CAMERA, Exclusion.OFF_FRAME):
-            continue
-        excluded = reason != Exclusion.NONE
-        x0, y0, x1, y1 = frame.tight_xyxy[f]
-        cv2.rectangle(image, pt(x0, y0), pt(x1, y1), EXCLUDED if excluded else TIGHT, thick, cv2.LINE_AA, shift)
-        x0, y0, x1, y1 = frame.corrected_xyxy[f]
-        cv2.rectangle(image, pt(x0, y0), pt(x1, y1), EXCLUDED if excluded else CORRECTED, thick, cv2.LINE_AA, shift)
-        if not excluded and not np.array_equal(frame.label_xyxy[f], frame.corrected_xyxy[f]):
-            lx0, ly0, lx1, ly1 = frame.label_xyxy[f]
-            cv2.rectangle(image, pt(lx0, ly0), pt(lx1, ly1), WRITTEN, thick, cv2.LINE_AA, shift)
-        u, v = frame.center_px[f]
-        colour = EXCLUDED if excluded else CENTRE
-        draw_crosshair(image, (u, v), colour, arm=6 * scale, thickness=thick)
-        if names:
-            text = view.features.name[f].split(".", 1)[-1] + (f" ({reason.reason})" if excluded else "")
-            cv2.putText(image, text, (int(x1) + 2, int(y0) + int(8 * scale)), cv2.FONT_HERSHEY_SIMPLEX, font,
-                        colour, 1, cv2.LINE_AA)
-    caption = (f"frame {view.frame_id[b]}  {view.split[b]}  PtD {view.distance_m[b]:.1f} m   "
-               "magenta +: true centre   amber: tight box   green: corrected box   cyan: label box grown to the "
-               "minimum training size   grey: excluded")
-    cv2.putText(image, caption, (8, int(20 * scale)), cv2.FONT_HERSHEY_SIMPLEX, 0.5 * scale, (255, 255, 255),
-                thick, cv2.LINE_AA)
-    return image
+        name = view.features.name[f].split(".", 1)[-1] + (f" ({reason.reason})" if reason != Exclusion.NONE else "")
+        kx, ky = x + (i // capacity) * KEY_W, y + (i % capacity) * TAG_H
+        _text(sheet.image, f"{numbers[f]:>3} {name}"[:34], (kx, ky + TAG_H - 4),
+              EXCLUDED if reason != Exclusion.NONE else INK, 0.42)
+        sheet.keys.append((view.features.name[f], int(f), (kx, ky, kx + KEY_W - 6, ky + TAG_H - 1)))
+    return KEY_W * max(1, math.ceil(len(features) / capacity))
+
+
+def _legend(width: int, caption: str) -> NDArray[np.uint8]:
+    """The caption and the colours' legend, wrapped to ``width``."""
+    import cv2
+
+    items = [(c, name) for name, c in COLOURS.items()] + [(REGION, "object region")]
+    rows: list[list[tuple[tuple, str, int]]] = [[]]
+    x = 12
+    for colour, text in items:
+        w = 30 + cv2.getTextSize(text, _FONT, 0.5, 1)[0][0] + 24
+        if x + w > width and rows[-1]:
+            rows.append([])
+            x = 12
+        rows[-1].append((colour, text, x))
+        x += w
+    out = np.full((34 + 26 * len(rows), width, 3), PAPER, np.uint8)
+    _text(out, caption, (12, 22), INK, 0.55)
+    for r, row in enumerate(rows):
+        y = 34 + 26 * r
+        for colour, text, x in row:
+            cv2.rectangle(out, (x, y + 4), (x + 22, y + 18), colour, 2)
+            _text(out, text, (x + 30, y + 17), INK, 0.5)
+    return out
+
+
+def draw_sheet(view: DatasetView, b: int, labels: FrameLabels, image: NDArray[np.uint8] | None = None) -> Sheet:
+    """The label sheet of row ``b`` of ``view`` (``image``: the frame's, default its file)."""
+    import cv2
+
+    image = _frame_image(view, b) if image is None else image
+    frame = labels.frame(b)
+    shown = _in_view(frame.exclusion)
+    objects = [(o, np.flatnonzero(shown & (view.features.object_index == i)))
+               for i, o in enumerate(view.features.objects)]
+    objects = [(o, f) for o, f in objects if len(f)]
+    numbering = {o: {int(f): n + 1 for n, f in enumerate(fs)} for o, fs in objects}
+    # Rows of panels first (their widths set the sheet's), then the whole frame above them.
+    rows = []
+    for o, fs in objects:
+        boxes = np.concatenate([frame.label_xyxy[fs], frame.tight_xyxy[fs]])
+        boxes = boxes[np.isfinite(boxes).all(axis=1)]
+        x0, y0, s = _crop(boxes)
+        rows.append((o, fs, (x0, y0, s)))
+    tag_room = [TAG_W * max(1, math.ceil(len(fs) / (PANEL_H // TAG_H))) + 12 for _, fs, _ in rows]
+    key_room = [KEY_W * max(1, math.ceil(len(fs) / (PANEL_H // TAG_H))) for _, fs, _ in rows]
+    width = max([3 * (PANEL_W + t) + k + 24 for t, k in zip(tag_room, key_room, strict=True)] + [1600])
+    k = view.intrinsics
+    scale = width / k.width
+    overview = cv2.resize(image, (width, round(k.height * scale)), interpolation=cv2.INTER_AREA)
+    caption = (f"frame {view.frame_id[b]}  ({view.split[b]})  PtD {view.distance_m[b]:.1f} m  "
+               f"{k.width}x{k.height}")
+    legend = _legend(width, caption)
+    row_h = PANEL_H + 40
+    sheet = Sheet(np.concatenate([legend, overview, np.full((row_h * len(rows), width, 3), PAPER, np.uint8)]))
+    top = legend.shape[0]
+    for o, (x0, y0, s) in ((o, c) for o, _, c in rows):  # each region in the whole frame
+        a = (np.array([x0, y0]) * scale) + (0, top)
+        z = (np.array([x0 + PANEL_W / s, y0 + PANEL_H / s]) * scale) + (0, top)
+        cv2.rectangle(sheet.image, _fixed(*a), _fixed(*z), REGION, 2, cv2.LINE_AA, _SHIFT)
+        _text(sheet.image, o, (int(max(a[0], 4)), int(max(a[1] - 6, top + 16))), REGION, 0.7)
+    y = top + overview.shape[0]
+    for o, fs, (x0, y0, s) in rows:
+        _text(sheet.image, f"{o}: {len(fs)} features in view, x{s:.1f}", (12, y + 26), REGION, 0.6)
+        x = 12
+        for kind in PANELS:
+            panel = Panel(o, kind, (x, y + 36), (x0, y0), s)
+            crop = _magnified(image, panel)
+            _text(crop, kind, (8, 20), INK, 0.55)
+            x += PANEL_W + _draw_panel(sheet, crop, panel, frame, fs, numbering[o])
+        _draw_key(sheet, x, y + 36, view, frame, fs, numbering[o])
+        y += row_h
+    return sheet
 
 
 def write_previews(view: DatasetView, frames: list[int] | None, out: Path, labels: FrameLabels | None = None,
                    *, limit: int = 4) -> list[Path]:
-    """Write ``out/{frame:08d}.jpg`` for the given frame ids (default: the first ``limit``)."""
+    """Write ``out/{frame:08d}.jpg`` sheets for the given frame ids (default: the first ``limit``)."""
     import json
 
     from datagen.core.errors import DatagenError
@@ -108,9 +371,9 @@ def write_previews(view: DatasetView, frames: list[int] | None, out: Path, label
         raise DatagenError(f"--frames: frame {missing[0]} is not in {view.root} "
                            f"(frames {int(view.frame_id.min())}-{int(view.frame_id.max())})")
     out = Path(out)
-    written = [write_image(out / f"{f:08d}.jpg", draw_overlay(view, index[f], labels), jpeg_quality=90)
+    written = [write_image(out / f"{f:08d}.jpg", draw_sheet(view, index[f], labels).image, jpeg_quality=92)
                for f in wanted]
-    # preview.json: the record of every overlay written here (``files``, relative to the folder),
+    # preview.json: the record of every sheet written here (``files``, relative to the folder),
     # which --overwrite removes and nothing else.
     record = out / "preview.json"
     try:
