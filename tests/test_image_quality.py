@@ -18,9 +18,10 @@ from datagen.analysis.image_quality import (
     speckles,
     ssim,
 )
+from datagen.assets.textures import cox_munk_roughness
 from datagen.config import load_config, override_config
 from datagen.core.conventions import frame_rng
-from datagen.scene.look import cox_munk_roughness, draw_look
+from datagen.scene.look import draw_look
 
 
 def test_fireflies_are_isolated_speckles_and_a_glint_is_not_one() -> None:

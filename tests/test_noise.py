@@ -12,8 +12,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from datagen.assets.noise import FADE_HI, FADE_LO, NOISE_BOUND, FractalField, gradient_noise
-from datagen.assets.textures import CLOUD_EDGE, WAVE_SHARE_MAX, CloudLayer, SeaWaves, wave_slope_variance
-from datagen.scene.look import cox_munk_roughness, cox_munk_slope_variance
+from datagen.assets.textures import (
+    CLOUD_EDGE,
+    WAVE_SHARE_MAX,
+    CloudLayer,
+    SeaWaves,
+    cox_munk_roughness,
+    cox_munk_slope_variance,
+    wave_slope_variance,
+)
 
 coordinates = st.floats(-1e5, 1e5, allow_nan=False, width=32)
 

@@ -40,6 +40,8 @@ __all__ = [
     "CloudLayer",
     "SeaSurface",
     "SeaWaves",
+    "cox_munk_roughness",
+    "cox_munk_slope_variance",
     "fractal_noise",
     "livery",
     "peak_wavelength_m",
@@ -188,6 +190,27 @@ class SeaSurface:
         return tuple(body * p(c) + foam * f(FOAM_ALBEDO) for c in self.colour)
 
 
+def cox_munk_slope_variance(wind_speed_mps: float) -> float:
+    """Cox and Munk's (1954) mean square slope of a clean sea under a wind of W m/s:
+    0.003 + 5.12e-3 W (both axes together)."""
+    return 0.003 + 5.12e-3 * float(wind_speed_mps)
+
+
+def cox_munk_roughness(wind_speed_mps: float) -> float:
+    """The principled-BSDF roughness of a sea under a wind of ``wind_speed_mps``.
+
+    Cox and Munk (1954) measured the mean square slope of the open sea from sun
+    glitter as sigma^2 = 0.003 + 5.12e-3 W (W in m/s, clean surface, both axes
+    together). A Beckmann-like microfacet lobe of width alpha has mean square slope
+    alpha^2, and the principled BSDF's alpha is its roughness squared, so
+    roughness = sigma^2 ** (1/4): 0.37 at 3 m/s, 0.50 at 12 m/s. The lobe stands
+    for wave facets smaller than a pixel; the sun's glint then spreads over the
+    area of the sea whose slopes reflect it, as it does in photographs. With waves on,
+    the waves a pixel resolves are taken out of the lobe there
+    (:meth:`SeaWaves.roughness`)."""
+    return float(cox_munk_slope_variance(wind_speed_mps) ** 0.25)
+
+
 def pierson_moskowitz(k: NDArray, wind_mps: float) -> NDArray[np.float64]:
     """The height spectrum of a fully developed sea per unit wavenumber (m^3) at wavenumbers
     ``k`` (rad/m) under a wind of ``wind_mps``: S(omega) = alpha g^2 omega^-5
@@ -222,8 +245,6 @@ def _octave_slope_variance(wind_mps: float) -> tuple[float, ...]:
     trapezoids), scaled down where the octaves would carry more than
     :data:`WAVE_SHARE_MAX` of Cox and Munk's total (light winds: Pierson-Moskowitz's
     k^-3 tail overstates short waves that Cox and Munk's glitter measured)."""
-    from datagen.scene.look import cox_munk_slope_variance
-
     top = 2.0 * math.pi / (2.0 * peak_wavelength_m(wind_mps))
     out = []
     for o in range(WAVE_OCTAVES):
@@ -315,7 +336,7 @@ class SeaWaves:
     def roughness(self, footprint_m, roughness: float, ops: Ops = NUMPY):
         """The principled BSDF's roughness for a pixel of ``footprint_m`` on a sea whose
         roughness without waves is ``roughness`` (its slope variance ``roughness ** 4``,
-        :func:`datagen.scene.look.cox_munk_roughness`): that slope variance less what the
+        :func:`cox_munk_roughness`): that slope variance less what the
         pixel resolves of the trains, and at least ``1 - WAVE_SHARE_MAX`` of it, ** (1/4).
         A :class:`~datagen.assets.noise.Slant` footprint counts by its long axis: a train
         seen across the view's width but not along it stays in the roughness too (the lobe

@@ -412,7 +412,7 @@ class SeaConfig(_Section):
 
     ``cox_munk`` (default) draws a wind speed and derives the microfacet roughness from
     Cox and Munk's (1954) sun-glint measurements of the open sea: the mean square wave
-    slope is 0.003 + 5.12e-3 W for a wind of W m/s (:func:`datagen.scene.look.cox_munk_roughness`).
+    slope is 0.003 + 5.12e-3 W for a wind of W m/s (:func:`datagen.assets.textures.cox_munk_roughness`).
     ``uniform`` draws the roughness itself from ``roughness``; its default (0.05-0.25, a
     mirror-calm sea no wind gives) is what datagen drew before: a glossy sea reflects the
     sun onto the aircraft as a caustic the path tracer samples as fireflies that no spp

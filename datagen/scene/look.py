@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.assets.models import MATERIAL_CLASSES
+from datagen.assets.textures import cox_munk_roughness
 from datagen.core.conventions import OBJECT_NAMES
 
 if TYPE_CHECKING:
@@ -30,8 +31,6 @@ __all__ = [
     "SKY_SCALE_LEVELS",
     "FrameLook",
     "Material",
-    "cox_munk_roughness",
-    "cox_munk_slope_variance",
     "draw_look",
     "draw_world",
     "frame_look",
@@ -46,27 +45,6 @@ SKY_SCALE_LEVELS: Final = 5
 
 #: Haze visibility (distance at which contrast falls to 1/e), metres, when haze is on.
 HAZE_VISIBILITY_M: Final = (15_000.0, 60_000.0)
-
-
-def cox_munk_slope_variance(wind_speed_mps: float) -> float:
-    """Cox and Munk's (1954) mean square slope of a clean sea under a wind of W m/s:
-    0.003 + 5.12e-3 W (both axes together)."""
-    return 0.003 + 5.12e-3 * float(wind_speed_mps)
-
-
-def cox_munk_roughness(wind_speed_mps: float) -> float:
-    """The principled-BSDF roughness of a sea under a wind of ``wind_speed_mps``.
-
-    Cox and Munk (1954) measured the mean square slope of the open sea from sun
-    glitter as sigma^2 = 0.003 + 5.12e-3 W (W in m/s, clean surface, both axes
-    together). A Beckmann-like microfacet lobe of width alpha has mean square slope
-    alpha^2, and the principled BSDF's alpha is its roughness squared, so
-    roughness = sigma^2 ** (1/4): 0.37 at 3 m/s, 0.50 at 12 m/s. The lobe stands
-    for wave facets smaller than a pixel; the sun's glint then spreads over the
-    area of the sea whose slopes reflect it, as it does in photographs. With waves on,
-    the waves a pixel resolves are taken out of the lobe there
-    (:meth:`datagen.assets.textures.SeaWaves.roughness`)."""
-    return float(cox_munk_slope_variance(wind_speed_mps) ** 0.25)
 
 
 @dataclass(frozen=True)
