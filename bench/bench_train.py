@@ -1,7 +1,7 @@
 """Labels a detector can learn, end to end through Ultralytics.
 
     python bench/bench_train.py [--frames 24] [--spp 4] [--epochs 3] [--batch 4] [--seed 2024]
-    python bench/bench_train.py --sweep [--sweep-frames 1000]
+    python bench/bench_train.py --sweep [--sweep-frames 1000] [--plot docs/learnable-sizes.png]
     python bench/bench_train.py --memorize [--epochs 100] [--min-box-px 48] [--optimizer SGD]
         [--nbs 4] [--model yolo11n.yaml]
 
@@ -118,7 +118,9 @@ def sweep(args) -> None:
     print("| min_box_px | label lines | per frame | edge_margin excluded | learnable | all anchors shared | "
           + " | ".join(f"{m}: positive, median target, target >= 0.01" for m in models) + " |")
     print("|---|---|---|---|---|---|" + "---|" * len(models))
-    for size in (0.0, 8.0, 16.0, 24.0, 32.0, 48.0, 64.0):
+    sizes = (0.0, 8.0, 16.0, 24.0, 32.0, 48.0, 64.0)
+    rows: dict[str, list[float]] = {"learnable": []} | {f"{m} targeted": [] for m in models}
+    for size in sizes:
         with tempfile.TemporaryDirectory() as tmp:
             config = config_for(args.seed, args.sweep_frames, **{"labels.min_box_px": size})
             report = build_dataset(config, Path(tmp) / "ds", render=False)
@@ -127,14 +129,40 @@ def sweep(args) -> None:
             learnable, shared = contested(view)
             blank_images(Path(tmp) / "ds", config)
             cells = []
+            rows["learnable"].append(100 * share)
             for model in models:
                 a = assigner_positives(Path(tmp) / "ds", "train", images=args.assigner_images, model=model)
                 n = max(1, a["instances"])
+                rows[f"{model} targeted"].append(100 * a["targeted"] / n)
                 cells.append(f"{100 * a['positive'] / n:.1f}%, {a['target_median']:.2g}, "
                              f"{100 * a['targeted'] / n:.1f}%")
             print(f"| {size:g} | {report.labels} | {report.labels / report.frames:.1f} | "
                   f"{report.excluded['edge_margin']} | {100 * share:.1f}% | "
                   f"{100 * shared / max(1, learnable):.1f}% | " + " | ".join(cells) + " |", flush=True)
+    if args.plot:
+        plot_sweep(sizes, rows, args.plot)
+
+
+def plot_sweep(sizes, rows: dict[str, list[float]], path: str) -> None:
+    """The sweep's shares against the minimum box size, beside its table in the docs."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from datagen.files import write_figure
+
+    fig, ax = plt.subplots(figsize=(6.4, 3.6), layout="constrained")
+    labels = {"learnable": "learnable share (datagen audit = Ultralytics' dataloader)"}
+    for (name, values), marker in zip(rows.items(), "os^", strict=False):
+        ax.plot(sizes, values, marker=marker, label=labels.get(name, f"{name.split()[0]}: target >= 0.01 (untrained)"))
+    ax.set_xlabel("labels.min_box_px (px at imgsz 864)")
+    ax.set_ylabel("label lines (%)")
+    ax.set_ylim(0, 102)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower right")
+    write_figure(path, fig, dpi=120)
+    print(f"plot: {path}")
 
 
 # --- the end-to-end run ---------------------------------------------------------------------------
@@ -260,6 +288,7 @@ def main() -> None:
     parser.add_argument("--model", default="yolo11n.yaml", help="--memorize: the network, from scratch")
     parser.add_argument("--sweep-frames", type=int, default=1000)
     parser.add_argument("--assigner-images", type=int, default=128)
+    parser.add_argument("--plot", default=None, help="--sweep: also plot the shares against the size here")
     args = parser.parse_args()
     sweep(args) if args.sweep else memorize(args) if args.memorize else end_to_end(args)
 

@@ -133,7 +133,8 @@ def _in_view(exclusion: NDArray) -> NDArray[np.bool_]:
 
 
 def _crop(boxes: NDArray[np.float64]) -> tuple[float, float, float]:
-    """The crop ``(x0, y0, scale)`` of a panel that shows ``boxes`` (N, 4) with a margin."""
+    """The crop ``(x0, y0, scale)`` of a panel that shows ``boxes`` (N, 4) with a margin
+    (at most :data:`MAX_SCALE` times magnified)."""
     x0, y0 = boxes[:, 0].min(), boxes[:, 1].min()
     x1, y1 = boxes[:, 2].max(), boxes[:, 3].max()
     w, h = x1 - x0, y1 - y0
@@ -181,7 +182,11 @@ def _slots(desired: NDArray[np.float64], top: float, bottom: float) -> tuple[lis
 def _text(image, text: str, xy: tuple[int, int], colour, scale: float = 0.45) -> None:
     import cv2
 
-    cv2.putText(image, text, xy, _FONT, scale, (0, 0, 0), 3, cv2.LINE_AA)
+    # A dark outline from the same strokes shifted a pixel each way (a thicker stroke
+    # advances OpenCV's glyphs further, so it would not sit under the text).
+    x, y = xy
+    for dx, dy in ((-1, -1), (0, -1), (1, -1), (-1, 0), (1, 0), (-1, 1), (0, 1), (1, 1)):
+        cv2.putText(image, text, (x + dx, y + dy), _FONT, scale, (0, 0, 0), 1, cv2.LINE_AA)
     cv2.putText(image, text, xy, _FONT, scale, colour, 1, cv2.LINE_AA)
 
 
@@ -320,7 +325,9 @@ def draw_sheet(view: DatasetView, b: int, labels: FrameLabels, image: NDArray[np
     # Rows of panels first (their widths set the sheet's), then the whole frame above them.
     rows = []
     for o, fs in objects:
-        boxes = np.concatenate([frame.label_xyxy[fs], frame.tight_xyxy[fs]])
+        # The features themselves (tight boxes and true centres), not the label boxes grown
+        # to the training size: those may run past the panel, the features never do.
+        boxes = np.concatenate([frame.tight_xyxy[fs], np.tile(frame.center_px[fs], 2)])
         boxes = boxes[np.isfinite(boxes).all(axis=1)]
         x0, y0, s = _crop(boxes)
         rows.append((o, fs, (x0, y0, s)))
