@@ -168,8 +168,7 @@ def write_closeups(out: Path, *, before: Path | None = None, spp: int | None = N
 
 
 def _caption(image: np.ndarray, caption: str) -> np.ndarray:
-    import cv2
+    from datagen.report.overlays import draw_text
 
-    for colour, width in (((0, 0, 0), 3), ((255, 255, 255), 1)):  # legible on sky, cloud and sea
-        cv2.putText(image, caption, (8, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.65, colour, width, cv2.LINE_AA)
+    draw_text(image, caption, (8, 22), (255, 255, 255), 0.65)  # legible on sky, cloud and sea
     return image

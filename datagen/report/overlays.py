@@ -32,7 +32,7 @@ from datagen.core.conventions import drawing_px
 from datagen.core.labels import Exclusion, FrameLabels
 from datagen.dataset.reader import DatasetView
 
-__all__ = ["COLOURS", "PANELS", "Sheet", "draw_crosshair", "draw_sheet", "write_previews"]
+__all__ = ["COLOURS", "PANELS", "Sheet", "draw_crosshair", "draw_sheet", "draw_text", "write_previews"]
 
 # Okabe-Ito colours (BGR).
 TIGHT: Final = (0, 159, 230)  # orange: the tight box
@@ -179,7 +179,9 @@ def _slots(desired: NDArray[np.float64], top: float, bottom: float) -> tuple[lis
     return column.tolist(), y
 
 
-def _text(image, text: str, xy: tuple[int, int], colour, scale: float = 0.45) -> None:
+def draw_text(image, text: str, xy: tuple[int, int], colour, scale: float = 0.45) -> None:
+    """``text`` at ``xy`` (its baseline's left end) in ``colour``, outlined in black to read on
+    any background."""
     import cv2
 
     # A dark outline from the same strokes shifted a pixel each way (a thicker stroke
@@ -223,7 +225,7 @@ def _draw_panel(sheet: Sheet, crop: NDArray[np.uint8], panel: Panel, frame: Fram
             end = (float(rect[0]), (rect[1] + rect[3] + 1) / 2)
             cv2.line(image, _fixed(*mark), _fixed(*end), LEADER, 1, cv2.LINE_AA, _SHIFT)
             sheet.leaders.append((index, int(f), (float(mark[0]), float(mark[1]), *end)))
-        _text(image, str(numbers[f]), (rect[0] + 2, rect[3] - 3), colour)
+        draw_text(image, str(numbers[f]), (rect[0] + 2, rect[3] - 3), colour)
         sheet.tags.append((index, int(f), rect))
     right = max([r[2] for r, _ in placed] + [px + PANEL_W])
     return right - (px + PANEL_W) + 12
@@ -281,7 +283,7 @@ def _draw_key(sheet: Sheet, x: int, y: int, view: DatasetView, frame: FrameLabel
         reason = Exclusion(int(frame.exclusion[f]))
         name = view.features.name[f].split(".", 1)[-1] + (f" ({reason.reason})" if reason != Exclusion.NONE else "")
         kx, ky = x + (i // capacity) * KEY_W, y + (i % capacity) * TAG_H
-        _text(sheet.image, f"{numbers[f]:>3} {name}"[:34], (kx, ky + TAG_H - 4),
+        draw_text(sheet.image, f"{numbers[f]:>3} {name}"[:34], (kx, ky + TAG_H - 4),
               EXCLUDED if reason != Exclusion.NONE else INK, 0.42)
         sheet.keys.append((view.features.name[f], int(f), (kx, ky, kx + KEY_W - 6, ky + TAG_H - 1)))
     return KEY_W * max(1, math.ceil(len(features) / capacity))
@@ -302,12 +304,12 @@ def _legend(width: int, caption: str) -> NDArray[np.uint8]:
         rows[-1].append((colour, text, x))
         x += w
     out = np.full((34 + 26 * len(rows), width, 3), PAPER, np.uint8)
-    _text(out, caption, (12, 22), INK, 0.55)
+    draw_text(out, caption, (12, 22), INK, 0.55)
     for r, row in enumerate(rows):
         y = 34 + 26 * r
         for colour, text, x in row:
             cv2.rectangle(out, (x, y + 4), (x + 22, y + 18), colour, 2)
-            _text(out, text, (x + 30, y + 17), INK, 0.5)
+            draw_text(out, text, (x + 30, y + 17), INK, 0.5)
     return out
 
 
@@ -347,15 +349,15 @@ def draw_sheet(view: DatasetView, b: int, labels: FrameLabels, image: NDArray[np
         a = (np.array([x0, y0]) * scale) + (0, top)
         z = (np.array([x0 + PANEL_W / s, y0 + PANEL_H / s]) * scale) + (0, top)
         cv2.rectangle(sheet.image, _fixed(*a), _fixed(*z), REGION, 2, cv2.LINE_AA, _SHIFT)
-        _text(sheet.image, o, (int(max(a[0], 4)), int(max(a[1] - 6, top + 16))), REGION, 0.7)
+        draw_text(sheet.image, o, (int(max(a[0], 4)), int(max(a[1] - 6, top + 16))), REGION, 0.7)
     y = top + overview.shape[0]
     for o, fs, (x0, y0, s) in rows:
-        _text(sheet.image, f"{o}: {len(fs)} features in view, x{s:.1f}", (12, y + 26), REGION, 0.6)
+        draw_text(sheet.image, f"{o}: {len(fs)} features in view, x{s:.1f}", (12, y + 26), REGION, 0.6)
         x = 12
         for kind in PANELS:
             panel = Panel(o, kind, (x, y + 36), (x0, y0), s)
             crop = _magnified(image, panel)
-            _text(crop, kind, (8, 20), INK, 0.55)
+            draw_text(crop, kind, (8, 20), INK, 0.55)
             x += PANEL_W + _draw_panel(sheet, crop, panel, frame, fs, numbering[o])
         _draw_key(sheet, x, y + 36, view, frame, fs, numbering[o])
         y += row_h
