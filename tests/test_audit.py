@@ -287,6 +287,17 @@ def margin_bound(view, xyxy: np.ndarray) -> np.ndarray:
     return on[:, :2] | on[:, 2:]
 
 
+def test_labels_grown_to_exactly_the_assigners_size_pass_the_learnable_check(tmp_path: Path) -> None:
+    """labels.min_box_px at the assigner's side (32 px at imgsz): the boxes written are that
+    size up to their label lines' rounding, and the audit counts them learnable (it counted
+    none: the rounding left them a hundred-thousandth of a pixel short)."""
+    from datagen.core.training import ASSIGNABLE_SIDE_PX
+
+    result = audit(load_dataset(wingcam_labels(tmp_path, **{"labels.min_box_px": ASSIGNABLE_SIDE_PX})))
+    learnable = {c.name: c for c in result.checks}["learnable"]
+    assert learnable.passed and learnable.pass_share > 0.95
+
+
 def test_audit_fails_unlearnable_labels_and_names_the_worst_classes(tmp_path: Path) -> None:
     result = audit(load_dataset(wingcam_labels(tmp_path, **{"labels.min_box_px": 0.0})))
     learnable = {c.name: c for c in result.checks}["learnable"]

@@ -77,6 +77,10 @@ MATCH_PX: Final[float] = 3.0
 #: The shortest side (px at the training size) for which the untrained head's task-aligned
 #: assigner gives a box a usable target (rule 5 of the module docstring).
 ASSIGNABLE_SIDE_PX: Final[float] = 32.0
+#: A box side counts as ASSIGNABLE_SIDE_PX long down to this much less (px at the training
+#: size): a label line's rounding (well under 1e-4 px at 2048 px across) must not make a box
+#: grown to exactly the side unassignable.
+_SIDE_TOLERANCE_PX: Final[float] = 1e-3
 #: An anchor centre counts as inside a box when it is further than this from every side (the assigner's eps).
 _ANCHOR_EPS: Final[float] = 1e-9
 
@@ -160,8 +164,8 @@ class TrainView:
         at the training size (original pixels in); NaN boxes have no short side."""
         t = self.to_train(xyxy)
         with np.errstate(invalid="ignore"):
-            # A relative tolerance: a box grown to exactly the side comes back a few ulps short.
-            return (t[..., 2:] - t[..., :2]) < ASSIGNABLE_SIDE_PX * (1.0 - 1e-9)
+            # A box grown to exactly the side comes back short by its label line's rounding.
+            return (t[..., 2:] - t[..., :2]) < ASSIGNABLE_SIDE_PX - _SIDE_TOLERANCE_PX
 
     def assignable(self, xyxy: ArrayLike) -> NDArray[np.bool_]:
         """``(...)`` both sides at least :data:`ASSIGNABLE_SIDE_PX` at the training size (original
