@@ -162,7 +162,7 @@ def test_a_texel_spans_its_size_times_fx_over_the_nearest_depth_of_its_surface()
     from datagen.core.conventions import object_id
     from datagen.render.world import SURFACES, World
 
-    world = World(load_config("wingcam55"), 2e7, pixel_rad=1e-3)
+    world = World(load_config("wingcam55"), pixel_rad=1e-3)
     world._livery_bbox["tanker"] = (np.zeros(3), np.array([50.0, 40.0, 12.0]))
     depth = np.array([[5000.0, 4200.0], [80.0, np.inf]])
     ids = np.array([[0, 0], [object_id("tanker"), 0]], dtype=np.uint32)

@@ -107,7 +107,7 @@ class Renderer:
         #: The image the renderer returns; with lens distortion, the pinhole render has a margin.
         self.output_intrinsics = scene.intrinsics if width is None and height is None else \
             Intrinsics.from_hfov_deg(width or cam.width, height or cam.height, cam.hfov_deg)
-        self.world = World(config, SEA_SIZE_M, pixel_rad=1.0 / self.output_intrinsics.fx)
+        self.world = World(config, pixel_rad=1.0 / self.output_intrinsics.fx)
         sensor = config.randomization.sensor
         self.sensor = sensor if sensor.enabled else None
         self.margin_px = 0

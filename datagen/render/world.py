@@ -68,7 +68,7 @@ SEA_COLOUR: Final = (0.01, 0.03, 0.05)
 class World:
     """Which world pieces a config renders, their scene entries and their per-frame updates."""
 
-    def __init__(self, config: Config, sea_size_m: float, pixel_rad: float) -> None:
+    def __init__(self, config: Config, pixel_rad: float) -> None:
         r = config.randomization
         self.config = config
         self.clouds = r.clouds.enabled
@@ -76,7 +76,6 @@ class World:
         self.whitecaps = r.sea.whitecaps
         self.sea_colour = r.sea.colour
         self.livery = r.livery.enabled
-        self.sea_size_m = sea_size_m
         #: Any world piece on (the renderer then classifies every pixel's surface).
         self.any = self.clouds or self.waves or self.whitecaps or self.sea_colour or self.livery
         self._livery_bbox: dict[str, tuple[NDArray, NDArray]] = {}
