@@ -26,7 +26,7 @@ def on_files(files, config):
     generated = {"reference/config.md": config_reference(), "reference/cli.md": cli_reference(),
                  "concepts/conventions.md": conventions_page()}
     for path, page in DOCUMENTS.items():
-        generated[page] = relink((ROOT / path).read_text(), page)
+        generated[page] = relink((ROOT / path).read_text(), path)
     for uri, content in generated.items():
         files.append(File.generated(config, uri, content=content))
     for pattern in IMAGES:
@@ -35,20 +35,20 @@ def on_files(files, config):
     return files
 
 
-def relink(text: str, page: str) -> str:
-    """A repository document's links, as the site has them: documents that are pages link
-    to their page, anything else in the repository is named rather than linked."""
-    up = "../" * page.count("/")
-    pages = dict(DOCUMENTS)
+def relink(text: str, path: str) -> str:
+    """The links of the repository document at ``path``, as its page on the site has them:
+    documents that are pages link to their page, anything else in the repository is named
+    rather than linked."""
+    up = "../" * DOCUMENTS[path].count("/")
+    folder = Path(path).parent
 
     def repl(m: re.Match) -> str:
         label, target = m.group(1), m.group(2)
         if target.startswith(("http", "#")):
             return m.group(0)
-        resolved = (Path(next(p for p, q in DOCUMENTS.items() if q == page)).parent / target).as_posix()
-        resolved = re.sub(r"[^/]+/\.\./", "", resolved)
-        if resolved in pages:
-            return f"[{label}]({up}{pages[resolved]})"
+        resolved = re.sub(r"[^/]+/\.\./", "", (folder / target).as_posix())
+        if resolved in DOCUMENTS:
+            return f"[{label}]({up}{DOCUMENTS[resolved]})"
         return label if label.startswith("`") else f"`{label}`"
 
     return re.sub(r"\[([^\]]+)\]\(([^)]+)\)", repl, text)

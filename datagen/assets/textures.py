@@ -229,6 +229,12 @@ def peak_wavelength_m(wind_mps: float) -> float:
     return 2.0 * math.pi * GRAVITY_MPS2 / omega_p**2
 
 
+def _longest_wavenumber(wind_mps: float) -> float:
+    """The wavenumber (rad/m) at which :class:`SeaWaves`' first octave starts: twice the
+    spectrum's peak wavelength; octave ``o`` spans ``2^o`` to ``2^(o + 1)`` times it."""
+    return 2.0 * math.pi / (2.0 * peak_wavelength_m(wind_mps))
+
+
 def _sector_spread(lo: float, hi: float) -> float:
     """The share of a cos^2 spreading (2/pi cos^2 of the angle to the wind, waves running
     with it) between angles ``lo`` and ``hi`` (radians from the wind, within +-pi/2)."""
@@ -245,7 +251,7 @@ def _octave_slope_variance(wind_mps: float) -> tuple[float, ...]:
     trapezoids), scaled down where the octaves would carry more than
     :data:`WAVE_SHARE_MAX` of Cox and Munk's total (light winds: Pierson-Moskowitz's
     k^-3 tail overstates short waves that Cox and Munk's glitter measured)."""
-    top = 2.0 * math.pi / (2.0 * peak_wavelength_m(wind_mps))
+    top = _longest_wavenumber(wind_mps)
     out = []
     for o in range(WAVE_OCTAVES):
         k = top * 2.0 ** (o + np.linspace(0.0, 1.0, 257))
@@ -285,7 +291,7 @@ class SeaWaves:
 
     @classmethod
     def drawn(cls, rng: np.random.Generator, wind_mps: float, direction_deg: float) -> SeaWaves:
-        top = 2.0 * math.pi / (2.0 * peak_wavelength_m(wind_mps))
+        top = _longest_wavenumber(wind_mps)
         sector = math.pi / WAVE_DIRECTIONS
         trains = []
         for o, octave_variance in enumerate(_octave_slope_variance(float(wind_mps))):

@@ -104,9 +104,13 @@ def config_reference() -> str:
              "are bounded as the schema says: `datagen validate` checks a config. The shipped "
              "scenes (`datagen scenes`) are configs in this format; `datagen build` overrides a "
              "few keys from its flags (`--frames`, `--seed`, `--spp`, `--shard-size`).", ""]
-    for prefix, model in _sections():
+    sections = _sections()
+    first = {}  # model -> the section its plain anchor goes to (a model may be several sections)
+    for prefix, model in sections:
+        first.setdefault(model, prefix)
+    for prefix, model in sections:
         title = prefix.rstrip(".") or "the config"
-        anchor = f'<a id="{_anchor(model)}"></a>' if _first(model, prefix) else ""
+        anchor = f'<a id="{_anchor(model)}"></a>' if first[model] == prefix else ""
         lines += [f"## {anchor}`{title}`", "", _cell(model.__doc__ or ""), "",
                   "| key | type | default | description |", "|---|---|---|---|"]
         for name, info in model.model_fields.items():
@@ -115,7 +119,3 @@ def config_reference() -> str:
         lines.append("")
     return "\n".join(lines)
 
-
-def _first(model: type[BaseModel], prefix: str) -> bool:
-    """Whether ``prefix`` is the first place ``model`` appears (its plain anchor goes there)."""
-    return next(p for p, m in _sections() if m is model) == prefix

@@ -61,6 +61,8 @@ KEY_W: Final = 250
 MARGIN: Final = (0.15, 6.0)
 #: The most a crop magnifies (a single small feature would otherwise fill a panel).
 MAX_SCALE: Final = 24.0
+#: Tags (or key lines) a column beside a panel holds.
+COLUMN_ROWS: Final = PANEL_H // TAG_H
 _FONT: Final = 0  # cv2.FONT_HERSHEY_SIMPLEX
 _SHIFT: Final = 4  # OpenCV's sub-pixel drawing: coordinates in 1/16 px
 
@@ -157,13 +159,18 @@ def _magnified(image: NDArray[np.uint8], panel: Panel) -> NDArray[np.uint8]:
     return cv2.warpAffine(image, m, panel.size, flags=flags, borderMode=cv2.BORDER_CONSTANT, borderValue=PAPER)
 
 
+def _columns(n: int) -> int:
+    """Columns of :data:`COLUMN_ROWS` that ``n`` tags or key lines take (at least one)."""
+    return max(1, math.ceil(n / COLUMN_ROWS))
+
+
 def _slots(desired: NDArray[np.float64], top: float, bottom: float) -> tuple[list[int], NDArray[np.float64]]:
     """Tags of height :data:`TAG_H` for points at heights ``desired``: each tag's column and
     top, as near its point as the tags before it allow; columns of at most as many tags
-    as fit between ``top`` and ``bottom``, in order of height, never overlapping."""
+    as fit between ``top`` and ``bottom`` (a panel's height), in order of height, never
+    overlapping."""
     n = len(desired)
-    capacity = max(1, int((bottom - top) // TAG_H))
-    columns = max(1, math.ceil(n / capacity))
+    columns = _columns(n)
     order = np.argsort(desired, kind="stable")
     column = np.empty(n, dtype=int)
     y = np.empty(n)
@@ -278,15 +285,14 @@ def _overlap(a, b) -> bool:
 def _draw_key(sheet: Sheet, x: int, y: int, view: DatasetView, frame: FrameLabels, features: NDArray,
               numbers: dict[int, int]) -> int:
     """The numbers' names in columns of at most a panel's height; returns its width."""
-    capacity = PANEL_H // TAG_H
     for i, f in enumerate(features):
         reason = Exclusion(int(frame.exclusion[f]))
         name = view.features.name[f].split(".", 1)[-1] + (f" ({reason.reason})" if reason != Exclusion.NONE else "")
-        kx, ky = x + (i // capacity) * KEY_W, y + (i % capacity) * TAG_H
+        kx, ky = x + (i // COLUMN_ROWS) * KEY_W, y + (i % COLUMN_ROWS) * TAG_H
         draw_text(sheet.image, f"{numbers[f]:>3} {name}"[:34], (kx, ky + TAG_H - 4),
               EXCLUDED if reason != Exclusion.NONE else INK, 0.42)
         sheet.keys.append((view.features.name[f], int(f), (kx, ky, kx + KEY_W - 6, ky + TAG_H - 1)))
-    return KEY_W * max(1, math.ceil(len(features) / capacity))
+    return KEY_W * _columns(len(features))
 
 
 def _legend(width: int, caption: str) -> NDArray[np.uint8]:
@@ -333,8 +339,8 @@ def draw_sheet(view: DatasetView, b: int, labels: FrameLabels, image: NDArray[np
         boxes = boxes[np.isfinite(boxes).all(axis=1)]
         x0, y0, s = _crop(boxes)
         rows.append((o, fs, (x0, y0, s)))
-    tag_room = [TAG_W * max(1, math.ceil(len(fs) / (PANEL_H // TAG_H))) + 12 for _, fs, _ in rows]
-    key_room = [KEY_W * max(1, math.ceil(len(fs) / (PANEL_H // TAG_H))) for _, fs, _ in rows]
+    tag_room = [TAG_W * _columns(len(fs)) + 12 for _, fs, _ in rows]
+    key_room = [KEY_W * _columns(len(fs)) for _, fs, _ in rows]
     width = max([3 * (PANEL_W + t) + k + 24 for t, k in zip(tag_room, key_room, strict=True)] + [1600])
     k = view.intrinsics
     scale = width / k.width
