@@ -4,8 +4,10 @@
 
 Each scene is built as a user builds it (a subprocess: ``datagen build --config NAME
 --frames N --workers W``, shards of ``frames_per_approach`` frames so that every worker
-has work), after a 2-frame warm-up build of the same scene (Dr.Jit compiles its kernels
-once per machine; a 10,000-frame build pays that once). Prints a markdown table: the
+has work), after a warm-up build of the same frames: Dr.Jit compiles its kernels once per
+machine and keeps them on disk, one per combination of the sky's scale levels
+(``datagen.scene.look.SKY_SCALE_LEVELS`` squared), which a 10,000-frame build pays once;
+a timed build whose frames draw combinations not seen before would count their compiles. Prints a markdown table: the
 estimate the build printed in its first line, the measured frames/h of the build's own
 summary, and its split of a rendered frame.
 """
@@ -44,7 +46,7 @@ def main() -> None:
     for name in args.scenes:
         shard = max(1, min(load_config(name).approach.frames_per_approach, args.frames // max(1, args.workers)))
         with tempfile.TemporaryDirectory() as tmp:
-            build(name, Path(tmp) / "warm", 2, 1, shard)
+            build(name, Path(tmp) / "warm", args.frames, args.workers, shard)
             text = build(name, Path(tmp) / "ds", args.frames, args.workers, shard)
         estimate = re.search(r"estimate [0-9.]+ s a frame = ([0-9,]+) frames/h on \d+ cores \(([^)]*)\)", text)
         measured = re.search(r"this run: .* = ([0-9,]+) frames/h", text)

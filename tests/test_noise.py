@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from datagen.assets.noise import FADE_HI, FADE_LO, NOISE_BOUND, FractalField, gradient_noise
+from datagen.assets.noise import FADE_HI, FADE_LO, NOISE_BOUND, NUMPY, FractalField, gradient_noise
 from datagen.assets.textures import (
     CLOUD_EDGE,
     WAVE_SHARE_MAX,
@@ -79,6 +79,46 @@ def test_the_kernel_evaluates_the_same_field_as_numpy() -> None:
     footprint = (np.sqrt(x.astype(np.float64)**2 + y**2 + (z - 20.0)**2) / 1500.0).astype(np.float32)
     np.testing.assert_allclose(kernel, layer(x, y, footprint), atol=1e-5)
     assert 0.0 < (kernel > 0.0).mean() < 1.0
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**16), coverage=st.floats(0.05, 0.95), log_footprint=st.floats(-1.0, 2.5))
+def test_a_lane_stops_summing_octaves_only_where_the_rest_cannot_change_opacity_or_core(
+        seed: int, coverage: float, log_footprint: float) -> None:
+    layer = CloudLayer.drawn(np.random.default_rng(seed), coverage, 0.9, 168_000.0)
+    rows = layer.field.rows()
+    rng = np.random.default_rng(seed + 1)
+    x, y = rng.uniform(-8e4, 8e4, (2, 4000)).astype(np.float32)
+    footprint = np.float32(10.0**log_footprint)
+    full = layer.field(x, y, footprint)
+    stopped = 0
+    for k in range(1, layer.field.octaves):
+        partial = layer.field(x, y, footprint, octaves=k)
+        row = {name: values[k] for name, values in rows.items()}
+        for core in (True, False):
+            here = layer.settled((partial,), row, core=core)
+            stopped += int(here.sum())
+            np.testing.assert_array_equal(layer.opacity_of(partial[here]), layer.opacity_of(full[here]))
+            if core:
+                np.testing.assert_array_equal(layer.core_of(partial[here]), layer.core_of(full[here]))
+    assert stopped > 0  # the rule stops lanes at all
+
+
+def test_the_kernel_shades_the_same_opacity_and_core_as_numpy_where_lanes_stop_early() -> None:
+    pytest.importorskip("mitsuba")
+    from datagen.render.procedural import evaluate
+    from datagen.render.runtime import use_variant
+
+    use_variant("llvm_ad_rgb")
+    layer = CloudLayer.drawn(np.random.default_rng(21), 0.4, 0.9, 168_000.0)
+    rng = np.random.default_rng(22)
+    x, y = rng.uniform(-8e4, 8e4, (2, 50_000)).astype(np.float32)
+    footprint = (10.0 ** rng.uniform(-1.0, 2.5, 50_000)).astype(np.float32)
+    for shade in (lambda x, y, f, ops: layer(x, y, f, ops),
+                  lambda x, y, f, ops: layer.core_of(layer.value(x, y, f, ops), ops)):
+        np.testing.assert_array_equal(evaluate(shade, x, y, footprint), shade(x, y, footprint, NUMPY))
+    value = evaluate(lambda x, y, f, ops: layer.value(x, y, f, ops), x, y, footprint)
+    assert (value != layer.field(x, y, footprint)).mean() > 0.1  # many lanes did stop early
 
 
 @pytest.mark.parametrize("coverage", [0.1, 0.4, 0.8])

@@ -130,16 +130,18 @@ def band_weight(wavelength_m, footprint_m, ops: Ops = NUMPY):
 
 
 def series(rows: dict[str, NDArray], term, outputs: int, footprint_m=None, ops: Ops = NUMPY,
-           count: int | None = None):
+           count: int | None = None, settled=None):
     """The sum over the rows of a table of ``term(row, footprint_m, ops)`` (each a tuple of
     ``outputs`` arrays, summed element-wise): ``rows`` maps a column name to its values per row
     (float32 or uint32), with a ``wavelength`` column in decreasing order. At a footprint,
     a term whose wavelength is at most :data:`FADE_LO` footprints is taken to add nothing,
     so a kernel stops at the first such row (``ops.series_loop``); ``count``: only the
     first that many rows. A row's values enter a kernel as parameters (a new table
-    compiles nothing). A :class:`Slant` footprint stops the kernel at its narrowest axis."""
+    compiles nothing). A :class:`Slant` footprint stops the kernel at its narrowest axis.
+    ``settled(total, row, ops)``: true where the rows from ``row`` on can no longer change
+    what the caller makes of the sum (a kernel's lane stops there; the numpy loop sums on)."""
     if footprint_m is not None and ops.series_loop is not None and count is None:
-        return ops.series_loop(rows, term, footprint_m, outputs)
+        return ops.series_loop(rows, term, footprint_m, outputs, settled)
     total = None
     n = len(rows["wavelength"]) if count is None else count
     for i in range(n):
@@ -235,10 +237,11 @@ class FractalField:
                 "ox": offsets[:, 0], "oy": offsets[:, 1],
                 "seed": np.array([(self.seed + o) % 2**32 for o in range(self.octaves)], dtype=np.uint32),
                 "amplitude": np.array([self.amplitude(o) for o in range(self.octaves)], dtype=np.float32),
+                "rest": np.array([self.bound(o) for o in range(self.octaves)], dtype=np.float32),
                 "wavelength": np.array([self.shortest_wavelength_m(o) for o in range(self.octaves)],
                                        dtype=np.float32)}
 
-    def __call__(self, x, y, footprint_m=None, ops: Ops = NUMPY, octaves: int | None = None):
+    def __call__(self, x, y, footprint_m=None, ops: Ops = NUMPY, octaves: int | None = None, settled=None):
         """The field at ``(x, y)`` metres (float32 arrays): every octave (``footprint_m``
         None) or each weighted by :meth:`weight` at that pixel footprint; ``octaves``: only
         the first that many."""
@@ -250,7 +253,7 @@ class FractalField:
                 term = term * band_weight(row["wavelength"], footprint_m, ops)
             return (term,)
 
-        return series(self.rows(), octave, 1, footprint_m, ops, count=octaves)[0]
+        return series(self.rows(), octave, 1, footprint_m, ops, count=octaves, settled=settled)[0]
 
 
 def sample_grid(field: FractalField, span_m: float, n: int, octaves: int | None = None) -> NDArray[np.float32]:

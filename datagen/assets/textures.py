@@ -138,9 +138,27 @@ class CloudLayer:
             return value * ops.f32(0.0)
         return ramp(value, ops.param_f32(self.threshold), CLOUD_CORE, ops)
 
+    def settled(self, total, row, ops: Ops = NUMPY, *, core: bool = True):
+        """Where octaves still to come (at most ``row["rest"]`` in all) can change neither
+        opacity nor, with ``core``, the core: the field so far ``total`` lies that far below
+        the threshold or above full opacity (:data:`CLOUD_EDGE`) or the thickest core
+        (:data:`CLOUD_CORE`)."""
+        value, rest = total[0], row["rest"]
+        threshold = ops.param_f32(self.threshold)
+        top = ops.f32(max(CLOUD_EDGE, CLOUD_CORE) if core else CLOUD_EDGE)
+        return (value + rest < threshold) | (value - rest > threshold + top)
+
+    def value(self, x, y, footprint_m=None, ops: Ops = NUMPY, *, core: bool = True):
+        """The field at ``(x, y)``, its octaves summed only while they can matter to
+        :meth:`opacity_of` and, with ``core``, :meth:`core_of` (a kernel stops a lane where
+        they no longer can)."""
+        if not math.isfinite(self.threshold):
+            return self.field(x, y, footprint_m, ops)
+        return self.field(x, y, footprint_m, ops, settled=functools.partial(self.settled, core=core))
+
     def __call__(self, x, y, footprint_m=None, ops: Ops = NUMPY):
         """Opacity at ``(x, y)`` metres, filtered to a pixel of ``footprint_m`` metres there."""
-        return self.opacity_of(self.field(x, y, footprint_m, ops), ops)
+        return self.opacity_of(self.value(x, y, footprint_m, ops, core=False), ops)
 
 
 @dataclass(frozen=True)

@@ -80,7 +80,7 @@ def evaluate(fn, *arrays: np.ndarray) -> np.ndarray:
     return np.asarray(out, dtype=np.float32).reshape(np.shape(arrays[0]))
 
 
-def _series_loop(ops: Ops, rows: dict[str, np.ndarray], term, footprint_m, outputs: int):
+def _series_loop(ops: Ops, rows: dict[str, np.ndarray], term, footprint_m, outputs: int, settled=None):
     """:func:`datagen.assets.noise.series` at a footprint as a loop over rows that each lane
     leaves at its first row a pixel cannot hold (every later one is shorter): far away, few
     terms cost anything. The rows are opaque arrays gathered per step; the sum is the same,
@@ -96,8 +96,13 @@ def _series_loop(ops: Ops, rows: dict[str, np.ndarray], term, footprint_m, outpu
     width = dr.width(narrowest)
 
     def cond(i, *total):
-        wavelength = dr.gather(mi.Float, table["wavelength"], dr.minimum(i, n - 1))
-        return (i < n) & (wavelength > limit)
+        last = dr.minimum(i, n - 1)
+        wavelength = dr.gather(mi.Float, table["wavelength"], last)
+        going = (i < n) & (wavelength > limit)
+        if settled is not None:
+            row = {name: dr.gather(type(table[name]), table[name], last) for name in ("rest",)}
+            going &= ~settled(total, row, ops)
+        return going
 
     def body(i, *total):
         row = {name: dr.gather(type(values), values, i) for name, values in table.items()}

@@ -351,7 +351,7 @@ def _layer_radiance(layer: textures.CloudLayer, light: tuple[float, float, float
     lets through, 0.3 of it at full opacity and half that again in a core."""
     import mitsuba as mi
 
-    value = layer.field(x, y, footprint_m, ops)
+    value = layer.value(x, y, footprint_m, ops)
     opacity, core = layer.opacity_of(value, ops), layer.core_of(value, ops)
     f = ops.f32
     if above:
