@@ -121,6 +121,39 @@ def test_the_kernel_shades_the_same_opacity_and_core_as_numpy_where_lanes_stop_e
     assert (value != layer.field(x, y, footprint)).mean() > 0.1  # many lanes did stop early
 
 
+def test_a_one_sided_emitters_texture_sums_no_term_behind_it_and_emits_the_same() -> None:
+    mi = pytest.importorskip("mitsuba")
+    import drjit as dr
+
+    from datagen.assets.textures import CloudLayer
+    from datagen.render.procedural import texture_class
+    from datagen.render.runtime import use_variant
+
+    variant = use_variant("llvm_ad_rgb")
+    layer = CloudLayer.drawn(np.random.default_rng(5), 0.6, 0.9, 168_000.0)
+    rng = np.random.default_rng(6)
+    n = 20_000
+    x, y = rng.uniform(-2e4, 2e4, (2, n)).astype(np.float32)
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.p = mi.Point3f(mi.Float(x), mi.Float(y), mi.Float(np.full(n, 900.0, np.float32)))
+    si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+    facing = rng.random(n) < 0.5
+    si.wi = mi.Vector3f(0.3, 0.1, mi.Float(np.where(facing, 0.9, -0.9).astype(np.float32)))
+    emitted, footprints = {}, {}
+    for front_only in (False, True):
+        texture = texture_class(variant)(pixel_rad=1.0 / 1500.0, colour=True, front_only=front_only)
+        texture.camera = (0.0, 0.0, 20.0)
+        texture.shade = lambda x, y, f, ops: mi.Color3f(layer(x, y, f, ops))
+        emitter = mi.load_dict({"type": "area", "radiance": texture})
+        emitted[front_only] = np.asarray(emitter.eval(si))
+        texture.shade = lambda x, y, f, ops: mi.Color3f(f)
+        footprints[front_only] = np.asarray(texture.eval(si))[0]
+    np.testing.assert_array_equal(emitted[True], emitted[False])
+    assert np.all(np.isinf(footprints[True][~facing])) and np.all(np.isfinite(footprints[True][facing]))
+    assert np.all(np.isfinite(footprints[False]))
+    assert (emitted[True][:, facing] > 0).any()  # (3, lanes): the front does emit
+
+
 @pytest.mark.parametrize("coverage", [0.1, 0.4, 0.8])
 def test_a_cloud_layer_covers_the_share_of_sky_it_was_drawn_with(coverage: float) -> None:
     span = 168_000.0

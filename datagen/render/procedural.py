@@ -119,16 +119,21 @@ def texture_class(variant: str):
     camera's render-frame position goes in ``camera`` and a pixel's angle in
     ``pixel_rad``. ``eval`` returns what ``shade`` does (a colour or a value); ``slant``: the
     texture lies on a horizontal plane, and ``shade`` gets its footprint there as a
-    :class:`~datagen.assets.noise.Slant`."""
+    :class:`~datagen.assets.noise.Slant`; ``front_only``: the texture is the radiance of a
+    one-sided ``area`` emitter, which shows nothing of it behind its surface (Mitsuba's
+    ``area`` returns 0 there but evaluates its texture first): a lane that sees the back
+    gets an infinite footprint, so that a series sums no term there."""
     import drjit as dr
     import mitsuba as mi
 
     class FieldTexture(mi.Texture):
-        def __init__(self, props=None, *, pixel_rad: float = 1e-3, colour: bool = False, slant: bool = False):
+        def __init__(self, props=None, *, pixel_rad: float = 1e-3, colour: bool = False, slant: bool = False,
+                     front_only: bool = False):
             super().__init__(props if props is not None else mi.Properties())
             self.pixel_rad = float(pixel_rad)
             self.colour = colour
             self.slant = slant
+            self.front_only = front_only
             self.camera = (0.0, 0.0, 0.0)
             self.shade = None  # (x, y, footprint_m, ops) -> value (Float, or Color3f when colour)
 
@@ -139,6 +144,8 @@ def texture_class(variant: str):
                 view = p - np.asarray(self.camera)
                 distance = np.linalg.norm(view)
                 footprint = np.float32(distance * self.pixel_rad)
+                if self.front_only and not si.wi[2] > 0.0:
+                    footprint = np.float32(np.inf)
                 if self.slant:
                     height = max(abs(view[2]), distance / SLANT_STRETCH_MAX)
                     footprint = Slant(footprint, np.float32(view[0] / height), np.float32(view[1] / height))
@@ -148,6 +155,8 @@ def texture_class(variant: str):
             view = si.p - camera
             distance = dr.norm(view)
             footprint = distance * self.pixel_rad
+            if self.front_only:
+                footprint = dr.select(mi.Frame3f.cos_theta(si.wi) > 0.0, footprint, dr.inf)
             if self.slant:
                 height = dr.maximum(dr.abs(view.z), distance * (1.0 / SLANT_STRETCH_MAX))
                 footprint = Slant(footprint, view.x / height, view.y / height)

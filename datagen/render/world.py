@@ -155,7 +155,7 @@ class World:
         entries = {}
         for name in CLOUD_LAYERS:
             opacity = field_texture(pixel_rad=self.pixel_rad)
-            radiance = field_texture(pixel_rad=self.pixel_rad, colour=True)
+            radiance = field_texture(pixel_rad=self.pixel_rad, colour=True, front_only=True)
             for texture in (opacity, radiance):
                 texture.shade = _clear
             self._cloud_textures[name] = (opacity, radiance)
