@@ -83,9 +83,8 @@ def evaluate(fn, *arrays: np.ndarray) -> np.ndarray:
 def _series_loop(ops: Ops, rows: dict[str, np.ndarray], term, footprint_m, outputs: int, settled=None):
     """:func:`datagen.assets.noise.series` at a footprint as a loop over rows that each lane
     leaves at its first row a pixel cannot hold (every later one is shorter): far away, few
-    terms cost anything. The rows are opaque arrays gathered per step, the float columns
-    four at a time (a packet gather); the sum is the same, term by term, as the Python
-    loop's."""
+    terms cost anything. The rows are opaque arrays gathered per step; the sum is the same,
+    term by term, as the Python loop's."""
     import drjit as dr
     import mitsuba as mi
 
@@ -105,19 +104,8 @@ def _series_loop(ops: Ops, rows: dict[str, np.ndarray], term, footprint_m, outpu
             going &= ~settled(total, row, ops)
         return going
 
-    # The float columns travel in packets of four per row (one packet gather, not four gathers).
-    floats = [name for name, values in rows.items() if values.dtype != np.uint32]
-    floats += [None] * (-len(floats) % 4)
-    packets = [mi.Float(np.stack([rows[name] if name else np.zeros(n, np.float32) for name in floats[k:k + 4]],
-                                 axis=1).reshape(-1)) for k in range(0, len(floats), 4)]
-    dr.make_opaque(*packets)
-
     def body(i, *total):
-        row = {name: dr.gather(type(values), values, i) for name, values in table.items()
-               if rows[name].dtype == np.uint32}
-        for k, packet in enumerate(packets):
-            values = dr.gather(mi.Vector4f, packet, i)
-            row.update({name: values[j] for j, name in enumerate(floats[4 * k:4 * k + 4]) if name})
+        row = {name: dr.gather(type(values), values, i) for name, values in table.items()}
         return i + 1, *(a + b for a, b in zip(total, term(row, footprint_m, ops), strict=True))
 
     state = (mi.UInt32(0), *(dr.zeros(mi.Float, width) for _ in range(outputs)))
