@@ -7,9 +7,9 @@ Each scene is built as a user builds it (a subprocess: ``datagen build --config 
 has work), after a warm-up build of the same frames: Dr.Jit compiles its kernels once per
 machine and keeps them on disk, one per combination of the sky's scale levels
 (``datagen.scene.look.SKY_SCALE_LEVELS`` squared), which a 10,000-frame build pays once;
-a timed build whose frames draw combinations not seen before would count their compiles. Prints a markdown table: the
-estimate the build printed in its first line, the measured frames/h of the build's own
-summary, and its split of a rendered frame.
+a timed build whose frames drew combinations not seen before would count their compiles.
+Prints a markdown table: the estimate the build printed in its first line, the measured
+frames/h of the build's own summary, and its split of a rendered frame.
 """
 
 from __future__ import annotations

@@ -100,8 +100,7 @@ def _series_loop(ops: Ops, rows: dict[str, np.ndarray], term, footprint_m, outpu
         wavelength = dr.gather(mi.Float, table["wavelength"], last)
         going = (i < n) & (wavelength > limit)
         if settled is not None:
-            row = {name: dr.gather(type(table[name]), table[name], last) for name in ("rest",)}
-            going &= ~settled(total, row, ops)
+            going &= ~settled(total, {"rest": dr.gather(mi.Float, table["rest"], last)}, ops)
         return going
 
     def body(i, *total):
