@@ -25,10 +25,13 @@ import numpy as np
 
 from datagen.assets.noise import FADE_LO, NUMPY, Ops, Slant
 
-__all__ = ["drjit_ops", "evaluate", "texture_class"]
+__all__ = ["drjit_ops", "evaluate", "mask_class", "texture_class"]
 
 #: The area a texture's field is evaluated on: its surface's render-frame x and y (metres).
 PLANE_AXES: Final = (0, 1)
+#: A series' first rows are summed in straight-line code (every lane needs them: a pixel
+#: holds a field's longest waves almost everywhere), the rest in a loop lanes leave early.
+UNROLLED: Final = 4
 #: A slant footprint's length along the view: 1 / cos of the view's angle to the vertical, up to this.
 SLANT_STRETCH_MAX: Final = 50.0
 
@@ -81,33 +84,52 @@ def evaluate(fn, *arrays: np.ndarray) -> np.ndarray:
 
 
 def _series_loop(ops: Ops, rows: dict[str, np.ndarray], term, footprint_m, outputs: int, settled=None):
-    """:func:`datagen.assets.noise.series` at a footprint as a loop over rows that each lane
-    leaves at its first row a pixel cannot hold (every later one is shorter): far away, few
-    terms cost anything. The rows are opaque arrays gathered per step; the sum is the same,
-    term by term, as the Python loop's."""
+    """:func:`datagen.assets.noise.series` at a footprint: the first :data:`UNROLLED` rows in
+    straight-line code, then a loop over the rest that each lane leaves at its first row a
+    pixel cannot hold (every later one is shorter): far away, few terms cost anything. A
+    lane that stops within the first rows adds none of the rest (both rules only ever stop
+    a lane for good), so the sum is the same, term by term, as the Python loop's. The
+    straight-line rows are opaque scalars, the loop's rows opaque arrays gathered per
+    step: a new draw compiles no kernel."""
     import drjit as dr
     import mitsuba as mi
 
     n = len(rows["wavelength"])
-    table = {name: (mi.UInt32 if values.dtype == np.uint32 else mi.Float)(values) for name, values in rows.items()}
-    dr.make_opaque(*table.values())  # device arrays, not literals: a new draw compiles no kernel
     narrowest = footprint_m.across if isinstance(footprint_m, Slant) else footprint_m
     limit = narrowest * FADE_LO  # a term whose wavelength is at most this adds nothing
     width = dr.width(narrowest)
 
+    def going(row, total):
+        go = row["wavelength"] > limit
+        if settled is not None:
+            go &= ~settled(total, {"rest": row["rest"]}, ops)
+        return go
+
+    total = tuple(dr.zeros(mi.Float, width) for _ in range(outputs))
+    active = dr.full(mi.Bool, True, width)
+    for i in range(min(UNROLLED, n)):
+        row = {name: (ops.param_u32 if values.dtype == np.uint32 else ops.param_f32)(values[i])
+               for name, values in rows.items()}
+        active &= going(row, total)
+        total = tuple(dr.select(active, a + b, a) for a, b in zip(total, term(row, footprint_m, ops), strict=True))
+    if n <= UNROLLED:
+        return total
+
+    table = {name: (mi.UInt32 if values.dtype == np.uint32 else mi.Float)(values) for name, values in rows.items()}
+    dr.make_opaque(*table.values())  # device arrays, not literals: a new draw compiles no kernel
+
     def cond(i, *total):
         last = dr.minimum(i, n - 1)
-        wavelength = dr.gather(mi.Float, table["wavelength"], last)
-        going = (i < n) & (wavelength > limit)
+        row = {"wavelength": dr.gather(mi.Float, table["wavelength"], last)}
         if settled is not None:
-            going &= ~settled(total, {"rest": dr.gather(mi.Float, table["rest"], last)}, ops)
-        return going
+            row["rest"] = dr.gather(mi.Float, table["rest"], last)
+        return (i < n) & going(row, total)
 
     def body(i, *total):
         row = {name: dr.gather(type(values), values, i) for name, values in table.items()}
         return i + 1, *(a + b for a, b in zip(total, term(row, footprint_m, ops), strict=True))
 
-    state = (mi.UInt32(0), *(dr.zeros(mi.Float, width) for _ in range(outputs)))
+    state = (dr.select(active, mi.UInt32(UNROLLED), mi.UInt32(n)), *total)
     return dr.while_loop(state=state, cond=cond, body=body)[1:]
 
 
@@ -121,7 +143,9 @@ def texture_class(variant: str):
     :class:`~datagen.assets.noise.Slant`; ``front_only``: the texture is the radiance of a
     one-sided ``area`` emitter, which shows nothing of it behind its surface (Mitsuba's
     ``area`` returns 0 there but evaluates its texture first): a lane that sees the back
-    gets an infinite footprint, so that a series sums no term there."""
+    gets an infinite footprint, so that a series sums no term there. An opacity's owner
+    may also set ``cover`` (``(x, y, footprint_m, u, ops)``: whether the value exceeds
+    ``u``), which :func:`mask_class` asks instead of the value."""
     import drjit as dr
     import mitsuba as mi
 
@@ -135,8 +159,10 @@ def texture_class(variant: str):
             self.front_only = front_only
             self.camera = (0.0, 0.0, 0.0)
             self.shade = None  # (x, y, footprint_m, ops) -> value (Float, or Color3f when colour)
+            self.cover = None  # (x, y, footprint_m, u, ops) -> whether shade's value exceeds u (an opacity's)
 
-        def _value(self, si):
+        def _at(self, si):
+            """``(x, y, footprint_m)`` of the point ``si``, for ``shade`` and ``cover``."""
             ops = drjit_ops()
             if ops is NUMPY:  # a scalar variant: one point, numpy's wrapping uint32 arithmetic
                 p = np.array([si.p.x, si.p.y, si.p.z], dtype=np.float64)
@@ -148,8 +174,7 @@ def texture_class(variant: str):
                 if self.slant:
                     height = max(abs(view[2]), distance / SLANT_STRETCH_MAX)
                     footprint = Slant(footprint, np.float32(view[0] / height), np.float32(view[1] / height))
-                with np.errstate(over="ignore"):
-                    return self.shade(np.float32(p[0]), np.float32(p[1]), footprint, ops)
+                return np.float32(p[0]), np.float32(p[1]), footprint
             camera = mi.Point3f(*(dr.opaque(mi.Float, float(c)) for c in self.camera))
             view = si.p - camera
             distance = dr.norm(view)
@@ -159,7 +184,16 @@ def texture_class(variant: str):
             if self.slant:
                 height = dr.maximum(dr.abs(view.z), distance * (1.0 / SLANT_STRETCH_MAX))
                 footprint = Slant(footprint, view.x / height, view.y / height)
-            return self.shade(si.p.x, si.p.y, footprint, ops)
+            return si.p.x, si.p.y, footprint
+
+        def _value(self, si):
+            with np.errstate(over="ignore"):
+                return self.shade(*self._at(si), drjit_ops())
+
+        def covers(self, si, u):
+            """Whether the texture, an opacity, exceeds ``u`` at ``si`` (``cover``'s answer)."""
+            with np.errstate(over="ignore"):
+                return self.cover(*self._at(si), u, drjit_ops())
 
         def eval(self, si, active=True):
             v = self._value(si)
@@ -183,3 +217,59 @@ def texture_class(variant: str):
 
     assert mi.variant() == variant
     return FieldTexture
+
+
+@functools.cache
+def mask_class(variant: str):
+    """Mitsuba's ``mask`` BSDF over a black mirror, as a Python :class:`mitsuba.BSDF` whose
+    opacity is a :func:`texture_class` texture with a ``cover``: the same scattering, but
+    sampling asks the texture only whether a path stops (``u < opacity``), which a
+    procedural opacity answers as soon as the terms still to come cannot change the answer,
+    most often long before its value is known. Shadow rays' null transmission
+    (``1 - opacity``) takes the whole value, as ``mask`` does.
+
+    Like ``mask``: a path that meets the surface stops there (the black mirror reflects
+    nothing) with probability ``opacity``, or passes it unchanged (weight 1, a ``Null``
+    event, whose pdf the path tracers do not use: it reports 1); ``eval`` and ``pdf`` are
+    zero (a delta lobe)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    F = mi.BSDFFlags
+    mirror = F.DeltaReflection | F.FrontSide
+    null = F.Null | F.FrontSide | F.BackSide
+
+    class OpacityMask(mi.BSDF):
+        def __init__(self, opacity, props=None):
+            super().__init__(props if props is not None else mi.Properties())
+            self.opacity = opacity
+            self.m_components = [mirror, null]
+            self.m_flags = mirror | null
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            stops = self.opacity.covers(si, sample1)
+            bs = dr.zeros(mi.BSDFSample3f)
+            bs.wo = dr.select(stops, mi.reflect(si.wi), -si.wi)
+            bs.eta = 1.0
+            bs.sampled_component = dr.select(stops, mi.UInt32(0), mi.UInt32(1))
+            bs.sampled_type = dr.select(stops, mi.UInt32(+F.DeltaReflection), mi.UInt32(+F.Null))
+            bs.pdf = 1.0
+            return bs, dr.select(stops, mi.Color3f(0.0), mi.Color3f(1.0))
+
+        def eval(self, ctx, si, wo, active=True):
+            return mi.Color3f(0.0)
+
+        def pdf(self, ctx, si, wo, active=True):
+            return mi.Float(0.0)
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            return mi.Color3f(0.0), mi.Float(0.0)
+
+        def eval_null_transmission(self, si, active=True):  # the mirror transmits nothing
+            return mi.Color3f(1.0 - dr.clip(self.opacity.eval_1(si, active), 0.0, 1.0))
+
+        def to_string(self):
+            return "OpacityMask[]"
+
+    assert mi.variant() == variant
+    return OpacityMask

@@ -148,7 +148,7 @@ class World:
         import mitsuba as mi
 
         from datagen.render.mitsuba import mitsuba_mesh
-        from datagen.render.procedural import texture_class
+        from datagen.render.procedural import mask_class, texture_class
 
         field_texture = texture_class(mi.variant())
         verts, faces = _cloud_grid()
@@ -158,11 +158,11 @@ class World:
             radiance = field_texture(pixel_rad=self.pixel_rad, colour=True, front_only=True)
             for texture in (opacity, radiance):
                 texture.shade = _clear
+            opacity.cover = _uncovered
             self._cloud_textures[name] = (opacity, radiance)
             # Behind the mask, a black mirror: a delta lobe, so that the path tracer spends no
             # shadow ray on a surface that reflects nothing (a black diffuse one would).
-            bsdf = mi.load_dict({"type": "mask", "opacity": opacity, "bsdf": {
-                "type": "conductor", "specular_reflectance": {"type": "rgb", "value": 0.0}}})
+            bsdf = mask_class(mi.variant())(opacity)
             emitter = mi.load_dict({"type": "area", "sampling_weight": 0.0,  # found by paths, never sampled
                                     "radiance": radiance})
             # Built with every cell in place: the acceleration structure then follows the
@@ -241,6 +241,7 @@ class World:
                 for texture in (opacity, radiance):
                     texture.camera = tuple(float(c) for c in camera_render)
                 opacity.shade = layer  # CloudLayer(x, y, footprint_m, ops): the opacity
+                opacity.cover = layer.covers
                 radiance.shade = functools.partial(_layer_radiance, layer, tuple(float(c) for c in light), above)
                 if fresh or self._cloud_height.get(name) != height:  # the mesh moves only when it must
                     set_buffer(params, f"{name}.vertex_positions", _cloud_cells(self._cloudy[name], height))
@@ -304,6 +305,12 @@ class World:
 
         footprint = np.asarray(distance_m) * self.pixel_rad
         return evaluate(layer, np.asarray(xy)[:, 0], np.asarray(xy)[:, 1], footprint)
+
+
+def _uncovered(x, y, footprint_m, u, ops):
+    """A layer without cloud stops no path."""
+    return u < x * ops.f32(0.0)
+
 
 def _clear(x, y, footprint_m, ops):
     """A layer without cloud."""
