@@ -60,7 +60,7 @@ def test_a_field_far_away_keeps_only_the_octaves_a_pixel_can_hold() -> None:
     assert 0.0 < weight < 1.0
 
 
-def test_a_kernel_series_sums_exactly_the_terms_before_each_lanes_stop_in_or_after_its_straight_line_rows(
+def test_a_kernel_series_sums_the_terms_before_each_lanes_stop_in_or_after_its_straight_line_rows(
         ) -> None:
     pytest.importorskip("mitsuba")
     from datagen.render.procedural import UNROLLED, evaluate
@@ -129,7 +129,7 @@ def test_a_lane_stops_summing_octaves_only_where_the_rest_cannot_change_opacity_
             np.testing.assert_array_equal(layer.opacity_of(partial[here]), layer.opacity_of(full[here]))
             if core:  # the smoothstep's steepest slope is 1.5 over its width
                 moved = np.abs(layer.core_of(partial[here]) - layer.core_of(full[here]))
-                assert np.all(moved <= 1.5 / CLOUD_CORE * CLOUD_CORE_TOLERANCE + 1e-6)
+                assert np.all(moved <= 1.5 / CLOUD_CORE * CLOUD_CORE_TOLERANCE + 1e-5)
     assert stopped > 0  # the rule stops lanes at all
 
 
@@ -174,7 +174,7 @@ def test_the_kernel_shades_the_same_opacity_as_numpy_and_the_core_within_its_tol
 
     np.testing.assert_array_equal(evaluate(opacity, x, y, footprint), opacity(x, y, footprint, NUMPY))
     moved = np.abs(evaluate(core, x, y, footprint) - core(x, y, footprint, NUMPY))
-    assert moved.max() <= 1.5 / CLOUD_CORE * CLOUD_CORE_TOLERANCE + 1e-6 and (moved > 0).any()
+    assert moved.max() <= 1.5 / CLOUD_CORE * CLOUD_CORE_TOLERANCE + 1e-5 and (moved > 0).any()
     value = evaluate(lambda x, y, f, ops: layer.value(x, y, f, ops), x, y, footprint)
     assert (value != layer.field(x, y, footprint)).mean() > 0.1  # many lanes did stop early
 
@@ -245,6 +245,39 @@ def test_the_cloud_mask_stops_and_passes_paths_and_shadows_exactly_as_mitsubas_m
     np.testing.assert_array_equal(np.asarray(ours.eval_null_transmission(si)),
                                   np.asarray(theirs.eval_null_transmission(si)))
     assert not np.asarray(ours.eval(ctx, si, mi.Vector3f(0, 0, 1))).any()
+
+
+def test_the_cloud_mask_samples_under_the_scalar_variant_as_mitsubas_mask_does() -> None:
+    mi = pytest.importorskip("mitsuba")
+
+    from datagen.render.procedural import mask_class, texture_class
+    from datagen.render.runtime import use_variant
+
+    variant = use_variant("scalar_rgb")
+    try:
+        layer = CloudLayer.drawn(np.random.default_rng(7), 0.5, 0.9, 168_000.0)
+        opacity = texture_class(variant)(pixel_rad=1.0 / 1500.0)
+        opacity.camera = (0.0, 0.0, 20.0)
+        opacity.shade, opacity.cover = layer, layer.covers
+        ours = mask_class(variant)(opacity)
+        theirs = mi.load_dict({"type": "mask", "opacity": opacity, "bsdf": {
+            "type": "conductor", "specular_reflectance": {"type": "rgb", "value": 0.0}}})
+        rng = np.random.default_rng(9)
+        answers = set()
+        for _ in range(60):
+            si = mi.SurfaceInteraction3f()
+            si.p = mi.Point3f(*rng.uniform(-2e4, 2e4, 2), 900.0)
+            si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+            si.wi = mi.Vector3f(0.3, 0.1, 0.9)
+            u = float(rng.random())
+            (bs_a, w_a), (bs_b, w_b) = (b.sample(mi.BSDFContext(), si, u, mi.Point2f(0.5, 0.5)) for b in (ours, theirs))
+            passes = mi.has_flag(bs_a.sampled_type, mi.BSDFFlags.Null)
+            assert passes == mi.has_flag(bs_b.sampled_type, mi.BSDFFlags.Null)
+            assert np.array_equal(np.asarray(w_a), np.asarray(w_b))
+            answers.add(bool(passes))
+        assert answers == {True, False}
+    finally:
+        use_variant("llvm_ad_rgb")
 
 
 @pytest.mark.parametrize("coverage", [0.1, 0.4, 0.8])

@@ -34,6 +34,7 @@ __all__ = [
     "CLOUD_GAIN",
     "CLOUD_OCTAVES",
     "CLOUD_WAVELENGTH_M",
+    "COVER_MARGIN",
     "FOAM_ALBEDO",
     "LIVERY_TEXELS",
     "WAVE_DIRECTIONS",
@@ -177,9 +178,10 @@ class CloudLayer:
     def decided(self, total, row, ops: Ops = NUMPY, *, u):
         """Where octaves still to come (at most ``row["rest"]``, plus :data:`COVER_MARGIN`
         for float rounding) cannot carry the opacity of the field so far ``total`` across
-        ``u`` (wherever :meth:`settled` without core holds, this does too)."""
+        ``u``, and wherever :meth:`settled` without core holds (the opacity is then known)."""
         value, rest = total[0], row["rest"] + ops.f32(COVER_MARGIN)
-        return (u < self.opacity_of(value - rest, ops)) | (u >= self.opacity_of(value + rest, ops))
+        return (self.settled(total, row, ops, core=False) | (u < self.opacity_of(value - rest, ops))
+                | (u >= self.opacity_of(value + rest, ops)))
 
     def covers(self, x, y, footprint_m, u, ops: Ops = NUMPY):
         """Whether the opacity at ``(x, y)`` (:meth:`__call__`, clipped to [0, 1]) exceeds

@@ -191,9 +191,12 @@ def texture_class(variant: str):
                 return self.shade(*self._at(si), drjit_ops())
 
         def covers(self, si, u):
-            """Whether the texture, an opacity, exceeds ``u`` at ``si`` (``cover``'s answer)."""
+            """Whether the texture, an opacity, exceeds ``u`` at ``si`` (``cover``'s answer;
+            a Python bool under a scalar variant)."""
+            ops = drjit_ops()
             with np.errstate(over="ignore"):
-                return self.cover(*self._at(si), u, drjit_ops())
+                answer = self.cover(*self._at(si), np.float32(u) if ops is NUMPY else u, ops)
+            return bool(answer) if ops is NUMPY else answer
 
         def eval(self, si, active=True):
             v = self._value(si)
