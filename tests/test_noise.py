@@ -109,15 +109,20 @@ def test_the_kernel_evaluates_the_same_field_as_numpy() -> None:
     assert 0.0 < (kernel > 0.0).mean() < 1.0
 
 
+def _layer_points(seed: int, coverage: float, log_footprint: float):
+    """A cloud layer drawn from ``seed``, its series table, a generator for further draws, and
+    4,000 points over it seen at a footprint of ``10 ** log_footprint`` metres."""
+    layer = CloudLayer.drawn(np.random.default_rng(seed), coverage, 0.9, 168_000.0)
+    rng = np.random.default_rng(seed + 1)
+    x, y = rng.uniform(-8e4, 8e4, (2, 4000)).astype(np.float32)
+    return layer, layer.field.rows(), rng, x, y, np.float32(10.0**log_footprint)
+
+
 @settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 2**16), coverage=st.floats(0.05, 0.95), log_footprint=st.floats(-1.0, 2.5))
 def test_a_lane_stops_summing_octaves_only_where_the_rest_cannot_change_opacity_nor_the_core_beyond_its_tolerance(
         seed: int, coverage: float, log_footprint: float) -> None:
-    layer = CloudLayer.drawn(np.random.default_rng(seed), coverage, 0.9, 168_000.0)
-    rows = layer.field.rows()
-    rng = np.random.default_rng(seed + 1)
-    x, y = rng.uniform(-8e4, 8e4, (2, 4000)).astype(np.float32)
-    footprint = np.float32(10.0**log_footprint)
+    layer, rows, _, x, y, footprint = _layer_points(seed, coverage, log_footprint)
     full = layer.field(x, y, footprint)
     stopped = 0
     for k in range(1, layer.field.octaves):
@@ -137,12 +142,8 @@ def test_a_lane_stops_summing_octaves_only_where_the_rest_cannot_change_opacity_
 @given(seed=st.integers(0, 2**16), coverage=st.floats(0.05, 0.95), log_footprint=st.floats(-1.0, 2.5))
 def test_a_lane_stops_asking_whether_cloud_covers_it_only_where_every_later_octave_gives_the_same_answer(
         seed: int, coverage: float, log_footprint: float) -> None:
-    layer = CloudLayer.drawn(np.random.default_rng(seed), coverage, 0.9, 168_000.0)
-    rows = layer.field.rows()
-    rng = np.random.default_rng(seed + 1)
-    x, y = rng.uniform(-8e4, 8e4, (2, 4000)).astype(np.float32)
+    layer, rows, rng, x, y, footprint = _layer_points(seed, coverage, log_footprint)
     u = rng.random(4000).astype(np.float32)
-    footprint = np.float32(10.0**log_footprint)
     answer = u < np.clip(layer(x, y, footprint), 0.0, 1.0)
     early = 0
     for k in range(1, layer.field.octaves):
@@ -179,9 +180,39 @@ def test_the_kernel_shades_the_same_opacity_as_numpy_and_the_core_within_its_tol
     assert (value != layer.field(x, y, footprint)).mean() > 0.1  # many lanes did stop early
 
 
+def _layer_hits(rng: np.random.Generator, n: int):
+    """``n`` surface interactions on a horizontal cloud layer 880 m above the camera of
+    :func:`_cloud_masks`, half of them seen from its front (returned as a mask)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    x, y = rng.uniform(-2e4, 2e4, (2, n)).astype(np.float32)
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.p = mi.Point3f(mi.Float(x), mi.Float(y), mi.Float(np.full(n, 900.0, np.float32)))
+    si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+    facing = rng.random(n) < 0.5
+    si.wi = mi.Vector3f(0.3, 0.1, mi.Float(np.where(facing, 0.9, -0.9).astype(np.float32)))
+    return si, facing
+
+
+def _cloud_masks():
+    """The datagen cloud mask and Mitsuba's ``mask`` over a black mirror, in the current
+    variant, with one cloud layer's opacity seen from a camera at (0, 0, 20)."""
+    import mitsuba as mi
+
+    from datagen.render.procedural import mask_class, texture_class
+
+    layer = CloudLayer.drawn(np.random.default_rng(7), 0.5, 0.9, 168_000.0)
+    opacity = texture_class(mi.variant())(pixel_rad=1.0 / 1500.0)
+    opacity.camera = (0.0, 0.0, 20.0)
+    opacity.shade, opacity.cover = layer, layer.covers
+    theirs = mi.load_dict({"type": "mask", "opacity": opacity, "bsdf": {
+        "type": "conductor", "specular_reflectance": {"type": "rgb", "value": 0.0}}})
+    return mask_class(mi.variant())(opacity), theirs
+
+
 def test_a_one_sided_emitters_texture_sums_no_term_behind_it_and_emits_the_same() -> None:
     mi = pytest.importorskip("mitsuba")
-    import drjit as dr
 
     from datagen.assets.textures import CloudLayer
     from datagen.render.procedural import texture_class
@@ -189,14 +220,7 @@ def test_a_one_sided_emitters_texture_sums_no_term_behind_it_and_emits_the_same(
 
     variant = use_variant("llvm_ad_rgb")
     layer = CloudLayer.drawn(np.random.default_rng(5), 0.6, 0.9, 168_000.0)
-    rng = np.random.default_rng(6)
-    n = 20_000
-    x, y = rng.uniform(-2e4, 2e4, (2, n)).astype(np.float32)
-    si = dr.zeros(mi.SurfaceInteraction3f, n)
-    si.p = mi.Point3f(mi.Float(x), mi.Float(y), mi.Float(np.full(n, 900.0, np.float32)))
-    si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
-    facing = rng.random(n) < 0.5
-    si.wi = mi.Vector3f(0.3, 0.1, mi.Float(np.where(facing, 0.9, -0.9).astype(np.float32)))
+    si, facing = _layer_hits(np.random.default_rng(6), 20_000)
     emitted, footprints = {}, {}
     for front_only in (False, True):
         texture = texture_class(variant)(pixel_rad=1.0 / 1500.0, colour=True, front_only=front_only)
@@ -214,27 +238,13 @@ def test_a_one_sided_emitters_texture_sums_no_term_behind_it_and_emits_the_same(
 
 def test_the_cloud_mask_stops_and_passes_paths_and_shadows_exactly_as_mitsubas_mask_does() -> None:
     mi = pytest.importorskip("mitsuba")
-    import drjit as dr
-
-    from datagen.render.procedural import mask_class, texture_class
     from datagen.render.runtime import use_variant
 
-    variant = use_variant("llvm_ad_rgb")
-    layer = CloudLayer.drawn(np.random.default_rng(7), 0.5, 0.9, 168_000.0)
+    use_variant("llvm_ad_rgb")
     rng = np.random.default_rng(8)
-    n = 50_000
-    x, y = rng.uniform(-2e4, 2e4, (2, n)).astype(np.float32)
-    si = dr.zeros(mi.SurfaceInteraction3f, n)
-    si.p = mi.Point3f(mi.Float(x), mi.Float(y), mi.Float(np.full(n, 900.0, np.float32)))
-    si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
-    si.wi = mi.Vector3f(0.3, 0.1, mi.Float(np.where(rng.random(n) < 0.5, 0.9, -0.9).astype(np.float32)))
-    opacity = texture_class(variant)(pixel_rad=1.0 / 1500.0)
-    opacity.camera = (0.0, 0.0, 20.0)
-    opacity.shade, opacity.cover = layer, layer.covers
-    ours = mask_class(variant)(opacity)
-    theirs = mi.load_dict({"type": "mask", "opacity": opacity, "bsdf": {
-        "type": "conductor", "specular_reflectance": {"type": "rgb", "value": 0.0}}})
-    u = mi.Float(rng.random(n).astype(np.float32))
+    si, _ = _layer_hits(rng, 50_000)
+    ours, theirs = _cloud_masks()
+    u = mi.Float(rng.random(50_000).astype(np.float32))
     ctx = mi.BSDFContext()
     (bs_a, w_a), (bs_b, w_b) = (b.sample(ctx, si, u, mi.Point2f(0.5, 0.5)) for b in (ours, theirs))
     passes_a, passes_b = (np.asarray(mi.has_flag(bs.sampled_type, mi.BSDFFlags.Null)) for bs in (bs_a, bs_b))
@@ -249,19 +259,11 @@ def test_the_cloud_mask_stops_and_passes_paths_and_shadows_exactly_as_mitsubas_m
 
 def test_the_cloud_mask_samples_under_the_scalar_variant_as_mitsubas_mask_does() -> None:
     mi = pytest.importorskip("mitsuba")
-
-    from datagen.render.procedural import mask_class, texture_class
     from datagen.render.runtime import use_variant
 
-    variant = use_variant("scalar_rgb")
+    use_variant("scalar_rgb")
     try:
-        layer = CloudLayer.drawn(np.random.default_rng(7), 0.5, 0.9, 168_000.0)
-        opacity = texture_class(variant)(pixel_rad=1.0 / 1500.0)
-        opacity.camera = (0.0, 0.0, 20.0)
-        opacity.shade, opacity.cover = layer, layer.covers
-        ours = mask_class(variant)(opacity)
-        theirs = mi.load_dict({"type": "mask", "opacity": opacity, "bsdf": {
-            "type": "conductor", "specular_reflectance": {"type": "rgb", "value": 0.0}}})
+        ours, theirs = _cloud_masks()
         rng = np.random.default_rng(9)
         answers = set()
         for _ in range(60):

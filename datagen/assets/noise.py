@@ -19,7 +19,8 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["NOISE_BOUND", "NUMPY", "FractalField", "Ops", "Slant", "band_weight", "gradient_noise", "ramp", "series"]
+__all__ = ["NOISE_BOUND", "NUMPY", "FractalField", "Ops", "Slant", "band_weight", "gradient_noise", "ramp",
+           "row_params", "series"]
 
 #: |gradient_noise| never exceeds this: Perlin's noise with unit gradients peaks at sqrt(1/2)
 #: in two dimensions, and a corner gradient here is at most sqrt(2) long ([-1, 1]^2).
@@ -145,11 +146,16 @@ def series(rows: dict[str, NDArray], term, outputs: int, footprint_m=None, ops: 
     total = None
     n = len(rows["wavelength"]) if count is None else count
     for i in range(n):
-        row = {name: (ops.param_u32 if values.dtype == np.uint32 else ops.param_f32)(values[i])
-               for name, values in rows.items()}
-        t = term(row, footprint_m, ops)
+        t = term(row_params(rows, i, ops), footprint_m, ops)
         total = t if total is None else tuple(a + b for a, b in zip(total, t, strict=True))
     return total
+
+
+def row_params(rows: dict[str, NDArray], i: int, ops: Ops = NUMPY) -> dict:
+    """Row ``i`` of a :func:`series` table as kernel parameters made by ``ops`` (opaque
+    values: a new table compiles nothing)."""
+    return {name: (ops.param_u32 if values.dtype == np.uint32 else ops.param_f32)(values[i])
+            for name, values in rows.items()}
 
 
 def _fade(t, ops: Ops):

@@ -23,7 +23,7 @@ from typing import Final
 
 import numpy as np
 
-from datagen.assets.noise import FADE_LO, NUMPY, Ops, Slant
+from datagen.assets.noise import FADE_LO, NUMPY, Ops, Slant, row_params
 
 __all__ = ["drjit_ops", "evaluate", "mask_class", "texture_class"]
 
@@ -108,8 +108,7 @@ def _series_loop(ops: Ops, rows: dict[str, np.ndarray], term, footprint_m, outpu
     total = tuple(dr.zeros(mi.Float, width) for _ in range(outputs))
     active = dr.full(mi.Bool, True, width)
     for i in range(min(UNROLLED, n)):
-        row = {name: (ops.param_u32 if values.dtype == np.uint32 else ops.param_f32)(values[i])
-               for name, values in rows.items()}
+        row = row_params(rows, i, ops)
         active &= going(row, total)
         total = tuple(dr.select(active, a + b, a) for a, b in zip(total, term(row, footprint_m, ops), strict=True))
     if n <= UNROLLED:
