@@ -17,7 +17,7 @@ from datagen.core.camera import Intrinsics
 from datagen.core.conventions import CVCAM_FROM_MICAM
 
 __all__ = [
-    "aligned_float32",
+    "aligned",
     "jit_vectors",
     "mitsuba_mesh",
     "sensor_dict",
@@ -53,22 +53,26 @@ def mitsuba_mesh(name: str, vertices: ArrayLike, faces: ArrayLike, bsdf=None, te
 
 def set_buffer(params, key: str, array: ArrayLike) -> None:
     """Assign a flat numpy buffer to a mesh parameter in any variant (scalar
-    variants take their own dynamic array type, vectorized ones mi.Float/UInt32)."""
-    flat = np.ascontiguousarray(array).ravel()
-    params[key] = type(params[key])(flat)
+    variants take their own dynamic array type, vectorized ones mi.Float/UInt32), from
+    :func:`aligned` memory."""
+    flat = np.asarray(array).ravel()
+    params[key] = type(params[key])(aligned(flat, flat.dtype))
 
 
-def aligned_float32(values: ArrayLike) -> NDArray[np.float32]:
-    """A contiguous float32 copy of ``values`` that starts on a 64-byte boundary.
+def aligned(values: ArrayLike, dtype=np.float32) -> NDArray:
+    """A contiguous copy of ``values`` as ``dtype``, in their shape, that starts on a
+    64-byte boundary: what every numpy array handed to Dr.Jit goes through.
 
-    Dr.Jit maps numpy memory into a kernel without copying, and compiles the kernel
-    for the buffer's alignment: with numpy's arbitrary alignment every ray-casting
-    kernel would exist in aligned and unaligned variants, compiled anew by chance."""
-    flat = np.asarray(values, dtype=np.float32).ravel()
-    buffer = np.empty(flat.size + 16, dtype=np.float32)
-    start = (-buffer.ctypes.data % 64) // 4
-    out = buffer[start:start + flat.size]
-    out[...] = flat
+    Dr.Jit maps numpy memory into a kernel without copying, and compiles the kernel for
+    the buffer's alignment (an unaligned buffer's gathers are also slower): with numpy's
+    arbitrary alignment, a kernel reading a mesh, a texture or a table would exist in
+    aligned and unaligned variants, compiled anew by chance in each process (a render
+    kernel takes seconds)."""
+    src = np.asarray(values, dtype=dtype)
+    buffer = np.empty(src.size + 64 // src.dtype.itemsize, dtype=src.dtype)
+    start = (-buffer.ctypes.data % 64) // src.dtype.itemsize
+    out = buffer[start:start + src.size].reshape(src.shape)
+    out[...] = src
     return out
 
 
@@ -77,7 +81,7 @@ def jit_vectors(cls, xyz: ArrayLike):
     import mitsuba as mi
 
     xyz = np.asarray(xyz).reshape(-1, 3)
-    return cls(*(mi.Float(aligned_float32(xyz[:, i])) for i in range(3)))
+    return cls(*(mi.Float(aligned(xyz[:, i])) for i in range(3)))
 
 
 def world_from_micam(world_from_cam: ArrayLike) -> NDArray[np.float64]:
@@ -129,6 +133,6 @@ def visible(scene, origin: ArrayLike, points: ArrayLike, tolerance_m: float | Ar
             seen[i] = not scene.ray_test(ray)
         return seen
     ray = mi.Ray3f(jit_vectors(mi.Point3f, np.broadcast_to(o, (n, 3))), jit_vectors(mi.Vector3f, d))
-    ray.maxt = mi.Float(aligned_float32(max_t))
+    ray.maxt = mi.Float(aligned(max_t))
     hit = np.asarray(scene.ray_test(ray), dtype=bool).reshape(n)
     return ~hit
