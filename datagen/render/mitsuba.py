@@ -54,20 +54,25 @@ def mitsuba_mesh(name: str, vertices: ArrayLike, faces: ArrayLike, bsdf=None, te
 def set_buffer(params, key: str, array: ArrayLike) -> None:
     """Assign a flat numpy buffer to a mesh parameter in any variant (scalar
     variants take their own dynamic array type, vectorized ones mi.Float/UInt32), from
-    :func:`aligned` memory."""
-    flat = np.asarray(array).ravel()
-    params[key] = type(params[key])(aligned(flat, flat.dtype))
+    :func:`aligned` memory of the parameter's own element type (a buffer of another type
+    would be converted by a copy wherever numpy put it)."""
+    import drjit as dr
+
+    cls = type(params[key])
+    dtype = np.uint32 if dr.type_v(cls) == dr.VarType.UInt32 else np.float32
+    params[key] = cls(aligned(np.ravel(array), dtype))
 
 
 def aligned(values: ArrayLike, dtype=np.float32) -> NDArray:
-    """A contiguous copy of ``values`` as ``dtype``, in their shape, that starts on a
-    64-byte boundary: what every numpy array handed to Dr.Jit goes through.
+    """A contiguous copy of ``values`` as ``dtype`` (the element type of the Dr.Jit array
+    it becomes), in their shape, that starts on a 64-byte boundary: what every numpy array
+    handed to Dr.Jit goes through.
 
-    Dr.Jit maps numpy memory into a kernel without copying, and compiles the kernel for
-    the buffer's alignment (an unaligned buffer's gathers are also slower): with numpy's
-    arbitrary alignment, a kernel reading a mesh, a texture or a table would exist in
-    aligned and unaligned variants, compiled anew by chance in each process (a render
-    kernel takes seconds)."""
+    Dr.Jit maps numpy memory into a kernel without copying, and a kernel that loads a
+    buffer whole or in packets (a mesh's texture coordinates, a texture) is compiled for
+    the buffer's alignment, without packet gathers where it is unaligned: with numpy's
+    arbitrary alignment a render kernel would exist in aligned and unaligned variants,
+    compiled anew by chance in each process (seconds each)."""
     src = np.asarray(values, dtype=dtype)
     buffer = np.empty(src.size + 64 // src.dtype.itemsize, dtype=src.dtype)
     start = (-buffer.ctypes.data % 64) // src.dtype.itemsize

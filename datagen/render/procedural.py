@@ -115,7 +115,7 @@ def _series_loop(ops: Ops, rows: dict[str, np.ndarray], term, footprint_m, outpu
     if n <= UNROLLED:
         return total
 
-    table = {name: (mi.UInt32 if values.dtype == np.uint32 else mi.Float)(aligned(values, values.dtype))
+    table = {name: mi.UInt32(aligned(values, np.uint32)) if values.dtype == np.uint32 else mi.Float(aligned(values))
              for name, values in rows.items()}
     dr.make_opaque(*table.values())  # device arrays, not literals: a new draw compiles no kernel
 
