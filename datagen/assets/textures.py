@@ -157,10 +157,10 @@ class CloudLayer:
         or with at most the tolerance to come."""
         value, rest = total[0], row["rest"]
         threshold = ops.param_f32(self.threshold)
-        top = ops.f32(max(CLOUD_EDGE, CLOUD_CORE) if core else CLOUD_EDGE)
         clear, opaque = value + rest < threshold, value - rest > threshold + ops.f32(CLOUD_EDGE)
         if not core:
             return clear | opaque
+        top = ops.f32(max(CLOUD_EDGE, CLOUD_CORE))
         return clear | (opaque & ((rest <= ops.f32(CLOUD_CORE_TOLERANCE)) | (value - rest > threshold + top)))
 
     def value(self, x, y, footprint_m=None, ops: Ops = NUMPY, *, core: bool = True):

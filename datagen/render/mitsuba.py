@@ -18,6 +18,7 @@ from datagen.core.conventions import CVCAM_FROM_MICAM
 
 __all__ = [
     "aligned",
+    "jit_array",
     "jit_vectors",
     "mitsuba_mesh",
     "sensor_dict",
@@ -53,14 +54,18 @@ def mitsuba_mesh(name: str, vertices: ArrayLike, faces: ArrayLike, bsdf=None, te
 
 def set_buffer(params, key: str, array: ArrayLike) -> None:
     """Assign a flat numpy buffer to a mesh parameter in any variant (scalar
-    variants take their own dynamic array type, vectorized ones mi.Float/UInt32), from
-    :func:`aligned` memory of the parameter's own element type (a buffer of another type
-    would be converted by a copy wherever numpy put it)."""
+    variants take their own dynamic array type, vectorized ones mi.Float/UInt32)."""
+    params[key] = jit_array(type(params[key]), np.ravel(array))
+
+
+def jit_array(cls, values: ArrayLike):
+    """``values`` as the Dr.Jit array type ``cls`` (``mi.Float``, ``mi.UInt32``,
+    ``mi.TensorXf``, a scalar variant's dynamic arrays), made from :func:`aligned` memory
+    of its own element type (memory of another type would be converted by a copy wherever
+    numpy put it): how every numpy array reaches Dr.Jit."""
     import drjit as dr
 
-    cls = type(params[key])
-    dtype = np.uint32 if dr.type_v(cls) == dr.VarType.UInt32 else np.float32
-    params[key] = cls(aligned(np.ravel(array), dtype))
+    return cls(aligned(values, np.uint32 if dr.type_v(cls) == dr.VarType.UInt32 else np.float32))
 
 
 def aligned(values: ArrayLike, dtype=np.float32) -> NDArray:
@@ -86,7 +91,7 @@ def jit_vectors(cls, xyz: ArrayLike):
     import mitsuba as mi
 
     xyz = np.asarray(xyz).reshape(-1, 3)
-    return cls(*(mi.Float(aligned(xyz[:, i])) for i in range(3)))
+    return cls(*(jit_array(mi.Float, xyz[:, i]) for i in range(3)))
 
 
 def world_from_micam(world_from_cam: ArrayLike) -> NDArray[np.float64]:
@@ -138,6 +143,6 @@ def visible(scene, origin: ArrayLike, points: ArrayLike, tolerance_m: float | Ar
             seen[i] = not scene.ray_test(ray)
         return seen
     ray = mi.Ray3f(jit_vectors(mi.Point3f, np.broadcast_to(o, (n, 3))), jit_vectors(mi.Vector3f, d))
-    ray.maxt = mi.Float(aligned(max_t))
+    ray.maxt = jit_array(mi.Float, max_t)
     hit = np.asarray(scene.ray_test(ray), dtype=bool).reshape(n)
     return ~hit

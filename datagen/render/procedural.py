@@ -24,7 +24,7 @@ from typing import Final
 import numpy as np
 
 from datagen.assets.noise import FADE_LO, NUMPY, Ops, Slant, row_params
-from datagen.render.mitsuba import aligned
+from datagen.render.mitsuba import jit_array
 
 __all__ = ["drjit_ops", "evaluate", "mask_class", "texture_class"]
 
@@ -79,7 +79,7 @@ def evaluate(fn, *arrays: np.ndarray) -> np.ndarray:
     if ops is NUMPY:
         out = fn(*flat, ops)
     else:
-        out = fn(*(mi.Float(aligned(a)) for a in flat), ops)
+        out = fn(*(jit_array(mi.Float, a) for a in flat), ops)
         dr.eval(out)
     return np.asarray(out, dtype=np.float32).reshape(np.shape(arrays[0]))
 
@@ -115,7 +115,7 @@ def _series_loop(ops: Ops, rows: dict[str, np.ndarray], term, footprint_m, outpu
     if n <= UNROLLED:
         return total
 
-    table = {name: mi.UInt32(aligned(values, np.uint32)) if values.dtype == np.uint32 else mi.Float(aligned(values))
+    table = {name: jit_array(mi.UInt32 if values.dtype == np.uint32 else mi.Float, values)
              for name, values in rows.items()}
     dr.make_opaque(*table.values())  # device arrays, not literals: a new draw compiles no kernel
 

@@ -35,7 +35,7 @@ from datagen.core.camera import Intrinsics
 from datagen.core.conventions import OBJECT_NAMES, RIGID_OBJECTS, object_id, pixel_centres
 from datagen.core.transforms import make_transform
 from datagen.render.mitsuba import (
-    aligned,
+    jit_array,
     jit_vectors,
     mitsuba_mesh,
     sensor_dict,
@@ -296,7 +296,7 @@ class Renderer:
             return total / len(grid)
         if self._sky_probe_inputs is None:
             it = dr.zeros(mi.Interaction3f, n * n)
-            uv = mi.Point2f(mi.Float(aligned(grid[:, 0])), mi.Float(aligned(grid[:, 1])))
+            uv = mi.Point2f(jit_array(mi.Float, grid[:, 0]), jit_array(mi.Float, grid[:, 1]))
             dr.make_opaque(it, uv)
             self._sky_probe_inputs = it, uv
         ds, weight = sky.sample_direction(*self._sky_probe_inputs)

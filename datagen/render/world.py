@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from datagen.assets import textures
 from datagen.core.conventions import texture_rng
-from datagen.render.mitsuba import aligned
+from datagen.render.mitsuba import jit_array
 from datagen.scene.look import FrameLook
 
 if TYPE_CHECKING:
@@ -190,7 +190,7 @@ class World:
     def livery_base_color() -> dict:
         import mitsuba as mi
 
-        return {"type": "bitmap", "data": mi.TensorXf(aligned(np.full((textures.LIVERY_TEXELS,) * 2 + (3,), 0.5))),
+        return {"type": "bitmap", "data": jit_array(mi.TensorXf, np.full((textures.LIVERY_TEXELS,) * 2 + (3,), 0.5)),
                 "raw": True, "wrap_mode": "clamp", "filter_type": "bilinear"}
 
     # -- per frame -----------------------------------------------------------------------
@@ -209,8 +209,8 @@ class World:
         for obj in LIVERY_OBJECTS:
             lo, hi = self._livery_bbox.get(obj, (np.zeros(3), np.ones(3)))
             scheme = getattr(look, f"{obj}_livery")
-            out[obj] = mi.TensorXf(aligned(textures.livery(rng, scheme, look.livery_weathering, hi - lo,
-                                                           panel_lines=lv.panel_lines, markings=lv.markings)))
+            out[obj] = jit_array(mi.TensorXf, textures.livery(rng, scheme, look.livery_weathering, hi - lo,
+                                                              panel_lines=lv.panel_lines, markings=lv.markings))
         self._livery_key, self._liveries = key, out
         return out
 
