@@ -113,12 +113,13 @@ def write_bytes(path: str | Path, data: bytes) -> Path:
     frame, and the path objects and the folder check cost as much as the writing."""
     target = os.fspath(path)
     tmp = _temporary(target)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW  # a link in the temporary's place is not followed
     try:
         try:
-            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
+            fd = os.open(tmp, flags, 0o666)
         except FileNotFoundError:  # a folder not made yet
             os.makedirs(os.path.dirname(target) or ".", exist_ok=True)
-            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
+            fd = os.open(tmp, flags, 0o666)
         try:
             view = memoryview(data)
             while view:
@@ -172,7 +173,9 @@ def write_exr(path: str | Path, rgb, depth, object_id) -> Path:
 
 def link_or_copy(source: str | Path, target: str | Path) -> Path:
     """``target`` as a hard link to ``source`` (no bytes copied), or an atomic copy where the
-    file system refuses the link (another device)."""
+    file system refuses the link (another device); a symbolic link as ``source`` gives its
+    file, never the link itself."""
+    source = os.path.realpath(source)
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
     try:

@@ -26,4 +26,13 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install -q --disable-pip-version-check --upgrade pip
 .venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test]"
+# The lowest pyarrow pyproject.toml declares, in a folder of its own beside the venv's:
+# tests/test_versions.py builds, audits and reads a dataset with it on PYTHONPATH.
+FLOOR=$(.venv/bin/python scripts/declared_floor.py pyarrow)
+if [ ! -f ".venv/floor/pyarrow-$FLOOR/.complete" ]; then
+    rm -rf ".venv/floor/pyarrow-$FLOOR"
+    .venv/bin/python -m pip install -q --disable-pip-version-check --no-deps --target ".venv/floor/pyarrow-$FLOOR" \
+        "pyarrow==$FLOOR"
+    touch ".venv/floor/pyarrow-$FLOOR/.complete"
+fi
 .venv/bin/python -c "import datagen, mitsuba; print('datagen', datagen.__version__, '| mitsuba', mitsuba.__version__, '| variants', ', '.join(mitsuba.variants()))"

@@ -69,7 +69,7 @@ def test_a_built_dataset_passes_every_check(dataset) -> None:
     by_name = {c.name: c for c in result.checks}
     assert set(by_name) == {"manifest_boxes", "manifest_objects", "label_lines", "centre_drift",
                             "edge_margin_and_front", "ultralytics_rules", "learnable", "files", "images",
-                            "class_names", "world_texels"}
+                            "image_content", "class_names", "world_texels"}
     assert by_name["label_lines"].checked > 100
     assert by_name["centre_drift"].worst < 1e-3  # seven decimals: under 1.2e-4 px at most
     stats = result.stats

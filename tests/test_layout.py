@@ -71,8 +71,8 @@ def package_of(path_or_module: str) -> str:
 #: The packages from the bottom up: a package imports only packages of a lower rank (the
 #: build, ``pipeline``, and the reading commands, ``analysis``, share a rank and import neither
 #: the other); ``cli`` and the package's own ``__init__``/``__main__`` sit on top.
-RANKS = {"core": 0, "files": 1, "parallel": 1, "config": 2, "dataset": 3, "assets": 4, "scene": 5, "render": 6,
-         "pipeline": 7, "analysis": 7, "report": 8, "cli": 9, "__init__": 10, "__main__": 10}
+RANKS = {"core": 0, "files": 1, "paths": 1, "parallel": 1, "config": 2, "dataset": 3, "assets": 4, "scene": 5,
+         "render": 6, "pipeline": 7, "analysis": 7, "report": 8, "cli": 9, "__init__": 10, "__main__": 10}
 
 
 def test_every_package_imports_only_packages_below_it() -> None:
@@ -87,12 +87,13 @@ def test_every_package_imports_only_packages_below_it() -> None:
     assert upward == []
 
 
-def test_the_dataset_contract_imports_only_core_config_inputs_and_files() -> None:
+def test_the_dataset_contract_imports_only_core_config_inputs_files_and_paths() -> None:
     """``dataset/`` is the on-disk contract: reading a dataset needs no scene, renderer,
     build or config schema."""
     allowed = ("datagen.core.", "datagen.dataset.")
     offenders = {path: sorted(t for t in datagen_imports(tree)
-                              if not t.startswith(allowed) and t not in ("datagen.config.inputs", "datagen.files"))
+                              if not t.startswith(allowed)
+                              and t not in ("datagen.config.inputs", "datagen.files", "datagen.paths"))
                  for path, tree in modules().items() if path.startswith("dataset/")}
     assert {p: o for p, o in offenders.items() if o} == {}
     assert len(offenders) >= 4

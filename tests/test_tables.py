@@ -73,10 +73,10 @@ def test_pandas_reads_rows_features_and_matrices(dataset) -> None:
     assert u == pytest.approx(labeled_u_mean(dataset), rel=1e-12)
 
 
-def test_polars_reads_the_fixed_size_lists_as_arrays(dataset) -> None:
+def test_polars_reads_the_vectors_as_lists(dataset) -> None:
     pl = require("polars")
     u = (pl.read_parquet(f"{dataset}/manifests/*.parquet").explode("features").unnest("features")
-         .filter(pl.col("labeled")).select(pl.col("center_px").arr.get(0).mean()).item())
+         .filter(pl.col("labeled")).select(pl.col("center_px").list.get(0).mean()).item())
     assert u == pytest.approx(labeled_u_mean(dataset), rel=1e-12)
 
 

@@ -88,8 +88,19 @@ def solve_pose(points_model: NDArray, uv_px: NDArray, k: Intrinsics, settings: P
 
     Four or more matches: RANSAC with the paper's settings (and ``guess`` as the
     extrinsic guess), checked against SQPnP on its inliers. Exactly three: SQPnP,
-    the one OpenCV solver that takes three.
+    the one OpenCV solver that takes three. Points OpenCV's solvers refuse (SQPnP's
+    variance check on points far outside any image) are a failed solve, as is no pose.
     """
+    import cv2
+
+    try:
+        return _solve_pose(points_model, uv_px, k, settings, guess, distortion)
+    except cv2.error:
+        return None
+
+
+def _solve_pose(points_model: NDArray, uv_px: NDArray, k: Intrinsics, settings: PnPSettings,
+                guess: tuple[NDArray, NDArray] | None, distortion: NDArray | None) -> tuple[NDArray, NDArray] | None:
     import cv2
 
     n = len(points_model)
@@ -198,7 +209,7 @@ def noise_radii(text: str) -> list[float]:
         ValueError: what is wrong with ``text``, in words.
     """
     try:
-        radii = [float(r) for r in text.split(",")]
+        radii = [float(r) + 0.0 for r in text.split(",")]  # + 0.0: -0 is 0
     except ValueError:
         raise ValueError(f"{text[:60]!r} is not a list of radii like 0,0.5,1,2.5") from None
     if not all(math.isfinite(r) and r >= 0 for r in radii):

@@ -18,6 +18,7 @@ import yaml
 
 from datagen.core.errors import DatagenError
 from datagen.core.training import ANCHOR_STRIDES
+from datagen.paths import DatasetFolder
 
 __all__ = ["assigner_positives", "dataloader_learnability", "pose_items", "require_ultralytics"]
 
@@ -38,8 +39,9 @@ def _training_dataset(root: Path, split: str, task: str = "detect"):
     from ultralytics.data.build import build_yolo_dataset
     from ultralytics.data.utils import check_det_dataset
 
-    data = check_det_dataset(str(root / "data.yaml"))
-    hyp = yaml.safe_load((root / "hyp.yaml").read_text())
+    folder = DatasetFolder(Path(root))
+    data = check_det_dataset(str(folder.file("data.yaml")))
+    hyp = yaml.safe_load(folder.file("hyp.yaml").read_text())
     cfg = get_cfg(overrides={**hyp, "task": task, "mode": "train", "cache": False, "workers": 0})
     return build_yolo_dataset(cfg, data[split], batch=1, data=data, mode="train", stride=max(ANCHOR_STRIDES)), cfg
 

@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from datagen.cli.common import MAX_SPP, assets_app, output_path, user_errors
+from datagen.cli.common import MAX_SPP, assets_app, output_path, path_value, user_errors
 from datagen.config import load_config
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import DatagenError
@@ -18,7 +18,8 @@ from datagen.core.features import FEATURE_VARIANTS
 @assets_app.command("build")
 @user_errors
 def assets_build(
-    out: Annotated[Path | None, typer.Option("--out", help="Assets folder (default: the built-in one).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", parser=path_value,
+                                             help="Assets folder (default: the built-in one).")] = None,
 ) -> None:
     """Regenerate every built-in mesh and feature file, byte for byte."""
     from datagen.assets.files import BUILTIN_DIR
@@ -42,7 +43,8 @@ def assets_show(
     name: Annotated[str, typer.Argument(help=f"Object: {', '.join(RIGID_OBJECTS)}.", show_default=False)],
     variant: Annotated[str, typer.Option("--variant", help=f"{', '.join(FEATURE_VARIANTS[:-1])} or "
                                          f"{FEATURE_VARIANTS[-1]}.")] = "baseline",
-    config: Annotated[Path | None, typer.Option("--config", help="Use this config's mesh and feature files "
+    config: Annotated[Path | None, typer.Option("--config", parser=path_value,
+                                                help="Use this config's mesh and feature files "
                                                 "and its seed (default: the built-in assets).")] = None,
     seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of random features without --config.")] = 0,
     count: Annotated[int, typer.Option("--count", min=3, max=1000, help="Random features without --config "
@@ -70,11 +72,13 @@ def assets_show(
 @assets_app.command("preview")
 @user_errors
 def assets_preview(
-    out: Annotated[Path | None, typer.Option("--out", help="Folder for the PNGs (default: assets/previews, the "
+    out: Annotated[Path | None, typer.Option("--out", parser=path_value,
+                                             help="Folder for the PNGs (default: assets/previews, the "
                                             "repository's documentation).")] = None,
     objects: Annotated[list[str] | None, typer.Option("--object", help="Only this object (repeatable).")] = None,
     spp: Annotated[int, typer.Option("--spp", min=1, max=MAX_SPP, help="Samples per pixel.")] = 64,
-    config: Annotated[Path | None, typer.Option("--config", help="Use this config's mesh and feature files.")] = None,
+    config: Annotated[Path | None, typer.Option("--config", parser=path_value,
+                                                help="Use this config's mesh and feature files.")] = None,
 ) -> None:
     """Render a contact sheet of each object from six views, feature centres marked."""
     from datagen.assets.files import builtin_paths, load_features, load_mesh

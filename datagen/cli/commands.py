@@ -15,8 +15,12 @@ from datagen.cli.common import (
     MAX_PRINTED_FRAMES,
     MAX_SPP,
     ConfigOption,
+    PartialOption,
     app,
     output_path,
+    path_value,
+    require_plan,
+    unit_value,
     user_errors,
 )
 from datagen.config import find_config, load_config
@@ -27,7 +31,8 @@ from datagen.core.training import MATCH_PX
 @app.command()
 @user_errors
 def validate(
-    configs: Annotated[list[Path], typer.Argument(help="Scene config files (YAML), or shipped scenes by name.",
+    configs: Annotated[list[Path], typer.Argument(parser=path_value,
+                                                  help="Scene config files (YAML), or shipped scenes by name.",
                                                   show_default=False)],
 ) -> None:
     """Check configs against the schema, and their meshes and feature files;
@@ -77,7 +82,8 @@ def scenes() -> None:
 @user_errors
 def approach(
     config: ConfigOption,
-    plot: Annotated[Path | None, typer.Option("--plot", help="Write a PNG of the approaches here.")] = None,
+    plot: Annotated[Path | None, typer.Option("--plot", parser=path_value,
+                                              help="Write a PNG of the approaches here.")] = None,
     approaches: Annotated[int, typer.Option("--approaches", min=1, max=50, help="Approaches to draw.")] = 5,
     frames: Annotated[int, typer.Option("--frames", min=0, max=MAX_PRINTED_FRAMES,
                                         help="Also print the state of the first N frames.")] = 0,
@@ -109,7 +115,8 @@ def approach(
 @user_errors
 def build(
     config: ConfigOption,
-    out: Annotated[Path | None, typer.Option("--out", help="Dataset folder (default: datasets/<config name>).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", parser=path_value,
+                                             help="Dataset folder (default: datasets/<config name>).")] = None,
     frames: Annotated[int | None, typer.Option("--frames", min=1, help="Override dataset.frames.")] = None,
     seed: Annotated[int | None, typer.Option("--seed", min=0, help="Override dataset.seed.")] = None,
     spp: Annotated[int | None, typer.Option("--spp", min=1, help="Override render.spp.")] = None,
@@ -157,8 +164,9 @@ def build(
 @app.command()
 @user_errors
 def audit(
-    dataset: Annotated[Path, typer.Argument(help="Dataset folder.", show_default=False)],
-    out: Annotated[Path | None, typer.Option("--out", help="Report folder (default: DATASET/audit).")] = None,
+    dataset: Annotated[Path, typer.Argument(parser=path_value, help="Dataset folder.", show_default=False)],
+    out: Annotated[Path | None, typer.Option("--out", parser=path_value,
+                                             help="Report folder (default: DATASET/audit).")] = None,
     overlays: Annotated[int, typer.Option("--overlays", min=0, max=MAX_OVERLAYS,
                                           help="Overlay images in the HTML report.")] = 3,
     min_learnable: Annotated[float, typer.Option("--min-learnable", min=0.0, max=1.0, help="Share of label lines "
@@ -171,10 +179,12 @@ def audit(
     from datagen.analysis.audit import audit as run_audit
     from datagen.analysis.audit.frames import frames_to_draw
     from datagen.dataset.reader import open_dataset
+    from datagen.paths import report_folder
     from datagen.pipeline.progress import BuildProgress
     from datagen.report.audit_report import write_report
 
-    folder = output_path(out if out is not None else Path(dataset) / "audit", "--out")
+    folder = report_folder(output_path(out if out is not None else Path(dataset) / "audit", "--out"), dataset,
+                           make=False)
     source = open_dataset(dataset)
     index = source.index()
     result = run_audit(source, min_learnable=min_learnable, workers=workers, index=index,
@@ -203,19 +213,24 @@ def audit(
 @app.command()
 @user_errors
 def preview(
-    dataset: Annotated[Path, typer.Argument(help="Dataset folder.", show_default=False)],
+    dataset: Annotated[Path, typer.Argument(parser=path_value, help="Dataset folder.", show_default=False)],
     frames: Annotated[str | None, typer.Option("--frames", help="Frame ids, e.g. 0,5,9 or 0-7 "
                                                "(default: the first 4).")] = None,
-    out: Annotated[Path | None, typer.Option("--out", help="Folder for the overlays (default: DATASET/preview).")]
+    out: Annotated[Path | None, typer.Option("--out", parser=path_value,
+                                             help="Folder for the overlays (default: DATASET/preview).")]
     = None,
+    partial: PartialOption = False,
 ) -> None:
     """Draw overlays of true centres, tight and corrected boxes (paper Fig. 11)."""
     from datagen.dataset.reader import load_dataset
+    from datagen.paths import report_folder
     from datagen.report.overlays import write_previews
 
-    folder = output_path(out if out is not None else Path(dataset) / "preview", "--out")
+    folder = report_folder(output_path(out if out is not None else Path(dataset) / "preview", "--out"), dataset,
+                           make=False)
     wanted = _frame_list(frames) if frames else None
     view = load_dataset(dataset)
+    require_plan(view, partial)
     for path in write_previews(view, wanted, folder):
         typer.echo(f"wrote {path}")
 
@@ -223,25 +238,29 @@ def preview(
 @app.command()
 @user_errors
 def evaluate(
-    dataset: Annotated[Path, typer.Argument(help="Dataset folder (a --no-render build is enough).",
+    dataset: Annotated[Path, typer.Argument(parser=path_value, help="Dataset folder (a --no-render build is enough).",
                                             show_default=False)],
     noise_px: Annotated[str, typer.Option("--noise-px", help="Truth runs: pixel noise radii, e.g. 0,0.5,1,2.5.")]
     = "0,0.5,1,2.5",
-    predictions: Annotated[Path | None, typer.Option("--predictions", help="Folder of Ultralytics save_txt "
+    predictions: Annotated[Path | None, typer.Option("--predictions", parser=path_value,
+                                                     help="Folder of Ultralytics save_txt "
                                                      "detections (cls cx cy w h conf) or, for a dataset with pose "
                                                      "labels, pose predictions (keypoints with confidences), by "
                                                      "image stem; replaces the truth runs.")] = None,
-    conf: Annotated[float, typer.Option("--conf", min=0.0, max=1.0, help="Minimum detection confidence.")] = 0.25,
+    conf: Annotated[float, typer.Option("--conf", parser=unit_value, help="Minimum detection confidence (0 to "
+                                        "1).")] = 0.25,
     split: Annotated[str | None, typer.Option("--split", help="Frames to attempt: all, train or val (default: "
                                               "all for truth runs; with --predictions, the splits the "
                                               "prediction files cover).", show_default=False)] = None,
     seed: Annotated[int | None, typer.Option("--seed", min=0, help="Noise seed (default: the dataset's).")] = None,
-    out: Annotated[Path | None, typer.Option("--out", help="Output folder (default: DATASET/evaluation).")] = None,
+    out: Annotated[Path | None, typer.Option("--out", parser=path_value,
+                                             help="Output folder (default: DATASET/evaluation).")] = None,
     workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="Processes that solve approaches "
                                          "(results do not depend on it).")] = 1,
     match_px: Annotated[float, typer.Option("--match-px", min=0.0, max=1000.0, help="With --predictions: a "
                                             "detection within this many px of the true centre is a match.")]
     = MATCH_PX,
+    partial: PartialOption = False,
 ) -> None:
     """PtD vectors by dual-object PnP from true centres (with noise) or detections;
     accuracy and reliability against distance (paper 3.3-3.6). With --predictions, also
@@ -260,25 +279,34 @@ def evaluate(
     )
     from datagen.analysis.predictions import parse_predictions
     from datagen.dataset.reader import open_dataset
+    from datagen.paths import report_folder
     from datagen.pipeline.progress import BuildProgress
     from datagen.report.evaluation_report import write_evaluation
 
     if split not in (None, "all", "train", "val"):
         raise DatagenError(f"--split: {split!r}: choose all, train or val")
+    folder = report_folder(output_path(out if out is not None else Path(dataset) / "evaluation", "--out"), dataset,
+                           make=False)
     source = open_dataset(dataset)
     index = source.index(allow_duplicates=False)
+    require_plan(index, partial)
     progress = BuildProgress(source.root.name, verb="evaluate", announce=False)
     if predictions is not None:
         k = source.intrinsics
         pose = source.pose_layout if source.pose_yaml is not None else None
-        found = parse_predictions(predictions, k.width, k.height, len(source.features), min_conf=conf, pose=pose)
+        found = parse_predictions(predictions, k.width, k.height, len(source.features), min_conf=conf, pose=pose,
+                                  stems=set(index.stems))
+        if found.ghosts:
+            typer.echo(f"{predictions}: {len(found.ghosts)} prediction files name no frame of {source.root} "
+                       f"(the first: {found.ghosts[0]}); not read", err=True)
         if split is None:
             try:
                 split, why = prediction_split(index, found)
             except ValueError as exc:
                 raise DatagenError(f"--predictions: {predictions}: {exc}") from None
             typer.echo(f"{predictions}: {why} (--split to choose)" if not found else f"{why} (--split to choose)")
-        sources = [{"source": "predictions", "predictions": str(predictions), "conf": conf, "split": split}]
+        sources = [{"source": "predictions", "predictions": str(predictions), "conf": conf, "split": split,
+                    "files_of_no_frame": found.ghosts[:100]}]
         plan = [Run(predictions=found)]
     else:
         split = split or "all"
@@ -296,8 +324,7 @@ def evaluate(
     detector = None
     if predictions is not None:
         detector = score_detections(source, found, split=only, match_px=match_px)
-    written = write_evaluation(index, runs, output_path(out if out is not None else Path(dataset) / "evaluation",
-                                                        "--out"), settings=settings, detector=detector)
+    written = write_evaluation(index, runs, folder, settings=settings, detector=detector)
     if detector is not None:
         d = summarize_detections(detector, DISTANCE_EDGES)["overall"]
         typer.echo(f"detector: {d['matched']} of {d['labeled']} labeled features found within {match_px:g} px "
@@ -321,10 +348,12 @@ def evaluate(
 @app.command()
 @user_errors
 def export(
-    dataset: Annotated[Path, typer.Argument(help="Dataset folder.", show_default=False)],
+    dataset: Annotated[Path, typer.Argument(parser=path_value, help="Dataset folder.", show_default=False)],
     format: Annotated[str, typer.Option("--format", help="coco (keypoints per object) or bop (6D poses, "
                                         "models, masks; needs a build with --exr).", show_default=False)],
-    out: Annotated[Path, typer.Option("--out", help="New folder for the export.", show_default=False)],
+    out: Annotated[Path, typer.Option("--out", parser=path_value,
+                                      help="New folder for the export.", show_default=False)],
+    partial: PartialOption = False,
 ) -> None:
     """Write a built dataset as COCO keypoints or in the BOP format (poses, models, masks)."""
     from datagen.dataset.reader import load_dataset
@@ -334,6 +363,7 @@ def export(
         raise DatagenError(f"--format: {format!r}: choose {' or '.join(EXPORT_FORMATS)}")
     folder = output_path(out, "--out")
     view = load_dataset(dataset)
+    require_plan(view, partial)
     written = export_dataset(view, folder, format)
     typer.echo(f"wrote {format.upper()} export of {len(view)} frames: {written}")
 
@@ -351,7 +381,7 @@ def _px(value: float | None) -> str:
 def render(
     config: ConfigOption,
     frames: Annotated[str, typer.Option("--frames", help="Frame indices, e.g. 0,5,9 or 0-7.")] = "0",
-    out: Annotated[Path, typer.Option("--out", help="Folder for the images.")] = Path("renders"),
+    out: Annotated[Path, typer.Option("--out", parser=path_value, help="Folder for the images.")] = Path("renders"),
     spp: Annotated[int | None, typer.Option("--spp", min=1, max=MAX_SPP,
                                             help="Samples per pixel (default: the config's).")] = None,
     scale: Annotated[float, typer.Option("--scale", min=0.05, max=1.0, help="Image size relative to the "
@@ -371,12 +401,15 @@ def render(
 @app.command()
 @user_errors
 def gallery(
-    out: Annotated[Path, typer.Option("--out", help="Gallery image (JPEG or PNG).")] = Path("docs/gallery.jpg"),
+    out: Annotated[Path, typer.Option("--out", parser=path_value,
+                                      help="Gallery image (JPEG or PNG).")] = Path("docs/gallery.jpg"),
     spp: Annotated[int | None, typer.Option("--spp", min=1, max=MAX_SPP,
                                             help="Samples per pixel (default: each config's render.spp).")] = None,
-    closeups: Annotated[Path | None, typer.Option("--closeups", help="Also write full-resolution close-ups of "
+    closeups: Annotated[Path | None, typer.Option("--closeups", parser=path_value,
+                                                  help="Also write full-resolution close-ups of "
                                                   "clouds and sea, one row per camera type, to this image.")] = None,
-    before: Annotated[Path | None, typer.Option("--before", help="Folder of `datagen render` images of the "
+    before: Annotated[Path | None, typer.Option("--before", parser=path_value,
+                                                help="Folder of `datagen render` images of the "
                                                 "close-up frames made by another datagen: shown beside each "
                                                 "close-up.")] = None,
 ) -> None:

@@ -41,8 +41,30 @@ MAX_OVERLAYS = 100
 
 F = TypeVar("F", bound=Callable[..., object])
 
+
+def path_value(text: str) -> Path:
+    """A path as the user typed it: an empty one is refused (``Path("")`` would be the
+    working folder, whose files a report or a scan would then touch)."""
+    if isinstance(text, Path):
+        return text
+    if not text.strip():
+        raise typer.BadParameter("an empty path; name a file or folder")
+    return Path(text)
+
+
+def unit_value(text: str) -> float:
+    """A number in [0, 1] (a threshold or share), NaN refused as not a number."""
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        raise typer.BadParameter(f"{text!r} is not a number") from None
+    if not 0.0 <= value <= 1.0:  # NaN fails both
+        raise typer.BadParameter(f"{text!r}: expected a number from 0 to 1")
+    return value
+
 #: The ``--config`` option of the commands that read a scene config.
-ConfigOption = Annotated[Path, typer.Option("--config", help="Scene config file (YAML), or a shipped scene by name "
+ConfigOption = Annotated[Path, typer.Option("--config", parser=path_value,
+                                            help="Scene config file (YAML), or a shipped scene by name "
                                                              "(datagen scenes).")]
 
 
@@ -80,6 +102,25 @@ def output_path(path: Path, flag: str) -> Path:
             raise DatagenError(f"{flag}: {part[:40]}...: a name of {len(os.fsencode(part))} bytes, longer than "
                                "the 255 a folder or file name may have")
     return path
+
+
+#: The ``--partial`` option of the commands that read a dataset's frames.
+PartialOption = Annotated[bool, typer.Option("--partial", help="Go on when the manifests hold fewer (or other) "
+                                             "frames than dataset.json planned (an unfinished build): say so and "
+                                             "use the frames there are.")]
+
+
+def require_plan(rows, partial: bool) -> None:
+    """Refuse a dataset whose manifests differ from what its dataset.json planned (one
+    line), or with ``partial`` say so on stderr and go on (:func:`datagen.dataset.reader.plan_gaps`)."""
+    from datagen.dataset.reader import plan_gaps
+
+    gaps = plan_gaps(rows)
+    if gaps and not partial:
+        raise DatagenError(f"{rows.root / 'dataset.json'}: {gaps[0]}; or pass --partial to go on with the "
+                           f"{len(rows.frame_id)} frames there are")
+    for gap in gaps:
+        typer.echo(f"partial: {rows.root / 'dataset.json'}: {gap}", err=True)
 
 
 def _version(value: bool) -> None:

@@ -9,6 +9,7 @@ quantities are continuous pixels (:mod:`datagen.core.conventions`).
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated, Any, Final, Literal
 
@@ -24,6 +25,14 @@ from pydantic import (
     model_validator,
 )
 
+from datagen.core.camera import (
+    MAX_IMAGE_PX,
+    MIN_FOCAL_PX,
+    MIN_PIXEL_ANGLE_RAD,
+    Intrinsics,
+    distortion_margin_px,
+    hfov_bounds_deg,
+)
 from datagen.core.conventions import CAMERA_MOUNTS, RIGID_OBJECTS
 from datagen.core.features import FEATURE_VARIANTS
 from datagen.core.keypoints import TruncatedObjects
@@ -66,8 +75,8 @@ def _real(value: Any) -> Any:
         except ValueError:
             pass
         else:  # YAML 1.1 reads 1e12 (no dot) and quoted numbers as text
-            raise ValueError(f"must be a number, got the text {value!r} (write exponents with a dot, as 1.0e12, "
-                             "and numbers without quotes)")
+            raise ValueError(f"must be a number, got the text {value!r} (write exponents with a dot and a sign, as "
+                             "1.0e+12, and numbers without quotes)")
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ValueError(f"must be a number, got {type(value).__name__}")
     return value
@@ -97,7 +106,7 @@ def _within(low: float, high: float) -> AfterValidator:
     def check(bounds: tuple[float, float]) -> tuple[float, float]:
         lo, hi = bounds
         if lo < low or hi > high:
-            raise ValueError(f"must lie within [{low:g}, {high:g}], got [{lo:g}, {hi:g}]")
+            raise ValueError(f"must lie within [{low:g}, {high:g}], got [{lo!r}, {hi!r}]")
         return bounds
 
     return AfterValidator(check)
@@ -155,14 +164,23 @@ class CameraConfig(_Section):
     hfov_deg: Number = Field(gt=0.0, lt=180.0)
     """Horizontal field of view in degrees; fx = fy = (W/2) / tan(hFOV/2)."""
 
-    width: Integer = Field(2048, gt=0, le=16384)
+    width: Integer = Field(2048, gt=0, le=MAX_IMAGE_PX)
     """Image width in pixels (Table 1: 2048)."""
 
-    height: Integer = Field(1080, gt=0, le=16384)
+    height: Integer = Field(1080, gt=0, le=MAX_IMAGE_PX)
     """Image height in pixels (Table 1: 1080)."""
 
     mount_jitter: MountJitterConfig = MountJitterConfig()
     """Bounds of the per-approach mount pose perturbation."""
+
+    @model_validator(mode="after")
+    def _makeable(self) -> CameraConfig:
+        lo, hi = hfov_bounds_deg(self.width)
+        if not lo <= self.hfov_deg <= hi:
+            raise ValueError(f"hfov_deg {self.hfov_deg:.10g} at width {self.width}: a pinhole of this width can be "
+                             f"made with {lo:.4g} to {hi:.6g} degrees (neighbouring pixels' rays at least "
+                             f"{MIN_PIXEL_ANGLE_RAD:.3g} rad apart, a focal length of at least {MIN_FOCAL_PX:g} px)")
+        return self
 
 
 # --- objects and features ------------------------------------------------------
@@ -451,7 +469,7 @@ LiveryScheme = Literal["grey_camouflage", "two_tone", "high_visibility", "bare_m
 def _unit_range(bounds: tuple[float, float]) -> tuple[float, float]:
     lo, hi = bounds
     if lo < 0.0 or hi > 1.0:
-        raise ValueError(f"must lie within [0, 1], got [{lo:g}, {hi:g}]")
+        raise ValueError(f"must lie within [0, 1], got [{lo!r}, {hi!r}]")
     return bounds
 
 
@@ -787,6 +805,16 @@ class Config(_Section):
             raise ValueError(f"labels.min_box_px {self.labels.min_box_px:g} at train_imgsz {self.labels.train_imgsz} "
                              f"is a {box_w:.0f}x{box_h:.0f} px box, which does not fit inside the edge margin "
                              f"of a {w}x{h} image")
+        sensor = self.randomization.sensor
+        if sensor.enabled and sensor.distortion:
+            k = Intrinsics.from_hfov_deg(w, h, self.camera.hfov_deg)
+            margin = distortion_margin_px(k, sensor.k1, sensor.k2, sensor.tangential)
+            if not max(w, h) + 2 * margin <= MAX_IMAGE_PX:
+                need = "a lens whose inverse does not converge" if margin == math.inf else \
+                    f"a pinhole render {margin:g} px wider on every side ({w + 2 * margin:g}x{h + 2 * margin:g})"
+                raise ValueError(f"randomization.sensor.k1, k2 and tangential at camera.hfov_deg "
+                                 f"{self.camera.hfov_deg:g}: the lenses these ranges allow need {need}; a render "
+                                 f"is at most {MAX_IMAGE_PX} px a side: narrow the ranges or the field of view")
         clouds = self.randomization.clouds
         if clouds.enabled:
             clear = self.approach.range_m[1] + CLOUD_CLEARANCE_M

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -21,9 +22,14 @@ from numpy.typing import ArrayLike, NDArray
 from datagen.core.conventions import NEAR_PLANE_M
 
 __all__ = [
+    "MAX_IMAGE_PX",
+    "MIN_FOCAL_PX",
+    "MIN_PIXEL_ANGLE_RAD",
     "Intrinsics",
     "depth_in_front",
     "distort_normalized",
+    "distortion_margin_px",
+    "hfov_bounds_deg",
     "in_front",
     "project_points",
     "project_xyz",
@@ -31,6 +37,24 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+
+#: The largest image side, pixels (a render's, margins included).
+MAX_IMAGE_PX: Final = 16384
+#: The narrowest lens: neighbouring pixels' rays at the image centre must differ by at least
+#: this angle (2^-20 rad, eight float32 steps of a unit direction), or Mitsuba's float32 rays
+#: would give neighbouring pixels the same ray.
+MIN_PIXEL_ANGLE_RAD: Final = 2.0**-20
+#: The widest lens: a focal length of at least one pixel (under it, the central pixel alone
+#: spans more than 53 degrees and every feature falls into a few pixels).
+MIN_FOCAL_PX: Final = 1.0
+
+
+def hfov_bounds_deg(width: int) -> tuple[float, float]:
+    """The horizontal fields of view, degrees, that a ``width``-pixel pinhole can be made
+    with (:data:`MIN_PIXEL_ANGLE_RAD`, :data:`MIN_FOCAL_PX`)."""
+    half = width / 2.0
+    return (math.degrees(2.0 * math.atan(half * MIN_PIXEL_ANGLE_RAD)),
+            math.degrees(2.0 * math.atan(half / MIN_FOCAL_PX)))
 
 
 @dataclass(frozen=True)
@@ -155,3 +179,30 @@ def project_xyz(
     v *= intrinsics.fy
     v += intrinsics.cy
     return u, v
+
+
+def distortion_margin_px(intrinsics: Intrinsics, k1, k2, tangential) -> float:
+    """Pixels the pinhole render must extend beyond the image on every side so that
+    every distorted pixel finds its source, for every lens the ranges allow (the
+    coefficient ranges ``(low, high)`` of k1, k2 and of p1 and p2 alike); ``inf`` where
+    a lens's inverse does not converge (:func:`undistort_px`): no render can serve it."""
+    k = intrinsics
+    edge = np.linspace(0.0, 1.0, 33)
+    border = np.concatenate([np.stack([edge * k.width, np.zeros_like(edge)], 1),
+                             np.stack([edge * k.width, np.full_like(edge, k.height)], 1),
+                             np.stack([np.zeros_like(edge), edge * k.height], 1),
+                             np.stack([np.full_like(edge, k.width), edge * k.height], 1)])
+    worst = 0.0
+    for a in k1:
+        for b in k2:
+            for p1 in tangential:
+                for p2 in tangential:
+                    lens = np.array([a, b, p1, p2, 0.0])
+                    src = undistort_px(border, k, lens)
+                    x, y = distort_normalized((src[:, 0] - k.cx) / k.fx, (src[:, 1] - k.cy) / k.fy, lens)
+                    back = np.stack([x * k.fx + k.cx, y * k.fy + k.cy], axis=-1)
+                    if not np.all(np.abs(back - border) < 0.01):  # the inverse did not converge
+                        return math.inf
+                    over = np.maximum(np.maximum(-src, src - [k.width, k.height]), 0.0)
+                    worst = max(worst, float(over.max()))
+    return math.ceil(worst) + 2

@@ -22,7 +22,7 @@ import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
 from datagen.config.inputs import parse_json, parse_yaml, read_text
-from datagen.core.camera import Intrinsics
+from datagen.core.camera import MAX_IMAGE_PX, MIN_FOCAL_PX, MIN_PIXEL_ANGLE_RAD, Intrinsics
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import DatagenError
 from datagen.core.features import FeatureTable
@@ -32,13 +32,16 @@ from datagen.dataset.layout import MANIFEST_NAME
 from datagen.dataset.schema import (
     APPEARANCE,
     FILE_COLUMNS,
-    MANIFEST_VERSION,
+    READABLE_MANIFEST_VERSIONS,
     manifest_schema,
     read_features,
     read_objects,
+    stored_schema,
 )
+from datagen.paths import NOT_INSIDE, DatasetFolder
 
-__all__ = ["DatasetIndex", "DatasetMeta", "DatasetSource", "DatasetView", "image_size", "load_dataset", "open_dataset"]
+__all__ = ["DatasetIndex", "DatasetMeta", "DatasetSource", "DatasetView", "image_size", "load_dataset", "open_dataset",
+           "plan_gaps"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,6 +60,12 @@ class DatasetMeta(Labelled):
     @property
     def corrected(self) -> bool:
         return bool(self.doc["corrected"])
+
+    @functools.cached_property
+    def folder(self) -> DatasetFolder:
+        """The dataset folder as untrusted input: :meth:`~datagen.paths.DatasetFolder.file`
+        is the only way a reader gets from a path the dataset names to a file."""
+        return DatasetFolder(self.root)
 
     @property
     def edge_margin_px(self) -> float:
@@ -114,6 +123,13 @@ class DatasetView(DatasetMeta):
         return len(self.frame_id)
 
     @property
+    def intrinsics_as_built(self) -> NDArray[np.bool_]:
+        """``(B,)`` whether each row's camera is dataset.json's (to 1e-9 px)."""
+        k = self.intrinsics
+        expected = np.array([k.width, k.height, k.fx, k.fy, k.cx, k.cy])
+        return np.isclose(self.row_intrinsics, expected, rtol=0, atol=1e-9).all(axis=1)
+
+    @property
     def world_texel_px(self) -> list[float | None]:
         return self.appearance["world_texel_px"]
 
@@ -167,6 +183,30 @@ class DatasetIndex:
         """Each row's file stem (the frame's image, or label, file name without extension)."""
         return _stems(self)
 
+    @functools.cached_property
+    def folder(self) -> DatasetFolder:
+        """The dataset folder as untrusted input (:class:`~datagen.paths.DatasetFolder`)."""
+        return DatasetFolder(self.root)
+
+
+def plan_gaps(rows: DatasetIndex | DatasetView) -> list[str]:
+    """How the frames in the manifests differ from what dataset.json planned
+    (``splits.SPLIT.frames``), one text per split that differs (none: as planned)."""
+    splits = rows.doc.get("splits", {})
+    gaps = []
+    for split, planned in (splits.items() if isinstance(splits, dict) else []):
+        have = len({int(f) for f, s in zip(rows.frame_id, rows.split, strict=True) if s == split})
+        want = planned.get("frames", have) if isinstance(planned, dict) else have
+        if not isinstance(want, int) or isinstance(want, bool):
+            gaps.append(f"splits.{split}.frames: {str(want)[:40]!r} is not a frame count")
+        elif have < want:
+            gaps.append(f"splits.{split}: {want} frames planned, {have} in the manifests (an unfinished build, or a "
+                        "manifest removed: rerun the build)")
+        elif have > want:
+            gaps.append(f"splits.{split}: {want} frames planned, {have} in the manifests (manifests from another "
+                        "build?)")
+    return gaps
+
 
 def _stems(rows: DatasetIndex | DatasetView) -> list[str]:
     return [Path(next(p for p in paths if p)).stem
@@ -189,9 +229,10 @@ class DatasetSource(DatasetMeta):
         manifest this datagen reads)."""
         return _read_manifest(self.root / name, columns)
 
-    def read_shard(self, name: str) -> DatasetView:
-        """One manifest's rows as a view."""
-        return _view(self, [self.read_manifest(name)], [name], allow_duplicates=True)
+    def read_shard(self, name: str, *, checked: bool = True) -> DatasetView:
+        """One manifest's rows as a view; ``checked``: refuse (one line) rows whose camera is
+        not dataset.json's (the audit, which reports them, reads them unchecked)."""
+        return _view(self, [self.read_manifest(name)], [name], allow_duplicates=True, checked=checked)
 
     def index(self, *, allow_duplicates: bool = True) -> DatasetIndex:
         """Every manifest's small columns (:data:`INDEX_COLUMNS`), rows in frame order.
@@ -233,11 +274,6 @@ def _read_json(path: Path) -> dict:
     return data
 
 
-def _relative_inside(rel: str) -> bool:
-    """A manifest path: relative, without ``..``, so that it names a file inside the dataset."""
-    return bool(rel) and not rel.startswith(("/", "\\")) and ".." not in Path(rel).parts and "\0" not in rel
-
-
 def _check_document(doc: dict, path: Path) -> None:
     """The keys of dataset.json the readers use, with their types (one line per the first problem)."""
     def number(value: object) -> bool:
@@ -248,15 +284,18 @@ def _check_document(doc: dict, path: Path) -> None:
             raise DatagenError(f"{path}: {key}: missing")
     for key in ("image_width", "image_height"):
         value = doc[key]
-        if not isinstance(value, int) or isinstance(value, bool) or not 0 < value <= 16384:
+        if not isinstance(value, int) or isinstance(value, bool) or not 0 < value <= MAX_IMAGE_PX:
             raise DatagenError(f"{path}: {key}: value {str(value)[:40]!r}: expected an image size in pixels")
     k = doc["intrinsics"]
     for key in ("fx", "fy", "cx", "cy"):
         if not isinstance(k, dict) or key not in k:
             raise DatagenError(f"{path}: intrinsics.{key}: missing")
-        if not number(k[key]) or (key in ("fx", "fy") and k[key] <= 0):
-            raise DatagenError(f"{path}: intrinsics.{key}: value {str(k[key])[:40]!r}: expected a finite number"
-                               f"{' above 0' if key in ('fx', 'fy') else ''}")
+        size = doc["image_width"] if key in ("fx", "cx") else doc["image_height"]
+        lo, hi = (MIN_FOCAL_PX, 1.0 / MIN_PIXEL_ANGLE_RAD) if key in ("fx", "fy") else (0.0, size)
+        what = "a focal length a camera can be made with, px" if key in ("fx", "fy") else "a point of the image"
+        if not number(k[key]) or not lo <= k[key] <= hi:
+            raise DatagenError(f"{path}: intrinsics.{key}: value {str(k[key])[:40]!r}: expected a number from {lo:g} "
+                               f"to {hi:g} ({what})")
     if not number(doc["edge_margin_px"]) or not isinstance(doc["corrected"], bool):
         raise DatagenError(f"{path}: edge_margin_px or corrected: expected a number and true or false")
     if not isinstance(doc["config"], dict):
@@ -281,18 +320,20 @@ def _flat_floats(array: pa.Array) -> NDArray[np.float64]:
     return np.asarray(pc.fill_null(array, float("nan")).to_numpy(zero_copy_only=False), dtype=np.float64)
 
 
-def load_dataset(root: str | Path, *, allow_duplicates: bool = False) -> DatasetView:
+def load_dataset(root: str | Path, *, allow_duplicates: bool = False, checked: bool = True) -> DatasetView:
     """Read ``root``'s dataset.json, data.yaml, features.parquet and every manifest.
 
     ``allow_duplicates``: keep rows of a frame that several manifests hold (the audit
     names them); otherwise they are refused, as they would count the frame twice.
+    ``checked``: refuse rows whose camera is not dataset.json's (the audit names them).
 
     Raises:
         DatagenError: one line naming the file and what is wrong with it.
     """
     source = open_dataset(root)
     tables = [source.read_manifest(name) for name in source.manifests]
-    return _view(source, tables, list(source.manifests), allow_duplicates=allow_duplicates)
+    return _view(source, tables, list(source.manifests), allow_duplicates=allow_duplicates,
+                 checked=checked)
 
 
 def open_dataset(root: str | Path) -> DatasetSource:
@@ -305,6 +346,9 @@ def open_dataset(root: str | Path) -> DatasetSource:
     root = Path(root)
     if not root.is_dir():
         raise DatagenError(f"{root}: no such dataset folder")
+    folder = DatasetFolder(root)
+    for name in ("dataset.json", "data.yaml", "features.parquet", "objects.parquet", "manifests"):
+        folder.file(name)  # none of them may lead out of the dataset
     doc = _read_json(root / "dataset.json")
     data_yaml = parse_yaml(read_text(root / "data.yaml", "data.yaml"), root / "data.yaml")
     _check_document(doc, root / "dataset.json")
@@ -316,7 +360,7 @@ def open_dataset(root: str | Path) -> DatasetSource:
         raise DatagenError(f"{root / 'dataset.json'}: config.labels.{exc}") from None
     pose_yaml = data_yaml if rules.format == "pose" else None
     if rules.format == "both":
-        pose_yaml = parse_yaml(read_text(root / "pose" / "data.yaml", "data.yaml"), root / "pose" / "data.yaml")
+        pose_yaml = parse_yaml(read_text(folder.file("pose/data.yaml"), "data.yaml"), root / "pose" / "data.yaml")
         if not isinstance(pose_yaml, dict):
             raise DatagenError(f"{root / 'pose' / 'data.yaml'}: expected a mapping with train, val, nc, names and "
                                "kpt_shape")
@@ -351,12 +395,15 @@ def _read_tables(root: Path) -> tuple[FeatureTable, dict[str, NDArray[np.float64
 def _manifest_names(root: Path) -> tuple[str, ...]:
     """The shards' manifests, relative to ``root`` (a dataset without one is refused)."""
     manifests = []
+    folder = DatasetFolder(root)
     for path in sorted((root / "manifests").glob("*.parquet")):
         if not MANIFEST_NAME.fullmatch(path.name):
             continue  # not a shard's manifest (the audit names it)
+        rel = str(path.relative_to(root))
+        folder.file(rel)
         if not path.is_file():
             raise DatagenError(f"{path}: not a regular file")
-        manifests.append(str(path.relative_to(root)))
+        manifests.append(rel)
     if not manifests:
         raise DatagenError(f"{root / 'manifests'}: no manifest; the dataset has no finished shard")
     return tuple(manifests)
@@ -375,19 +422,27 @@ def _read_manifest(path: Path, columns: tuple[str, ...] | None = None) -> pa.Tab
     except (OSError, pa.ArrowException) as exc:
         raise DatagenError(f"{path}: unreadable manifest ({type(exc).__name__})") from None
     version = version.decode(errors="replace")[:20]
-    if version != MANIFEST_VERSION:
-        raise DatagenError(f"{path}: manifest version {version}, this datagen reads {MANIFEST_VERSION}")
-    for field in expected:
+    if version not in READABLE_MANIFEST_VERSIONS:
+        raise DatagenError(f"{path}: manifest version {version}, this datagen reads "
+                           f"{' and '.join(READABLE_MANIFEST_VERSIONS)}")
+    stored = expected if version == READABLE_MANIFEST_VERSIONS[0] else stored_schema(expected)
+    for field in stored:
         have = table.schema.field(field.name) if field.name in table.schema.names else None
         if have is None or not have.type.equals(field.type):
             what = "missing" if have is None else f"type {have.type}, expected {field.type}"
             raise DatagenError(f"{path}: column {field.name}: {what}")
-    return table.select(expected.names).cast(expected)
+    try:
+        return table.select(expected.names).cast(expected)
+    except (pa.ArrowException, ValueError) as exc:  # a list of the wrong length
+        raise DatagenError(f"{path}: a column's lists are not the lengths its type fixes "
+                           f"({' '.join(str(exc).split())[:120]})") from None
 
 
-def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, allow_duplicates: bool) -> DatasetView:
-    """The rows of ``tables`` (read from ``manifests``) as one view, sorted by frame id."""
-    root, features = meta.root, meta.features
+def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, allow_duplicates: bool,
+          checked: bool) -> DatasetView:
+    """The rows of ``tables`` (read from ``manifests``) as one view, sorted by frame id;
+    ``checked``: every row's camera must be dataset.json's."""
+    root, features, folder = meta.root, meta.features, meta.folder
     names = [name for name, t in zip(manifests, tables, strict=True) for _ in range(t.num_rows)]
     try:
         table = pa.concat_tables(tables)
@@ -403,9 +458,9 @@ def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, al
     flat = _records(table, "features", f, f"feature records, features.parquet has {f} classes", root, names)
     for column in FILE_COLUMNS:
         for i, rel in enumerate(table.column(column).to_pylist()):
-            if rel is not None and not _relative_inside(rel):
+            if rel is not None and folder.problem(rel) == NOT_INSIDE:
                 raise DatagenError(f"{root / names[i]}: frame {table.column('frame_id')[i]}: {column} {rel[:80]!r} "
-                                   "is not a path inside the dataset")
+                                   f"{NOT_INSIDE}")
 
     def matrices(name: str) -> NDArray[np.float64]:
         return _floats(table.column(name).combine_chunks(), (b, 4, 4))
@@ -414,7 +469,7 @@ def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, al
     n_obj = len(features.objects)
     objects = _records(table, "objects", n_obj, f"object records, features.parquet has {n_obj} objects", root,
                        names)
-    return DatasetView(
+    view = DatasetView(
         root=root,
         doc=meta.doc,
         data_yaml=meta.data_yaml,
@@ -455,6 +510,12 @@ def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, al
         appearance={c: table.column(c).to_pylist() for cols in APPEARANCE.values() for c in cols
                     if c in table.column_names},
     )
+    if checked and not view.intrinsics_as_built.all():
+        b = int(np.argmin(view.intrinsics_as_built))
+        raise DatagenError(f"{root / 'dataset.json'}: intrinsics differ from those of {names[b]} frame "
+                           f"{view.frame_id[b]} ({view.row_intrinsics[b].tolist()}): dataset.json or the manifest "
+                           "was changed; datagen audit names every such frame")
+    return view
 
 
 def _refuse_duplicates(root: Path, frame_ids: NDArray[np.int64], names: list[str]) -> None:

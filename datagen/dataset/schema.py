@@ -34,6 +34,7 @@ __all__ = [
     "IMAGE_STATISTICS",
     "MANIFEST_VERSION",
     "MEASURED_COLUMNS",
+    "READABLE_MANIFEST_VERSIONS",
     "RUN_COLUMNS",
     "TEXEL_COLUMNS",
     "FeatureColumns",
@@ -45,13 +46,18 @@ __all__ = [
     "read_features",
     "read_manifest_summary",
     "read_objects",
+    "stored_schema",
+    "stored_type",
     "write_features",
     "write_manifest",
     "write_objects",
 ]
 
 #: Version of the manifest and feature-table schemas (bumped on any incompatible change).
-MANIFEST_VERSION: Final = "7"
+MANIFEST_VERSION: Final = "8"
+#: The manifest versions this datagen reads: 7 stored fixed-size lists as they are
+#: (:func:`stored_type`).
+READABLE_MANIFEST_VERSIONS: Final = ("7", MANIFEST_VERSION)
 
 #: The image statistics a manifest records per rendered frame
 #: (:func:`datagen.render.tonemap.image_statistics` measures them).
@@ -214,10 +220,27 @@ def manifest_schema() -> pa.Schema:
     return pa.schema(fields, metadata={"datagen.manifest_version": MANIFEST_VERSION})
 
 
+def stored_type(t: pa.DataType) -> pa.DataType:
+    """How a manifest column of type ``t`` is stored in parquet: every fixed-size list (at
+    any depth) as a list, whose null rows every supported pyarrow writes and reads back
+    (before pyarrow 26 a null fixed-size list row read back as an error); readers cast the
+    columns back to :func:`manifest_schema`'s types."""
+    if pa.types.is_fixed_size_list(t) or pa.types.is_list(t):
+        return pa.list_(stored_type(t.value_type))
+    if pa.types.is_struct(t):
+        return pa.struct([pa.field(f.name, stored_type(f.type), f.nullable) for f in t])
+    return t
+
+
+def stored_schema(schema: pa.Schema) -> pa.Schema:
+    """``schema`` with each column's :func:`stored_type`."""
+    return pa.schema([f.with_type(stored_type(f.type)) for f in schema], metadata=schema.metadata)
+
+
 def write_manifest(path: Path, rows: Sequence[dict], summary: dict) -> Path:
-    """Write one shard's manifest atomically; ``summary`` (label counts, JSON-able)
-    goes into the schema metadata."""
-    schema = manifest_schema()
+    """Write one shard's manifest atomically (its columns as :func:`stored_type` says);
+    ``summary`` (label counts, JSON-able) goes into the schema metadata."""
+    schema = stored_schema(manifest_schema())
     meta = dict(schema.metadata)
     meta[b"datagen.shard_summary"] = json.dumps(summary, sort_keys=True).encode()
     index = schema.get_field_index("features")
@@ -366,14 +389,15 @@ def _features_column(frames: Sequence[FeatureColumns]) -> pa.Array:
         return np.concatenate(arrays) if width == 0 else np.concatenate(arrays).reshape(-1, width)
 
     def fixed(values: NDArray, width: int, mask: NDArray | None = None) -> pa.Array:
-        """Fixed-size lists, null where a value is not finite (a point behind the camera has no
-        projection: a null, which every table tool skips, not a NaN that poisons a mean) or ``mask``."""
+        """Lists of ``width`` values (stored as lists: :func:`stored_type`), null where a value
+        is not finite (a point behind the camera has no projection: a null, which every table
+        tool skips, not a NaN that poisons a mean) or ``mask``; a null list holds no values."""
         missing = ~np.isfinite(values).all(axis=1)
         if mask is not None:
             missing |= mask
-        values = np.where(missing[:, None], 0.0, values)  # a null list hides its values
-        return pa.FixedSizeListArray.from_arrays(pa.array(values.reshape(-1), _F64), width,
-                                                 mask=pa.array(missing))
+        offsets = np.concatenate([[0], np.cumsum(np.where(missing, 0, width))]).astype(np.int32)
+        return pa.ListArray.from_arrays(pa.array(offsets), pa.array(values[~missing].reshape(-1), _F64),
+                                        mask=pa.array(missing))
 
     def optional(name: str, dtype) -> pa.Array:
         values = np.zeros(n, dtype=dtype)
@@ -402,6 +426,6 @@ def _features_column(frames: Sequence[FeatureColumns]) -> pa.Array:
             optional("center_visible", bool),
             pa.array(cat("keypoint_flag").astype(np.int8)),
         ],
-        fields=list(FEATURE_RECORD),
+        fields=list(stored_type(FEATURE_RECORD)),
     )
-    return pa.ListArray.from_arrays(offsets, struct).cast(pa.list_(FEATURE_RECORD))
+    return pa.ListArray.from_arrays(offsets, struct).cast(stored_type(pa.list_(FEATURE_RECORD)))

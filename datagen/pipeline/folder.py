@@ -22,6 +22,7 @@ from datagen.core.errors import DatagenError
 from datagen.dataset.layout import LOCK_NAME, MANIFEST_NAME, POSE_IMAGES_LINK, Layout
 from datagen.dataset.schema import FILE_COLUMNS
 from datagen.files import is_temporary
+from datagen.paths import DatasetFolder
 from datagen.pipeline.metadata import is_dataset_card
 from datagen.pipeline.plan import dataset_layout, plan_shards
 from datagen.scene.resolved import Scene
@@ -106,6 +107,9 @@ def check_folder(layout: Layout) -> bool:
     if not layout.dataset_json.is_file():
         raise DatagenError(f"{root}: not empty and not a datagen dataset (no dataset.json); "
                            "choose an empty or new --out folder")
+    for rel in DatasetFolder(root).links_out(dangling=False):
+        raise DatagenError(f"{root / rel}: a symbolic link that leads outside the dataset; a build writes only "
+                           "inside its folder (remove the link)")
     return True
 
 

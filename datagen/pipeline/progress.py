@@ -30,6 +30,8 @@ class ShardSummary:
     frame_s: float = 0.0  # seconds of the rendered frames, whole (render, denoise and the rest)
     wall_s: float = 0.0
     stages: dict[str, float] = field(default_factory=dict)  # seconds per stage of the rendered frames
+    blank: int = 0  # label boxes of the rendered frames that show nothing (datagen.core.content)
+    blank_frames: int = 0  # rendered frames with such a box
 
     def counts(self) -> dict:
         """The deterministic part, stored in the manifest's metadata."""
@@ -118,6 +120,12 @@ class BuildReport:
         excluded = ", ".join(f"{k} {v}" for k, v in self.excluded.items())
         scope = "" if done == len(self.jobs) else f" (in the {done} finished shards)"
         out.append(f"  labels: {self.labels} boxes{scope}; excluded: {excluded}")
+        blank = sum(s.blank for s in self.shards.values())
+        if blank:
+            frames = sum(s.blank_frames for s in self.shards.values())
+            out.append(f"  warning: {blank} label boxes in {frames} of the {self.rendered} rendered frames show "
+                       "nothing in the image (saturated, black or flat): the config's draws (exposure, sensor, "
+                       "field of view) make frames a detector cannot learn from; datagen audit names them")
         if self.interrupted:
             out.append(f"  interrupted: {len(self.jobs) - done} shards unfinished; run the same command "
                        "again to finish them")

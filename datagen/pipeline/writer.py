@@ -19,6 +19,9 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
+import numpy as np
+
+from datagen.core.content import blank_boxes
 from datagen.core.keypoints import pose_rows
 from datagen.core.labels import FrameLabels
 from datagen.dataset.layout import ShardJob
@@ -132,7 +135,7 @@ class ShardWriter:
         start = time.perf_counter()
         self._stop = stop or (lambda: False)
         rows, excluded, labels = [], Counter(), 0
-        rendered, render_s, denoise_s, frame_s = 0, 0.0, 0.0, 0.0
+        rendered, render_s, denoise_s, frame_s, blank, blank_frames = 0, 0.0, 0.0, 0.0, 0, 0
         stages: Counter = Counter()  # seconds per stage of the rendered frames
         self.states.prefetch(job.frames)  # the shard's approach chains, simulated together
         approaches = {} if approaches is None else approaches  # each chain's weather and liveries, drawn once
@@ -148,6 +151,8 @@ class ShardWriter:
             if row["render_s"] is not None:
                 rendered += 1
                 render_s += row["render_s"]
+                blank += self._blank
+                blank_frames += self._blank > 0
                 denoise_s += row["denoise_s"] or 0.0
                 frame_s += row["frame_s"]
                 stages.update(self._stages)
@@ -155,7 +160,7 @@ class ShardWriter:
                 progress(1)
         self._wait_for_writes(0)
         summary = ShardSummary(job.name, len(job.frames), labels, dict(excluded), rendered, render_s, denoise_s,
-                               frame_s, stages=dict(stages))
+                               frame_s, stages=dict(stages), blank=blank, blank_frames=blank_frames)
         write_manifest(self.layout.manifest(job), rows, summary.counts())
         summary.wall_s = time.perf_counter() - start
         return summary
@@ -173,11 +178,12 @@ class ShardWriter:
         if self.renderer is not None:
             image_rel = layout.image_rel(job.split, job.shard, i)
             exr_rel = layout.exr_rel(job.split, job.shard, i) if scene.config.render.exr else None
-            render_s, denoise_s, rendered = self._render(draws, layout.root / image_rel,
-                                                         layout.root / exr_rel if exr_rel else None)
+            render_s, denoise_s, rendered, srgb = self._render(draws, layout.root / image_rel,
+                                                               layout.root / exr_rel if exr_rel else None)
             with self._clock.stage("feature visibility"):
                 fraction, center_visible = self.renderer.feature_visibility(draws.state, features)
             labels = scene.labelling.occlude(labels, fraction)
+            self._blank = int(np.count_nonzero(blank_boxes(srgb, labels.label_xyxy[labels.labeled])))
         records = feature_records(labels, features.class_id, fraction, center_visible)
         label_rel = layout.label_rel(job.split, job.shard, i)
         pose_rel = layout.pose_label_rel(job.split, job.shard, i)
@@ -202,12 +208,13 @@ class ShardWriter:
         return row
 
     def _render(self, draws: FrameDraws, image: Path, exr: Path | None
-                ) -> tuple[float | None, float | None, dict]:
+                ) -> tuple[float | None, float | None, dict, np.ndarray]:
         """Render and write the frame's image (and EXR). Returns seconds in mi.render and
-        in the denoiser (None when not denoised) and what the render measured
-        (:data:`datagen.dataset.schema.MEASURED_COLUMNS`). A frame whose files an earlier,
-        interrupted run left is rendered again: its measurements live only in the manifest
-        that run did not write, and a shard holds few frames."""
+        in the denoiser (None when not denoised), what the render measured
+        (:data:`datagen.dataset.schema.MEASURED_COLUMNS`) and the 8-bit sRGB training image.
+        A frame whose files an earlier, interrupted run left is rendered again: its
+        measurements live only in the manifest that run did not write, and a shard holds
+        few frames."""
         renderer = self.renderer
         result = renderer.render(draws.state, draws.look, draws.render_seed, geometry=exr is not None)
         self._clock = StageClock()
@@ -226,7 +233,7 @@ class ShardWriter:
         self._writes.append(self._io.submit(write))
         with self._clock.stage("waiting for image writes"):
             self._wait_for_writes(MAX_PENDING_WRITES)
-        return result.render_s, result.denoise_s, measured
+        return result.render_s, result.denoise_s, measured, srgb
 
     def _wait_for_writes(self, keep: int) -> None:
         """Wait until at most ``keep`` image writes are pending; re-raise their errors."""

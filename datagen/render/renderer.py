@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from datagen.assets.files import load_mesh
 from datagen.assets.models import material_class
 from datagen.assets.models.drogue import hose_faces, hose_placeholder, hose_vertices
-from datagen.core.camera import Intrinsics
+from datagen.core.camera import Intrinsics, distortion_margin_px
 from datagen.core.conventions import OBJECT_NAMES, RIGID_OBJECTS, object_id, pixel_centres
 from datagen.core.transforms import make_transform
 from datagen.render.mitsuba import (
@@ -113,8 +113,6 @@ class Renderer:
         self.sensor = sensor if sensor.enabled else None
         self.margin_px = 0
         if self.sensor is not None and sensor.distortion:
-            from datagen.render.sensor import distortion_margin_px
-
             self.margin_px = distortion_margin_px(self.output_intrinsics, sensor.k1, sensor.k2, sensor.tangential)
         #: The pinhole render's grid (the output image grown by the margin).
         self.intrinsics = self.output_intrinsics.with_margin(self.margin_px)

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.core.camera import Intrinsics, undistort_px
+from datagen.core.camera import Intrinsics, distortion_margin_px, undistort_px
 from datagen.core.conventions import (
     OBJECT_NAMES,
     drawing_px,
@@ -134,14 +134,26 @@ def image_motion(state: FrameState, depth: NDArray[np.float32], ids: NDArray[np.
 
 def motion_blur(rgb: NDArray[np.float32], displacement_px: NDArray[np.float32]) -> NDArray[np.float32]:
     """Average each pixel over its displacement during the exposure, centred on the
-    pixel (the frame's time is the middle of the exposure, where the labels are)."""
+    pixel (the frame's time is the middle of the exposure, where the labels are).
+
+    A displacement longer than the image's diagonal (a pixel near the horizon of a very
+    wide lens) is shortened to it: beyond that, the average crosses the whole image
+    either way, and OpenCV's reflected border would walk the excess a width at a time."""
     import cv2
 
-    length = float(np.sqrt((displacement_px**2).sum(axis=-1)).max(initial=0.0))
+    h, w = rgb.shape[:2]
+    lengths = np.sqrt((displacement_px**2).sum(axis=-1))
+    diagonal = np.float32(math.hypot(w, h))
+    if not (np.isfinite(lengths).all() and lengths.max(initial=0.0) <= diagonal):
+        finite = np.isfinite(lengths)
+        scale = np.where(finite, np.minimum(np.float32(1.0), diagonal / np.where(finite, np.maximum(lengths, 1e-30),
+                                                                                   1.0)), 0.0)
+        displacement_px = np.where(finite[..., None], displacement_px, 0.0) * scale[..., None].astype(np.float32)
+        lengths = np.sqrt((displacement_px**2).sum(axis=-1))
+    length = float(lengths.max(initial=0.0))
     if length < 0.25:
         return rgb
     n = int(min(MAX_BLUR_SAMPLES, max(2, math.ceil(2.0 * length))))
-    h, w = rgb.shape[:2]
     gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
     out = np.zeros_like(rgb)
     for s in (np.arange(n, dtype=np.float32) + 0.5) / n - 0.5:
@@ -151,26 +163,6 @@ def motion_blur(rgb: NDArray[np.float32], displacement_px: NDArray[np.float32]) 
 
 
 # --- distortion --------------------------------------------------------------------
-def distortion_margin_px(intrinsics: Intrinsics, k1, k2, tangential) -> int:
-    """Pixels the pinhole render must extend beyond the image on every side so that
-    every distorted pixel finds its source, for every lens the ranges allow."""
-    k = intrinsics
-    edge = np.linspace(0.0, 1.0, 33)
-    border = np.concatenate([np.stack([edge * k.width, np.zeros_like(edge)], 1),
-                             np.stack([edge * k.width, np.full_like(edge, k.height)], 1),
-                             np.stack([np.zeros_like(edge), edge * k.height], 1),
-                             np.stack([np.full_like(edge, k.width), edge * k.height], 1)])
-    worst = 0.0
-    for a in k1:
-        for b in k2:
-            for p1 in tangential:
-                for p2 in tangential:
-                    src = undistort_px(border, k, np.array([a, b, p1, p2, 0.0]))
-                    over = np.maximum(np.maximum(-src, src - [k.width, k.height]), 0.0)
-                    worst = max(worst, float(np.nan_to_num(over, nan=1e6).max()))
-    return math.ceil(worst) + 2
-
-
 def distort_image(images: dict[str, NDArray], output: Intrinsics, margin_px: int,
                   distortion) -> dict[str, NDArray]:
     """Resample pinhole renders (``output`` grown by ``margin_px`` on every side) into the

@@ -19,6 +19,7 @@ from datagen.analysis.audit import AuditResult
 from datagen.core.labels import FrameLabels
 from datagen.dataset.reader import DatasetMeta, DatasetView
 from datagen.files import write_text
+from datagen.paths import real_folder, report_folder
 
 __all__ = ["report_document", "write_report"]
 
@@ -47,8 +48,8 @@ def write_report(result: AuditResult, dataset: DatasetMeta, out: Path, *,
     from datagen.report.overlays import draw_sheet
     from datagen.report.plots import plot_audit
 
-    out = Path(out)
-    plots = plot_audit(result.stats, result.plot, out / "plots")
+    out = report_folder(out, dataset.root)
+    plots = plot_audit(result.stats, result.plot, real_folder(out / "plots"))
 
     def data_uri(data: bytes, kind: str) -> str:
         return f"data:image/{kind};base64,{base64.b64encode(data).decode()}"

@@ -20,6 +20,7 @@ from datagen.analysis.detections import DetectionScores, summarize_detections
 from datagen.analysis.evaluate import DISTANCE_EDGES, REASONS, PnPSettings, summarize
 from datagen.dataset.reader import DatasetIndex, DatasetView
 from datagen.files import write_parquet, write_text
+from datagen.paths import real_folder, report_folder
 
 __all__ = ["write_evaluation"]
 
@@ -39,7 +40,8 @@ def write_evaluation(view: DatasetIndex | DatasetView, runs: list[tuple[dict, di
     """
     from datagen.report.plots import plot_detector, plot_evaluation
 
-    out = Path(out)
+    out = report_folder(out, view.root)
+    real_folder(out / "plots")
     summaries = [{**source, **summarize(result, settings)} for source, result in runs]
     doc = {"dataset": str(view.root), "name": view.doc.get("name"), "frames": len(view),
            "settings": dataclasses.asdict(settings), "reasons": list(REASONS), "runs": summaries}

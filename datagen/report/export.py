@@ -26,9 +26,11 @@ temporary folder beside it, renamed into place when complete.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
+import stat
 from collections.abc import Callable
 from pathlib import Path
 from typing import Final
@@ -65,20 +67,41 @@ def export_dataset(view: DatasetView, out: Path, fmt: str, progress: Callable[[i
             b = int(np.flatnonzero(view.distortion.any(axis=1))[0])
             raise DatagenError(f"{view.root / view.manifest_file[b]}: frame {view.frame_id[b]} has lens distortion; "
                                "BOP's cameras are pinholes (build with randomization.sensor.distortion off)")
-    out = Path(out).resolve()
+    for paths in (view.image_path, view.exr_path if fmt == "bop" else []):
+        for rel in paths:
+            view.folder.file(rel)  # nothing outside the dataset is exported
+    if fmt == "bop":
+        for name in view.features.objects:
+            _recorded_mesh(view, name)
+    out = Path(os.path.abspath(out))
+    if out.is_symlink():
+        raise DatagenError(f"--out: {out}: a symbolic link; an export is written only into a new real folder")
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise DatagenError(f"--out: {out}: exists and is not an empty folder; choose a new one")
-    if out.is_relative_to(view.root.resolve()):
+    if out.exists() and not out.stat().st_mode & stat.S_IWUSR:
+        raise DatagenError(f"--out: {out}: a read-only folder; make it writable or choose a new one")
+    if out.resolve().is_relative_to(view.folder.real_root):
         raise DatagenError(f"--out: {out}: inside the dataset {view.root}; choose a folder outside it")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.parent / f".{out.name}.datagen-export-{os.getpid()}"
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir()
     try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        raise DatagenError(f"--out: {out.parent}: a file is in the way of the folder; choose another") from None
+    tmp = out.parent / f".{out.name}.datagen-export-{os.getpid()}"
+    if tmp.is_symlink() or tmp.is_file():
+        tmp.unlink()
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        tmp.mkdir()
         (export_coco if fmt == "coco" else export_bop)(view, tmp, progress or (lambda n: None))
-        if out.exists():
+        mode = out.stat().st_mode if out.exists() else None
+        if mode is not None:
             out.rmdir()  # empty (checked above)
         tmp.rename(out)
+        if mode is not None:
+            out.chmod(stat.S_IMODE(mode))  # the folder the user made keeps its permissions
+    except OSError as exc:  # name the export, not the hidden folder it is written in
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise DatagenError(f"--out: {out}: {exc.strerror or exc}") from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)  # only the temporary folder this export made
         raise
@@ -129,7 +152,7 @@ def export_coco(view: DatasetView, out: Path, progress: Callable[[int], None]) -
         if not rows:
             continue
         for b in rows:
-            link_or_copy(view.root / view.image_path[b], out / view.image_path[b])
+            link_or_copy(view.folder.file(view.image_path[b]), out / view.image_path[b])
             progress(1)
         doc = coco_document(view, rows, objects)
         write_text(out / "annotations" / f"{split}.json", json.dumps(doc))
@@ -153,13 +176,8 @@ def _models(view: DatasetView, out: Path) -> dict[str, tuple[NDArray, NDArray]]:
 
     (out / "models").mkdir()
     info, meshes = {}, {}
-    assets = view.doc.get("assets", {})
     for name in view.features.objects:
-        path = Path(assets.get(name, {}).get("mesh", ""))
-        if not path.is_file():
-            raise DatagenError(f"{view.root / 'dataset.json'}: assets.{name}.mesh: {path}: not found (the BOP "
-                               "export writes the object's model from the mesh the dataset was built with)")
-        mesh = load_mesh(path, name).combined
+        mesh = load_mesh(_recorded_mesh(view, name), name).combined
         vertices, faces = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
         meshes[name] = (vertices, faces)
         mm = vertices * MM_PER_M
@@ -173,6 +191,39 @@ def _models(view: DatasetView, out: Path) -> dict[str, tuple[NDArray, NDArray]]:
     write_text(out / "models" / "models_info.json",
                json.dumps({k: {f: float(v) for f, v in d.items()} for k, d in info.items()}, indent=1))
     return meshes
+
+
+def _recorded_mesh(view: DatasetView, name: str) -> Path:
+    """The mesh file the dataset's object ``name`` was built with (dataset.json's
+    ``assets.NAME.mesh``), once its bytes are those of ``assets.NAME.mesh_sha256``: a
+    dataset names a file outside itself here, so nothing but its digest is read before it
+    is known to be that mesh."""
+    from datagen.assets.files import MAX_MESH_BYTES
+
+    where = f"{view.root / 'dataset.json'}: assets.{name}"
+    assets = view.doc.get("assets")
+    record = assets.get(name) if isinstance(assets, dict) else None
+    if not isinstance(record, dict) or not isinstance(record.get("mesh"), str) or not record["mesh"] \
+            or not isinstance(record.get("mesh_sha256"), str):
+        raise DatagenError(f"{where}: expected a mapping with the mesh's path and mesh_sha256 (the BOP export writes "
+                           "the object's model from the mesh the dataset was built with)")
+    path = Path(record["mesh"])
+    try:
+        info = path.stat()
+        if not stat.S_ISREG(info.st_mode) or info.st_size > MAX_MESH_BYTES:
+            raise DatagenError(f"{where}.mesh: {path}: not a mesh file")
+        digest = hashlib.sha256()
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                digest.update(block)
+        digest = digest.hexdigest()
+    except OSError as exc:
+        raise DatagenError(f"{where}.mesh: {path}: {exc.strerror or 'unreadable'} (the BOP export writes the "
+                           "object's model from the mesh the dataset was built with)") from None
+    if digest != record["mesh_sha256"]:
+        raise DatagenError(f"{where}.mesh: {path}: its bytes are not those the dataset was built with "
+                           "(mesh_sha256 differs): the mesh was changed or swapped")
+    return path
 
 
 def _bbox_of_mask(mask: NDArray[np.bool_]) -> list[int]:
@@ -223,9 +274,9 @@ def export_bop(view: DatasetView, out: Path, progress: Callable[[int], None]) ->
         camera, gt, gt_info = {}, {}, {}
         for b in rows:
             im = int(view.frame_id[b])
-            source = view.root / view.image_path[b]
+            source = view.folder.file(view.image_path[b])
             link_or_copy(source, folder / "rgb" / f"{im:06d}{source.suffix}")
-            ids = read_object_ids(view.root / view.exr_path[b])
+            ids = read_object_ids(view.folder.file(view.exr_path[b]))
             camera[str(im)] = {"cam_K": cam_k, "depth_scale": 1.0}
             gt[str(im)], gt_info[str(im)] = [], []
             for o, name in enumerate(view.features.objects):

@@ -118,13 +118,15 @@ class Sheet:
 
 
 def _frame_image(view: DatasetView, b: int) -> NDArray[np.uint8]:
-    """The frame's image (a black canvas when it has none or it does not match the camera)."""
+    """The frame's image (a black canvas when it has none, it leads outside the dataset or it
+    does not match the camera)."""
     import cv2
 
     k = view.intrinsics
     image = None
-    if view.image_path[b] and (view.root / view.image_path[b]).is_file():  # a FIFO would block the read
-        image = cv2.imread(str(view.root / view.image_path[b]), cv2.IMREAD_COLOR)
+    rel = view.image_path[b]
+    if rel and not view.folder.problem(rel) and (view.root / rel).is_file():  # a FIFO would block the read
+        image = cv2.imread(str(view.root / rel), cv2.IMREAD_COLOR)
         if image is not None and image.shape[:2] != (k.height, k.width):
             image = None
     return image if image is not None else np.zeros((k.height, k.width, 3), np.uint8)
@@ -377,22 +379,26 @@ def write_previews(view: DatasetView, frames: list[int] | None, out: Path, label
 
     from datagen.core.errors import DatagenError
     from datagen.files import write_image, write_text
+    from datagen.paths import report_folder
 
     labels = labels if labels is not None else view.recompute()
     index = {int(fid): b for b, fid in enumerate(view.frame_id)}
-    wanted = frames if frames is not None else [int(f) for f in view.frame_id[:limit]]
+    wanted = list(dict.fromkeys(frames)) if frames is not None else [int(f) for f in view.frame_id[:limit]]
     missing = [f for f in wanted if f not in index]
     if missing:
         raise DatagenError(f"--frames: frame {missing[0]} is not in {view.root} "
                            f"(frames {int(view.frame_id.min())}-{int(view.frame_id.max())})")
-    out = Path(out)
+    for f in wanted:  # a sheet shows nothing from outside the dataset
+        if view.image_path[index[f]]:
+            view.folder.file(view.image_path[index[f]])
+    out = report_folder(out, view.root)
     written = [write_image(out / f"{f:08d}.jpg", draw_sheet(view, index[f], labels).image, jpeg_quality=92)
                for f in wanted]
     # preview.json: the record of every sheet written here (``files``, relative to the folder),
     # which --overwrite removes and nothing else.
     record = out / "preview.json"
-    try:
-        earlier = json.loads(record.read_text()).get("files", [])
+    try:  # the record of earlier sheets, never through a link
+        earlier = [] if record.is_symlink() else json.loads(record.read_text()).get("files", [])
     except (OSError, ValueError, AttributeError):
         earlier = []
     files = sorted({*(f for f in earlier if isinstance(f, str)), *(p.name for p in written)})

@@ -199,7 +199,8 @@ def label_files(view: DatasetView, paths: list[str | None], check: Check,
         if rel is None:
             check.fail(f"{view.manifest_file[b]} frame {view.frame_id[b]}", f"no {kind} named", row=b)
             continue
-        rows, problem = read_label_file(view.root / rel)
+        problem = view.folder.problem(rel)
+        rows, problem = ([], problem) if problem else read_label_file(view.root / rel)
         if problem:
             check.fail(rel, problem, row=b)
             continue

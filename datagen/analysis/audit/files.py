@@ -1,5 +1,5 @@
 """The dataset's files: every file a manifest names exists and nothing else is there, the image
-lists, the planned shards, and every image decodes to the dataset's size."""
+lists, the planned shards, and how an image is decoded (its size read from its header first)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import numpy as np
 from datagen.analysis.audit.check import MAX_OFFENDERS, Check
 from datagen.core.camera import Intrinsics
 from datagen.dataset.layout import MANIFEST_NAME
-from datagen.dataset.reader import DatasetIndex, DatasetView, image_size
+from datagen.dataset.reader import DatasetIndex, DatasetView, image_size, plan_gaps
 from datagen.files import is_temporary
 
 #: Files Ultralytics writes into a dataset it trains on: label caches beside the label
@@ -24,16 +24,25 @@ ULTRALYTICS_SUFFIXES: Final = (".cache", ".cache.npy", ".npy")
 
 
 def check_files(view: DatasetIndex | DatasetView) -> Check:
-    check = Check("files", "every image, label and EXR a manifest names exists, no file in images/, labels/ "
-                  "or exr/ is unnamed, no temporary file is left, and every planned shard is finished")
-    root = view.root
+    check = Check("files", "every image, label and EXR a manifest names exists inside the dataset, no "
+                  "symbolic link leads out of it, no file in images/, labels/ or exr/ is unnamed, no temporary "
+                  "file is left, and every planned shard is finished")
+    root, folder = view.root, view.folder
     referenced = {p for paths in (view.image_path, view.label_path, view.pose_label_path, view.exr_path)
                   for p in paths if p}
     for rel in sorted(referenced):
         check.checked += 1
-        if not (root / rel).is_file():
+        problem = folder.problem(rel)
+        if problem:
+            check.fail(rel, problem)
+        elif not (root / rel).is_file():
             check.fail(rel, "named in a manifest but missing")
+    for rel in folder.links_out():
+        check.checked += 1
+        check.fail(rel, "a symbolic link that leads outside the dataset, or nowhere: no reader follows it")
     for tree in ("images", "labels", "exr", *(("pose/labels",) if view.label_format == "both" else ())):
+        if folder.problem(tree):
+            continue  # a link out of the dataset: named above, not walked
         for dirpath, _, files in os.walk(root / tree):
             for name in files:
                 rel = str((Path(dirpath) / name).relative_to(root))
@@ -57,7 +66,7 @@ def check_files(view: DatasetIndex | DatasetView) -> Check:
         listed = root / name
         check.checked += 1
         try:
-            have = listed.read_text().splitlines() if listed.is_file() else None
+            have = listed.read_text().splitlines() if listed.is_file() and not folder.problem(name) else None
         except (OSError, UnicodeDecodeError):
             have = None
         if have is None:
@@ -73,16 +82,9 @@ def check_files(view: DatasetIndex | DatasetView) -> Check:
         check.fail(rows[0], f"frame {frame} is in {len(rows)} manifest rows ({', '.join(sorted(set(rows)))}): a "
                    "manifest copied or renamed by hand")
     splits = view.doc.get("splits", {})
-    for split, planned in (splits.items() if isinstance(splits, dict) else []):
-        have = len({int(f) for f, s in zip(view.frame_id, view.split, strict=True) if s == split})
-        want = planned.get("frames", have) if isinstance(planned, dict) else have
-        check.checked += 1
-        if have < want:
-            check.fail("dataset.json", f"splits.{split}: {want} frames planned, {have} in the manifests "
-                       "(an unfinished build: rerun it)")
-        elif have > want:
-            check.fail("dataset.json", f"splits.{split}: {want} frames planned, {have} in the manifests "
-                       "(manifests from another build?)")
+    check.checked += len(splits) if isinstance(splits, dict) else 0
+    for gap in plan_gaps(view):
+        check.fail("dataset.json", gap)
     return check
 
 
@@ -110,56 +112,41 @@ def check_texels(view: DatasetIndex | DatasetView) -> Check:
 
 
 
-def check_images(view: DatasetIndex | DatasetView, k: Intrinsics) -> Check:
-    """Open every image a manifest names: its header states the dataset's size (``k``), and
-    it decodes fully (a truncated file or one that is not an image fails). Missing files
-    are the ``files`` check's."""
+def decode_image(path: Path, k: Intrinsics) -> tuple[np.ndarray | None, str | None]:
+    """The image at ``path`` decoded (BGR, uint8), or why not: its header must state the
+    dataset's size (``k``) before anything is decoded, and it must decode fully to 8-bit
+    colour. A missing file is ``(None, None)``: the files check names it. Call it inside
+    :func:`quiet_stderr` (libpng speaks of a damaged file on the process's stderr)."""
     import cv2
 
-    check = Check("images", f"every image a manifest names decodes fully, {k.width}x{k.height} 8-bit colour as "
-                  "dataset.json states")
-    paths = [p for p in view.image_path if p]
     # A decoded frame is at most its raw size; a file far larger than that is not one.
     max_bytes = 4 * k.width * k.height * 3 + (1 << 20)
-
-    def one(rel: str) -> str | None:
-        path = view.root / rel
-        try:
-            info = path.stat()
-            size = info.st_size
-            if not stat.S_ISREG(info.st_mode):
-                return "not a regular file"
-            if size > max_bytes:
-                return f"{size:,} bytes, more than a {k.width}x{k.height} image can take"
-            data = path.read_bytes()
-        except FileNotFoundError:
-            return None
-        except OSError as exc:
-            return f"unreadable ({exc.strerror})"
-        found = image_size(data[:_HEADER_BYTES])
-        if found is None:
-            return "not a PNG or JPEG image"
-        if found != (k.width, k.height):
-            return f"{found[0]}x{found[1]} px, dataset.json says {k.width}x{k.height}"
-        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-        if image is None:
-            return "does not decode (truncated or corrupt)"
-        if image.dtype != np.uint8 or image.shape != (k.height, k.width, 3):
-            return f"decodes to {image.dtype} {image.shape}, expected uint8 ({k.height}, {k.width}, 3)"
-        return None
-
-    from concurrent.futures import ThreadPoolExecutor
-
-    with _quiet_stderr(), ThreadPoolExecutor(max(1, os.cpu_count() or 1)) as pool:  # OpenCV decodes without the GIL
-        for rel, problem in zip(paths, pool.map(one, paths), strict=True):
-            check.checked += 1
-            if problem:
-                check.fail(rel, problem)
-    return check
+    try:
+        info = path.stat()
+        if not stat.S_ISREG(info.st_mode):
+            return None, "not a regular file"
+        if info.st_size > max_bytes:
+            return None, f"{info.st_size:,} bytes, more than a {k.width}x{k.height} image can take"
+        data = path.read_bytes()
+    except FileNotFoundError:
+        return None, None
+    except OSError as exc:
+        return None, f"unreadable ({exc.strerror})"
+    found = image_size(data[:_HEADER_BYTES])
+    if found is None:
+        return None, "not a PNG or JPEG image"
+    if found != (k.width, k.height):
+        return None, f"{found[0]}x{found[1]} px, dataset.json says {k.width}x{k.height}"
+    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if image is None:
+        return None, "does not decode (truncated or corrupt)"
+    if image.dtype != np.uint8 or image.shape != (k.height, k.width, 3):
+        return None, f"decodes to {image.dtype} {image.shape}, expected uint8 ({k.height}, {k.width}, 3)"
+    return image, None
 
 
 @contextlib.contextmanager
-def _quiet_stderr():
+def quiet_stderr():
     """Silence what libpng prints to the process's stderr about a damaged file (the check
     names the file itself)."""
     try:

@@ -13,10 +13,8 @@ from datagen.dataset.reader import DatasetMeta, DatasetView
 def check_manifest(view: DatasetView, labels: FrameLabels) -> Check:
     check = Check("manifest_boxes", "manifest centres, tight, corrected and label boxes and exclusions equal a "
                   f"recomputation from the poses and features.parquet (to {MANIFEST_TOLERANCE_PX:g} px)")
-    k = view.intrinsics
-    expected_k = np.array([k.width, k.height, k.fx, k.fy, k.cx, k.cy])
     check.checked = len(view)
-    k_ok = np.isclose(view.row_intrinsics, expected_k, rtol=0, atol=1e-9).all(axis=1)
+    k_ok = view.intrinsics_as_built
     class_ok = (view.class_id == view.features.class_id).all(axis=1)
     fresh_label = np.where(labels.labeled[..., None], labels.label_xyxy, np.nan)  # stored only for labeled features
     err = np.max([nan_error(view.center_px, labels.center_px), nan_error(view.tight_xyxy, labels.tight_xyxy),

@@ -11,7 +11,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.analysis.audit.check import AuditResult, Check, CheckGroup, Finish, GroupPart, Recomputed
-from datagen.analysis.audit.files import check_files, check_images, check_texels
+from datagen.analysis.audit.content import ImageChecks
+from datagen.analysis.audit.files import check_files, check_texels
 from datagen.analysis.audit.label_lines import MIN_LEARNABLE_SHARE, LabelLineChecks
 from datagen.analysis.audit.manifest import ManifestChecks
 from datagen.analysis.audit.pose import PoseChecks
@@ -21,7 +22,7 @@ from datagen.dataset.reader import DatasetIndex, DatasetSource, DatasetView
 from datagen.parallel import NullProgress, map_in_order
 
 #: The groups of per-frame checks, in report order (the dataset's files and images follow).
-GROUPS: Final[tuple[CheckGroup, ...]] = (ManifestChecks(), LabelLineChecks(), PoseChecks())
+GROUPS: Final[tuple[CheckGroup, ...]] = (ManifestChecks(), LabelLineChecks(), PoseChecks(), ImageChecks())
 
 
 @dataclass
@@ -45,7 +46,7 @@ def _audit_part(view: DatasetView, rank: NDArray[np.int64]) -> _Part:
 
 
 def _audit_shard(source: DatasetSource, name: str, rank: NDArray[np.int64]) -> _Part:
-    return _audit_part(source.read_shard(name), rank)
+    return _audit_part(source.read_shard(name, checked=False), rank)
 
 
 def _parts(dataset: DatasetView | DatasetSource, index: DatasetIndex | DatasetView, workers: int,
@@ -102,6 +103,6 @@ def audit(dataset: DatasetView | DatasetSource, *, min_learnable: float = MIN_LE
             if section is not None:
                 stats[section[0]] = section[1]
         stats["appearance"] = appearance_finish(spill, totals.appearance)
-    checks += [check_files(index), check_images(index, dataset.intrinsics), check_texels(index)]
+    checks += [check_files(index), check_texels(index)]
     return AuditResult(dataset.root, str(dataset.doc.get("name", dataset.root.name)), len(index),
                        [c.finish() for c in checks], stats, found_stats.plot)

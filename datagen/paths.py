@@ -1,0 +1,112 @@
+"""The one rule for every path a dataset names or holds, and for the folders datagen writes
+reports and exports into.
+
+A dataset folder is input from a stranger (datasets are downloaded and shared): a path it
+names (a manifest's ``image_path``, say) or a file it holds is read only when, resolved,
+it stays inside the dataset folder, so that a symbolic link can lead nobody's reader out
+of it. A report or export folder is a real folder: a symbolic link at its name, or
+between the dataset and a report folder inside it, is refused, and every folder made
+under it is made, never followed. Files themselves are replaced by a rename
+(:mod:`datagen.files`), which replaces a link instead of writing through it.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+
+from datagen.core.errors import DatagenError
+
+__all__ = ["DatasetFolder", "real_folder", "report_folder"]
+
+#: The problem of a path that names no file inside the dataset (absolute, ``..``, empty).
+NOT_INSIDE = "is not a path inside the dataset"
+#: The problem of a path that a symbolic link leads out of the dataset.
+LEADS_OUT = "leads outside the dataset through a symbolic link"
+
+
+@dataclass(frozen=True)
+class DatasetFolder:
+    """A dataset folder (or another folder of untrusted input, ``what``: a folder of
+    predictions) as untrusted input: which of the paths it names may be read."""
+
+    root: Path
+    what: str = "dataset"
+
+    @functools.cached_property
+    def real_root(self) -> str:
+        return os.path.realpath(self.root)
+
+    def _inside(self, resolved: str) -> bool:
+        return resolved == self.real_root or resolved.startswith(self.real_root.rstrip(os.sep) + os.sep)
+
+    def problem(self, rel: str) -> str | None:
+        """Why the dataset path ``rel`` (relative to the root, as a manifest writes it) may
+        not be read, or None: it must be relative, without ``..``, and stay inside the
+        dataset once every symbolic link on the way is resolved."""
+        if not isinstance(rel, str) or not rel or rel.startswith(("/", "\\")) or "\0" in rel \
+                or ".." in PurePosixPath(rel).parts:
+            return NOT_INSIDE.replace("dataset", self.what)
+        if not self._inside(os.path.realpath(os.path.join(self.root, rel))):
+            return LEADS_OUT.replace("dataset", self.what)
+        return None
+
+    def file(self, rel: str) -> Path:
+        """``root / rel`` where :meth:`problem` has none; otherwise one line naming it."""
+        problem = self.problem(rel)
+        if problem:
+            raise DatagenError(f"{self.root / str(rel)[:200]}: {problem}")
+        return self.root / rel
+
+    def links_out(self, *, dangling: bool = True) -> Iterator[str]:
+        """Every symbolic link in the dataset (files and folders, none followed) that leads
+        outside it (or, with ``dangling``, nowhere), relative to the root, in walking order."""
+        for dirpath, dirnames, filenames in os.walk(self.root):
+            for name in sorted(dirnames) + sorted(filenames):
+                path = os.path.join(dirpath, name)
+                if os.path.islink(path) and not (self._inside(os.path.realpath(path))
+                                                 and (os.path.exists(path) or not dangling)):
+                    yield os.path.relpath(path, self.root)
+            dirnames.sort()
+
+
+def real_folder(folder: Path, flag: str = "--out", *, make: bool = True) -> Path:
+    """Make ``folder`` (and its missing parents) and return it; a symbolic link at its name
+    is refused, not followed (one line naming ``flag``). ``make`` False: only check, before
+    any work starts, that it could be made."""
+    folder = Path(folder)
+    if folder.is_symlink():
+        raise DatagenError(f"{flag}: {folder}: a symbolic link; datagen writes reports and exports only into a "
+                           "real folder (remove the link or choose another folder)")
+    if folder.exists() and not folder.is_dir():
+        raise DatagenError(f"{flag}: {folder}: a file is in the way; choose a folder")
+    if not make:
+        return folder
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        raise DatagenError(f"{flag}: {folder}: a file is in the way of the folder; choose another") from None
+    if folder.is_symlink() or not folder.is_dir():
+        raise DatagenError(f"{flag}: {folder}: not a folder")
+    return folder
+
+
+def report_folder(folder: Path, dataset: Path, flag: str = "--out", *, make: bool = True) -> Path:
+    """:func:`real_folder` for a report of the dataset ``dataset``: where the folder lies in
+    the dataset (its default), no folder between the two may be a symbolic link either."""
+    folder, dataset = Path(folder), Path(dataset)
+    try:
+        rel = Path(os.path.abspath(folder)).relative_to(os.path.abspath(dataset))
+    except ValueError:
+        rel = None
+    if rel is not None:
+        step = dataset
+        for part in rel.parts:
+            step = step / part
+            if step.is_symlink():
+                raise DatagenError(f"{flag}: {step}: a symbolic link inside the dataset; datagen writes its "
+                                   "reports only into real folders (remove the link or choose another --out)")
+    return real_folder(folder, flag, make=make)
