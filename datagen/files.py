@@ -15,9 +15,11 @@ for training images, overlays and sheets, and the linear EXR of a frame
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import re
 import shutil
+import stat
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -46,10 +48,23 @@ def is_temporary(name: str) -> bool:
     return _TEMPORARY.fullmatch(name) is not None
 
 
-def _temporary(target: str) -> str:
-    """The hidden temporary beside ``target`` that this process writes it through."""
+def _new_temporary(target: str) -> tuple[str, int]:
+    """A new hidden temporary beside ``target`` and its descriptor, open for writing:
+    created here, exclusively (``O_EXCL``, ``O_NOFOLLOW``), so that nothing already at its
+    name (a link, a FIFO, someone's file) is written through or waited on; the folder is
+    made when missing."""
     folder, name = os.path.split(target)
-    return os.path.join(folder, f".{name}.{os.getpid()}{TEMPORARY_SUFFIX}")
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW
+    for attempt in range(100):
+        tmp = os.path.join(folder, f".{name}.{os.getpid()}{attempt or ''}{TEMPORARY_SUFFIX}")
+        try:
+            return tmp, os.open(tmp, flags, 0o666)
+        except FileExistsError:
+            continue
+        except FileNotFoundError:  # a folder not made yet
+            os.makedirs(folder or ".", exist_ok=True)
+            return tmp, os.open(tmp, flags, 0o666)
+    raise FileExistsError(errno.EEXIST, "no free temporary name beside it", target)
 
 
 def _name_target(exc: OSError, tmp: str | Path, target: str | Path) -> None:
@@ -63,8 +78,9 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a hidden temporary path beside ``path``; rename it into place on success,
     remove it on failure."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(_temporary(str(path)))
+    name, fd = _new_temporary(str(path))
+    os.close(fd)  # the writer reopens the empty regular file datagen just made
+    tmp = Path(name)
     try:
         yield tmp
         os.replace(tmp, path)
@@ -112,14 +128,9 @@ def write_bytes(path: str | Path, data: bytes) -> Path:
     naming ``path``), in plain system calls: a labels-only build writes a small file per
     frame, and the path objects and the folder check cost as much as the writing."""
     target = os.fspath(path)
-    tmp = _temporary(target)
-    flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW  # a link in the temporary's place is not followed
+    tmp = None
     try:
-        try:
-            fd = os.open(tmp, flags, 0o666)
-        except FileNotFoundError:  # a folder not made yet
-            os.makedirs(os.path.dirname(target) or ".", exist_ok=True)
-            fd = os.open(tmp, flags, 0o666)
+        tmp, fd = _new_temporary(target)
         try:
             view = memoryview(data)
             while view:
@@ -128,10 +139,11 @@ def write_bytes(path: str | Path, data: bytes) -> Path:
             os.close(fd)
         os.replace(tmp, target)
     except BaseException as exc:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
+        if tmp is not None:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
         if isinstance(exc, OSError):
-            _name_target(exc, tmp, target)
+            _name_target(exc, tmp or target, target)
         raise
     return Path(path)
 
@@ -176,6 +188,8 @@ def link_or_copy(source: str | Path, target: str | Path) -> Path:
     file system refuses the link (another device); a symbolic link as ``source`` gives its
     file, never the link itself."""
     source = os.path.realpath(source)
+    if not stat.S_ISREG(os.stat(source).st_mode):
+        raise IsADirectoryError(errno.EINVAL, "not a regular file", source)
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
     try:

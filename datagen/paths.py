@@ -14,18 +14,26 @@ from __future__ import annotations
 
 import functools
 import os
+import stat
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
 from datagen.core.errors import DatagenError
 
-__all__ = ["DatasetFolder", "real_folder", "report_folder"]
+__all__ = ["DatasetFolder", "named_inside", "real_folder", "regular_file", "report_folder"]
 
 #: The problem of a path that names no file inside the dataset (absolute, ``..``, empty).
 NOT_INSIDE = "is not a path inside the dataset"
 #: The problem of a path that a symbolic link leads out of the dataset.
 LEADS_OUT = "leads outside the dataset through a symbolic link"
+
+
+def named_inside(rel: object) -> bool:
+    """Whether ``rel``, as written, names a path inside a folder: a relative path without
+    ``..`` (no link is resolved: :meth:`DatasetFolder.problem` does that too)."""
+    return isinstance(rel, str) and bool(rel) and not rel.startswith(("/", "\\")) and "\0" not in rel \
+        and ".." not in PurePosixPath(rel).parts
 
 
 @dataclass(frozen=True)
@@ -47,8 +55,7 @@ class DatasetFolder:
         """Why the dataset path ``rel`` (relative to the root, as a manifest writes it) may
         not be read, or None: it must be relative, without ``..``, and stay inside the
         dataset once every symbolic link on the way is resolved."""
-        if not isinstance(rel, str) or not rel or rel.startswith(("/", "\\")) or "\0" in rel \
-                or ".." in PurePosixPath(rel).parts:
+        if not named_inside(rel):
             return NOT_INSIDE.replace("dataset", self.what)
         if not self._inside(os.path.realpath(os.path.join(self.root, rel))):
             return LEADS_OUT.replace("dataset", self.what)
@@ -58,19 +65,28 @@ class DatasetFolder:
         """``root / rel`` where :meth:`problem` has none; otherwise one line naming it."""
         problem = self.problem(rel)
         if problem:
-            raise DatagenError(f"{self.root / str(rel)[:200]}: {problem}")
+            name = str(self.root / str(rel)[:200])
+            raise DatagenError(f"{name if name.isprintable() else ascii(name)}: {problem}")
         return self.root / rel
 
-    def links_out(self, *, dangling: bool = True) -> Iterator[str]:
+    def links_out(self) -> Iterator[str]:
         """Every symbolic link in the dataset (files and folders, none followed) that leads
-        outside it (or, with ``dangling``, nowhere), relative to the root, in walking order."""
+        outside it, relative to the root, in walking order (a link inside whose target is
+        not there yet, as ``pose/images`` of a labels-only build, stays inside)."""
         for dirpath, dirnames, filenames in os.walk(self.root):
             for name in sorted(dirnames) + sorted(filenames):
                 path = os.path.join(dirpath, name)
-                if os.path.islink(path) and not (self._inside(os.path.realpath(path))
-                                                 and (os.path.exists(path) or not dangling)):
+                if os.path.islink(path) and not self._inside(os.path.realpath(path)):
                     yield os.path.relpath(path, self.root)
             dirnames.sort()
+
+
+def regular_file(path: Path) -> bool:
+    """Whether ``path`` is a regular file (a FIFO would block its reader, a device never end)."""
+    try:
+        return stat.S_ISREG(os.stat(path).st_mode)
+    except (OSError, ValueError):
+        return False
 
 
 def real_folder(folder: Path, flag: str = "--out", *, make: bool = True) -> Path:

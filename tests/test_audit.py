@@ -69,7 +69,7 @@ def test_a_built_dataset_passes_every_check(dataset) -> None:
     by_name = {c.name: c for c in result.checks}
     assert set(by_name) == {"manifest_boxes", "manifest_objects", "label_lines", "centre_drift",
                             "edge_margin_and_front", "ultralytics_rules", "learnable", "files", "images",
-                            "image_content", "class_names", "world_texels"}
+                            "image_content", "label_content", "class_names", "training_recipe", "world_texels"}
     assert by_name["label_lines"].checked > 100
     assert by_name["centre_drift"].worst < 1e-3  # seven decimals: under 1.2e-4 px at most
     stats = result.stats
@@ -87,7 +87,7 @@ def test_audit_command_writes_the_report(copy) -> None:
     assert out.returncode == 0, out.stdout + out.stderr
     assert out.stdout.strip().splitlines()[-1] == f"PASSED: {copy / 'audit' / 'report.html'}"
     doc = json.loads((copy / "audit" / "report.json").read_text())
-    assert doc["passed"] is True and doc["frames"] == 8 and len(doc["checks"]) == 11
+    assert doc["passed"] is True and doc["frames"] == 8 and len(doc["checks"]) == 14
     assert len(list((copy / "audit" / "plots").glob("*.png"))) == 5
     # The report is not a dataset file: a second audit still finds no orphan.
     assert checks(copy)["files"].passed

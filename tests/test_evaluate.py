@@ -105,7 +105,7 @@ def test_predictions_are_parsed_and_matched_by_stem(wingcam, tmp_path: Path) -> 
                 dropped += 1
                 continue  # a missing class
             good = f"{f} {u / k.width:.9f} {v / k.height:.9f} 0.01 0.01 0.90"
-            worse = f"{f} {(u + 40) / k.width:.9f} {v / k.height:.9f} 0.01 0.01 0.60"  # duplicate, lower conf
+            worse = f"{f} {min(u + 40, k.width) / k.width:.9f} {v / k.height:.9f} 0.01 0.01 0.60"  # lower conf
             lines += [worse, good] if f % 2 else [good, worse]
             lines.append(f"{f} 0.5 0.5 0.01 0.01 0.10")  # below the confidence threshold
         (folder / Path(wingcam.label_path[b]).name).write_text("\n".join(lines) + "\n")

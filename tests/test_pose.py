@@ -269,7 +269,7 @@ def test_bop_export_follows_the_format_spec_poses_reproject_and_masks_are_the_ob
         for im, gt_list in gts.items():
             b = int(np.flatnonzero(view.frame_id == int(im))[0])
             k = np.array(cams[im]["cam_K"]).reshape(3, 3)
-            ids = read_object_ids(rendered / view.exr_path[b])
+            ids = read_object_ids(rendered / view.exr_path[b], (view.intrinsics.height, view.intrinsics.width))
             assert (scene / "rgb" / f"{int(im):06d}.png").is_file()
             for index, gt in enumerate(gt_list):
                 name = next(o for o in f.objects if object_id(o) == gt["obj_id"])

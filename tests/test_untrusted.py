@@ -6,6 +6,7 @@ frames that show nothing where their labels are."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -293,10 +294,26 @@ def test_the_audit_fails_frames_that_show_nothing_where_their_labels_are(ds) -> 
     for path in (ds / "images").rglob("*.png"):
         cv2.imwrite(str(path), np.full((68, 128, 3), 255, np.uint8))
     assert datagen("audit", str(ds)).returncode == 1
-    content = next(c for c in json.loads((ds / "audit" / "report.json").read_text())["checks"]
-                   if c["name"] == "image_content")
-    assert not content["passed"] and content["failures"] == content["checked"] > 0
-    assert "the label box is saturated in the image" in content["offenders"][0]
+    checks = {c["name"]: c for c in json.loads((ds / "audit" / "report.json").read_text())["checks"]}
+    for name in ("image_content", "label_content"):
+        assert not checks[name]["passed"] and checks[name]["failures"] == checks[name]["checked"] > 0
+    assert "the label box is saturated in the image" in checks["label_content"]["offenders"][0]
+    assert "label boxes shows anything (saturated)" in checks["image_content"]["offenders"][0]
+
+
+@pytest.mark.render
+def test_one_frame_that_shows_nothing_fails_the_audit_however_many_frames_show_something(ds) -> None:
+    import cv2
+
+    from datagen.dataset.reader import load_dataset
+
+    view = load_dataset(ds)
+    b = int(np.argmax(view.labeled.sum(axis=1)))
+    cv2.imwrite(str(ds / view.image_path[b]), np.zeros((68, 128, 3), np.uint8))
+    assert datagen("audit", str(ds)).returncode == 1
+    checks = {c["name"]: c for c in json.loads((ds / "audit" / "report.json").read_text())["checks"]}
+    assert not checks["image_content"]["passed"] and checks["image_content"]["failures"] == 1
+    assert f"frame {view.frame_id[b]}: none of its" in checks["image_content"]["offenders"][0]
 
 
 @pytest.mark.render
@@ -333,3 +350,82 @@ def test_an_export_folder_under_a_file_is_named_without_a_temporary(ds, tmp_path
     line = refused(datagen("export", str(ds), "--format", "coco", "--out", str(tmp_path / "afile" / "x")))
     assert "a file is in the way" in line and "datagen" not in line.split(":")[-1] and "File exists" not in line
     assert (tmp_path / "afile").read_text() == "mine"
+
+
+# --- held-out kinds: split names, temporaries, locks, FIFOs, damaged values ----------------------------------------
+@pytest.mark.render
+def test_a_split_that_is_a_path_is_refused_before_anything_is_written(ds, tmp_path) -> None:
+    path = sorted((ds / "manifests").glob("val-*.parquet"))[0]
+    table = pq.read_table(path)
+    table = table.set_column(table.schema.get_field_index("split"), "split",
+                             pa.array([f"../../../{tmp_path.name}-evil"] * table.num_rows))
+    pq.write_table(table, path)
+    for args in (["export", "--format", "bop", "--out", str(tmp_path / "x")], ["evaluate", "--noise-px", "0"],
+                 ["audit"]):
+        refused(datagen(args[0], str(ds), *args[1:]), "split", "val-00000.parquet")
+    assert not list(tmp_path.parent.glob("*-evil")) and not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize("kind", ["link", "fifo"])
+def test_a_file_in_the_temporarys_place_is_neither_written_through_nor_waited_on(tmp_path, kind) -> None:
+    from datagen.files import write_bytes, write_parquet
+
+    victim = tmp_path / "victim"
+    victim.write_text("the user's own")
+    for name in ("report.json", "results.parquet"):
+        planted = tmp_path / f".{name}.{os.getpid()}.datagen-tmp"
+        if kind == "link":
+            planted.symlink_to(victim)
+        else:
+            os.mkfifo(planted)
+    write_bytes(tmp_path / "report.json", b"{}")
+    write_parquet(tmp_path / "results.parquet", pa.table({"a": [1]}))
+    assert victim.read_text() == "the user's own"
+    assert (tmp_path / "report.json").read_bytes() == b"{}" and not (tmp_path / "report.json").is_symlink()
+    assert pq.read_table(tmp_path / "results.parquet").num_rows == 1
+
+
+def test_a_lock_that_is_a_link_out_of_the_folder_is_refused(tmp_path) -> None:
+    victim = tmp_path / "victim"
+    victim.write_text("SECRET")
+    (tmp_path / "ds").mkdir()
+    (tmp_path / "ds" / ".datagen.lock").symlink_to(victim)
+    refused(datagen("build", "--config", str(write(tmp_path, "t.yaml", TINY)), "--out", str(tmp_path / "ds"),
+                    "--no-render"), "a symbolic link that leads outside the dataset")
+    assert victim.read_text() == "SECRET"
+
+
+@pytest.mark.render
+def test_fifos_in_a_dataset_block_no_command(ds, tmp_path) -> None:
+    exr = sorted((ds / "exr").rglob("*.exr"))[0]
+    exr.unlink()
+    os.mkfifo(exr)
+    refused(datagen("export", str(ds), "--format", "bop", "--out", str(tmp_path / "x")), "not a regular file")
+    (ds / "preview").mkdir()
+    os.mkfifo(ds / "preview" / "preview.json")
+    run = datagen("preview", str(ds), "--frames", "0")
+    assert run.returncode == 0, run.stderr
+
+
+@pytest.mark.render
+@pytest.mark.parametrize(("change", "expected"), [
+    (lambda doc: doc.__setitem__("seed", "abc"), "seed"),
+    (lambda doc: doc["splits"].__setitem__("val", 3), "splits.'val'"),
+    (lambda doc: doc.__setitem__("splits", None), "splits: expected a mapping"),
+])
+def test_damaged_dataset_values_are_one_line(ds, change, expected) -> None:
+    doc = json.loads((ds / "dataset.json").read_text())
+    change(doc)
+    (ds / "dataset.json").write_text(json.dumps(doc))
+    refused(datagen("evaluate", str(ds), "--noise-px", "0"), expected)
+
+
+@pytest.mark.render
+def test_two_prediction_files_of_no_frame_are_reported_not_refused(ds, tmp_path) -> None:
+    folder = tmp_path / "pred"
+    for sub in ("a", "b"):
+        (folder / sub).mkdir(parents=True)
+        (folder / sub / "99999999.txt").write_text("0 0.5 0.5 0.1 0.1 0.9\n")
+    (folder / "a" / "00000001.txt").write_text("0 0.5 0.5 0.1 0.1 0.9\n")
+    run = datagen("evaluate", str(ds), "--predictions", str(folder))
+    assert run.returncode == 0 and "2 prediction files name no frame" in run.stderr, run.stderr

@@ -107,13 +107,13 @@ def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_con
             raise DatagenError(f"{path}: {problem}")
         if not path.is_file():  # a folder or a FIFO named *.txt is not a prediction file
             continue
+        if stems is not None and path.stem not in stems:
+            ghosts.append(str(path.relative_to(folder)))
+            continue
         if path.stem in seen:
             raise DatagenError(f"{path}: frame {path.stem} has a second prediction file (the first: "
                                f"{seen[path.stem]}); keep one")
         seen[path.stem] = path
-        if stems is not None and path.stem not in stems:
-            ghosts.append(str(path.relative_to(folder)))
-            continue
         best: dict[int, tuple[float, float, float]] = {}
         try:
             text = path.read_text()

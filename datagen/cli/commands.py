@@ -294,8 +294,17 @@ def evaluate(
     if predictions is not None:
         k = source.intrinsics
         pose = source.pose_layout if source.pose_yaml is not None else None
+        stems = index.stems
+        if len(set(stems)) != len(stems):
+            twice = next(s for s in stems if stems.count(s) > 1)
+            raise DatagenError(f"{source.root}: two frames have files of the stem {twice!r}: a prediction file "
+                               "could not say which frame it is of (datagen audit names the manifests' paths)")
         found = parse_predictions(predictions, k.width, k.height, len(source.features), min_conf=conf, pose=pose,
-                                  stems=set(index.stems))
+                                  stems=set(stems))
+        if found.ghosts and not found:
+            raise DatagenError(f"--predictions: {predictions}: no prediction file is named after an image of the "
+                               f"dataset ({len(found.ghosts)} files, the first: {found.ghosts[0]}; expected files "
+                               "like 00000003.txt from `yolo predict save_txt=True`)")
         if found.ghosts:
             typer.echo(f"{predictions}: {len(found.ghosts)} prediction files name no frame of {source.root} "
                        f"(the first: {found.ghosts[0]}); not read", err=True)

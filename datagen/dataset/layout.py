@@ -28,6 +28,8 @@ from pathlib import Path
 from typing import Final
 
 __all__ = [
+    "DATA_YAML_KEYS",
+    "HYP_PATH_KEYS",
     "LOCK_NAME",
     "MANIFEST_NAME",
     "POSE_IMAGES_LINK",
@@ -44,6 +46,13 @@ LOCK_NAME: Final = ".datagen.lock"
 #: (Ultralytics finds a label by replacing the last /images/ of the image's path).
 POSE_IMAGES_LINK: Final = ("pose/images", "../images")
 
+
+#: The keys of a data.yaml datagen writes (Ultralytics' dataset file): no ``path``, no
+#: ``download`` (Ultralytics runs a ``download`` command when a split's images are missing).
+DATA_YAML_KEYS: Final = ("train", "val", "nc", "names", "kpt_shape", "flip_idx")
+#: Ultralytics settings that name files, folders, models or commands: never in a hyp.yaml datagen writes.
+HYP_PATH_KEYS: Final = ("data", "model", "project", "name", "source", "pretrained", "tracker", "cfg", "resume",
+                        "save_dir", "weights", "download")
 
 #: The name of a shard's manifest, ``{split}-{shard:05d}.parquet``; nothing else in manifests/ is one.
 MANIFEST_NAME: Final = re.compile(r"(train|val)-[0-9]{5}\.parquet")

@@ -28,7 +28,7 @@ from datagen.core.errors import DatagenError
 from datagen.core.features import FeatureTable
 from datagen.core.labelling import Labelled, LabellingContext, LabelRules
 from datagen.core.labels import FrameLabels
-from datagen.dataset.layout import MANIFEST_NAME
+from datagen.dataset.layout import MANIFEST_NAME, SPLITS
 from datagen.dataset.schema import (
     APPEARANCE,
     FILE_COLUMNS,
@@ -38,7 +38,7 @@ from datagen.dataset.schema import (
     read_objects,
     stored_schema,
 )
-from datagen.paths import NOT_INSIDE, DatasetFolder
+from datagen.paths import NOT_INSIDE, DatasetFolder, named_inside
 
 __all__ = ["DatasetIndex", "DatasetMeta", "DatasetSource", "DatasetView", "image_size", "load_dataset", "open_dataset",
            "plan_gaps"]
@@ -192,13 +192,15 @@ class DatasetIndex:
 def plan_gaps(rows: DatasetIndex | DatasetView) -> list[str]:
     """How the frames in the manifests differ from what dataset.json planned
     (``splits.SPLIT.frames``), one text per split that differs (none: as planned)."""
-    splits = rows.doc.get("splits", {})
-    gaps = []
-    for split, planned in (splits.items() if isinstance(splits, dict) else []):
+    splits = rows.doc.get("splits")
+    if not isinstance(splits, dict):
+        return ["splits: expected a mapping of each split to its planned frames"]
+    gaps = [f"splits: no plan for the {s} frames in the manifests" for s in sorted(set(rows.split) - set(splits))]
+    for split, planned in splits.items():
         have = len({int(f) for f, s in zip(rows.frame_id, rows.split, strict=True) if s == split})
-        want = planned.get("frames", have) if isinstance(planned, dict) else have
-        if not isinstance(want, int) or isinstance(want, bool):
-            gaps.append(f"splits.{split}.frames: {str(want)[:40]!r} is not a frame count")
+        want = planned.get("frames") if isinstance(planned, dict) else None
+        if split not in SPLITS or not isinstance(want, int) or isinstance(want, bool) or want < 0:
+            gaps.append(f"splits.{str(split)[:20]!r}: expected a split (train or val) with its planned frames")
         elif have < want:
             gaps.append(f"splits.{split}: {want} frames planned, {have} in the manifests (an unfinished build, or a "
                         "manifest removed: rerun the build)")
@@ -209,8 +211,9 @@ def plan_gaps(rows: DatasetIndex | DatasetView) -> list[str]:
 
 
 def _stems(rows: DatasetIndex | DatasetView) -> list[str]:
-    return [Path(next(p for p in paths if p)).stem
-            for paths in zip(rows.image_path, rows.label_path, rows.pose_label_path, strict=True)]
+    return [Path(next((p for p in paths if p), f"{int(frame):08d}")).stem
+            for frame, *paths in zip(rows.frame_id, rows.image_path, rows.label_path, rows.pose_label_path,
+                                     strict=True)]
 
 
 #: The columns of :class:`DatasetIndex`.
@@ -241,6 +244,8 @@ class DatasetSource(DatasetMeta):
         names them); otherwise they are refused in one line, as by :func:`load_dataset`."""
         tables = [self.read_manifest(name, INDEX_COLUMNS) for name in self.manifests]
         names = [name for name, t in zip(self.manifests, tables, strict=True) for _ in range(t.num_rows)]
+        _check_splits(self.root, [v for t in tables for v in t.column("split").to_pylist()], names,
+                      [v for t in tables for v in t.column("frame_id").to_pylist()])
         frame_ids = np.concatenate([np.asarray(t.column("frame_id"), dtype=np.int64) for t in tables])
         if not allow_duplicates:
             _refuse_duplicates(self.root, frame_ids, names)
@@ -300,6 +305,9 @@ def _check_document(doc: dict, path: Path) -> None:
         raise DatagenError(f"{path}: edge_margin_px or corrected: expected a number and true or false")
     if not isinstance(doc["config"], dict):
         raise DatagenError(f"{path}: config: expected a mapping")
+    seed = doc.get("seed", 0)
+    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+        raise DatagenError(f"{path}: seed: value {str(seed)[:40]!r}: expected the dataset's seed, an integer from 0")
 
 
 def _floats(array: pa.Array, shape: tuple[int, ...]) -> NDArray[np.float64]:
@@ -431,6 +439,9 @@ def _read_manifest(path: Path, columns: tuple[str, ...] | None = None) -> pa.Tab
         if have is None or not have.type.equals(field.type):
             what = "missing" if have is None else f"type {have.type}, expected {field.type}"
             raise DatagenError(f"{path}: column {field.name}: {what}")
+    for field in expected:
+        if not field.nullable and table.column(field.name).null_count:
+            raise DatagenError(f"{path}: column {field.name}: null values, which it may not hold")
     try:
         return table.select(expected.names).cast(expected)
     except (pa.ArrowException, ValueError) as exc:  # a list of the wrong length
@@ -442,7 +453,7 @@ def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, al
           checked: bool) -> DatasetView:
     """The rows of ``tables`` (read from ``manifests``) as one view, sorted by frame id;
     ``checked``: every row's camera must be dataset.json's."""
-    root, features, folder = meta.root, meta.features, meta.folder
+    root, features = meta.root, meta.features
     names = [name for name, t in zip(manifests, tables, strict=True) for _ in range(t.num_rows)]
     try:
         table = pa.concat_tables(tables)
@@ -455,10 +466,11 @@ def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, al
     table = table.take(pa.array(order))
     names = [names[i] for i in order]
     b, f = table.num_rows, len(features)
+    _check_splits(root, table.column("split").to_pylist(), names, table.column("frame_id").to_pylist())
     flat = _records(table, "features", f, f"feature records, features.parquet has {f} classes", root, names)
     for column in FILE_COLUMNS:
         for i, rel in enumerate(table.column(column).to_pylist()):
-            if rel is not None and folder.problem(rel) == NOT_INSIDE:
+            if rel is not None and not named_inside(rel):
                 raise DatagenError(f"{root / names[i]}: frame {table.column('frame_id')[i]}: {column} {rel[:80]!r} "
                                    f"{NOT_INSIDE}")
 
@@ -516,6 +528,15 @@ def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, al
                            f"{view.frame_id[b]} ({view.row_intrinsics[b].tolist()}): dataset.json or the manifest "
                            "was changed; datagen audit names every such frame")
     return view
+
+
+def _check_splits(root: Path, splits: list, names: list[str], frame_ids: list) -> None:
+    """Each row's split is the split its manifest's name says (a split names folders that
+    readers and exports write to)."""
+    for split, name, frame in zip(splits, names, frame_ids, strict=True):
+        if split not in SPLITS or not Path(name).name.startswith(f"{split}-"):
+            raise DatagenError(f"{root / name}: frame {frame}: split {str(split)[:40]!r}; a row of {Path(name).name} "
+                               f"is of split {Path(name).name.split('-')[0]}")
 
 
 def _refuse_duplicates(root: Path, frame_ids: NDArray[np.int64], names: list[str]) -> None:

@@ -13,6 +13,7 @@ import fcntl
 import json
 import os
 import platform
+import stat
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Final
@@ -22,7 +23,7 @@ from datagen.core.errors import DatagenError
 from datagen.dataset.layout import LOCK_NAME, MANIFEST_NAME, POSE_IMAGES_LINK, Layout
 from datagen.dataset.schema import FILE_COLUMNS
 from datagen.files import is_temporary
-from datagen.paths import DatasetFolder
+from datagen.paths import DatasetFolder, regular_file
 from datagen.pipeline.metadata import is_dataset_card
 from datagen.pipeline.plan import dataset_layout, plan_shards
 from datagen.scene.resolved import Scene
@@ -50,10 +51,13 @@ class DatasetLock:
     def acquire(self) -> None:
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
         except OSError as exc:
-            raise DatagenError(f"{exc.filename or self.path.parent}: cannot create the dataset folder "
+            raise DatagenError(f"{exc.filename or self.path.parent}: cannot create the dataset folder's lock "
                                f"({exc.strerror})") from None
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            os.close(fd)
+            raise DatagenError(f"{self.path}: not a regular file; a build locks its folder with it (remove it)")
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as exc:
@@ -102,15 +106,14 @@ def check_folder(layout: Layout) -> bool:
             if root.is_dir() else []
     except OSError as exc:
         raise DatagenError(f"{root}: cannot read the folder ({exc.strerror})") from None
-    if not entries:
-        return False
-    if not layout.dataset_json.is_file():
+    if entries and not layout.dataset_json.is_file():
         raise DatagenError(f"{root}: not empty and not a datagen dataset (no dataset.json); "
                            "choose an empty or new --out folder")
-    for rel in DatasetFolder(root).links_out(dangling=False):
-        raise DatagenError(f"{root / rel}: a symbolic link that leads outside the dataset; a build writes only "
-                           "inside its folder (remove the link)")
-    return True
+    if root.is_dir():  # a dataset, or a folder of nothing but a lock or a temporary: either may hold a link out
+        for rel in DatasetFolder(root).links_out():
+            raise DatagenError(f"{root / rel}: a symbolic link that leads outside the dataset; a build writes "
+                               "only inside its folder (remove the link)")
+    return bool(entries)
 
 
 def prepare_folder(layout: Layout, fingerprint: str, scene: Scene, *, render: bool, overwrite: bool) -> bool:
@@ -205,6 +208,8 @@ def owned_files(layout: Layout, doc: dict) -> list[Path]:
         if not MANIFEST_NAME.fullmatch(path.name):
             continue
         manifests.append(path)
+        if not regular_file(path):
+            continue
         try:
             table = pq.read_table(path, columns=[c for c in FILE_COLUMNS if c in pq.read_schema(path).names])
         except Exception:
@@ -215,7 +220,7 @@ def owned_files(layout: Layout, doc: dict) -> list[Path]:
     for folder, record in REPORT_RECORDS.items():
         path = root / folder / record
         try:
-            listed = json.loads(path.read_text()).get("files", [])
+            listed = json.loads(path.read_text()).get("files", []) if regular_file(path) else []
         except (OSError, ValueError, AttributeError):
             listed = []
         reports += [p for rel in listed if isinstance(listed, list) and (p := _inside(root / folder, rel))]

@@ -26,6 +26,7 @@ from datagen.core.training import TRAIN_BATCH
 from datagen.dataset.layout import POSE_IMAGES_LINK, SPLITS, Layout, ShardJob
 from datagen.dataset.schema import MANIFEST_VERSION, write_features, write_objects
 from datagen.files import link_or_copy, symlink_folder, write_image, write_text
+from datagen.paths import regular_file
 from datagen.scene.resolved import Scene
 
 __all__ = [
@@ -366,6 +367,8 @@ def write_dataset_card(layout: Layout, scene: Scene, jobs: list[ShardJob], *, re
 
 def is_dataset_card(path: Path) -> bool:
     """Whether ``path`` is a card datagen wrote (it carries :data:`CARD_MARK`)."""
+    if not regular_file(path):  # a FIFO would block the read
+        return False
     try:
         with open(path, encoding="utf-8", errors="replace") as f:
             return CARD_MARK in f.read(4096)

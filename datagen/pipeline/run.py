@@ -80,11 +80,13 @@ def build_dataset(config: Config, out: Path, *, workers: int | None = None, exec
                 if manifest.is_file():
                     try:
                         counts = read_manifest_summary(manifest)
+                        summary = ShardSummary(job.name, int(counts.get("frames", len(job.frames))),
+                                               int(counts.get("labels", 0)),
+                                               {str(k): int(v) for k, v in counts.get("excluded", {}).items()})
                     except Exception as exc:  # damaged outside datagen: manifests are written atomically
                         raise DatagenError(f"{manifest}: unreadable manifest ({type(exc).__name__}); delete it to "
                                            "render its shard again") from None
-                    report.shards[job.name] = ShardSummary(job.name, counts.get("frames", len(job.frames)),
-                                                           counts.get("labels", 0), counts.get("excluded", {}))
+                    report.shards[job.name] = summary
                     report.resumed.append(job.name)
                 else:
                     todo.append(job)

@@ -43,6 +43,7 @@ from datagen.core.errors import DatagenError
 from datagen.core.labels import FrameLabels
 from datagen.dataset.reader import DatasetView
 from datagen.files import link_or_copy, write_image, write_text
+from datagen.paths import regular_file
 
 __all__ = ["EXPORT_FORMATS", "export_bop", "export_coco", "export_dataset"]
 
@@ -69,7 +70,8 @@ def export_dataset(view: DatasetView, out: Path, fmt: str, progress: Callable[[i
                                "BOP's cameras are pinholes (build with randomization.sensor.distortion off)")
     for paths in (view.image_path, view.exr_path if fmt == "bop" else []):
         for rel in paths:
-            view.folder.file(rel)  # nothing outside the dataset is exported
+            if not regular_file(view.folder.file(rel)):  # nothing outside the dataset, nothing but files
+                raise DatagenError(f"{view.root / rel}: missing or not a regular file")
     if fmt == "bop":
         for name in view.features.objects:
             _recorded_mesh(view, name)
@@ -99,9 +101,12 @@ def export_dataset(view: DatasetView, out: Path, fmt: str, progress: Callable[[i
         tmp.rename(out)
         if mode is not None:
             out.chmod(stat.S_IMODE(mode))  # the folder the user made keeps its permissions
-    except OSError as exc:  # name the export, not the hidden folder it is written in
+    except OSError as exc:  # the file it is about, named in the export, not in the hidden folder it is written in
         shutil.rmtree(tmp, ignore_errors=True)
-        raise DatagenError(f"--out: {out}: {exc.strerror or exc}") from None
+        where = os.fsdecode(exc.filename) if exc.filename is not None else str(out)
+        if Path(where).is_relative_to(tmp):
+            where = str(out / Path(where).relative_to(tmp))
+        raise DatagenError(f"{where}: {exc.strerror or 'cannot be written'}") from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)  # only the temporary folder this export made
         raise
@@ -243,15 +248,22 @@ def _bbox_of_box(xyxy: NDArray[np.float64]) -> list[int]:
     return [x0, y0, x1 - x0 + 1, y1 - y0 + 1]
 
 
-def read_object_ids(path: Path) -> NDArray[np.uint32]:
-    """The ``object_id`` channel of a datagen EXR (:func:`datagen.files.write_exr`)."""
+def read_object_ids(path: Path, shape: tuple[int, int]) -> NDArray[np.uint32]:
+    """The ``object_id`` channel of a datagen EXR (:func:`datagen.files.write_exr`), which
+    must be a regular file of the image's ``(height, width)``."""
     import OpenEXR
 
+    if not regular_file(path):
+        raise DatagenError(f"{path}: not a regular file; expected the frame's EXR")
     try:
         with OpenEXR.File(str(path), separate_channels=True) as exr:
-            return np.asarray(exr.channels()["object_id"].pixels, dtype=np.uint32)
+            ids = np.asarray(exr.channels()["object_id"].pixels, dtype=np.uint32)
     except Exception as exc:
         raise DatagenError(f"{path}: unreadable EXR or no object_id channel ({type(exc).__name__})") from None
+    if ids.shape != tuple(shape):
+        raise DatagenError(f"{path}: object ids of {ids.shape[1::-1]} px, the dataset's images are "
+                           f"{shape[1]}x{shape[0]}")
+    return ids
 
 
 def export_bop(view: DatasetView, out: Path, progress: Callable[[int], None]) -> None:
@@ -276,7 +288,7 @@ def export_bop(view: DatasetView, out: Path, progress: Callable[[int], None]) ->
             im = int(view.frame_id[b])
             source = view.folder.file(view.image_path[b])
             link_or_copy(source, folder / "rgb" / f"{im:06d}{source.suffix}")
-            ids = read_object_ids(view.folder.file(view.exr_path[b]))
+            ids = read_object_ids(view.folder.file(view.exr_path[b]), (k.height, k.width))
             camera[str(im)] = {"cam_K": cam_k, "depth_scale": 1.0}
             gt[str(im)], gt_info[str(im)] = [], []
             for o, name in enumerate(view.features.objects):

@@ -120,15 +120,14 @@ class Sheet:
 def _frame_image(view: DatasetView, b: int) -> NDArray[np.uint8]:
     """The frame's image (a black canvas when it has none, it leads outside the dataset or it
     does not match the camera)."""
-    import cv2
+    from datagen.analysis.audit.files import decode_image, quiet_stderr
 
     k = view.intrinsics
     image = None
     rel = view.image_path[b]
-    if rel and not view.folder.problem(rel) and (view.root / rel).is_file():  # a FIFO would block the read
-        image = cv2.imread(str(view.root / rel), cv2.IMREAD_COLOR)
-        if image is not None and image.shape[:2] != (k.height, k.width):
-            image = None
+    if rel and not view.folder.problem(rel):
+        with quiet_stderr():
+            image, _ = decode_image(view.root / rel, k)  # its size read from its header before it is decoded
     return image if image is not None else np.zeros((k.height, k.width, 3), np.uint8)
 
 
@@ -379,7 +378,7 @@ def write_previews(view: DatasetView, frames: list[int] | None, out: Path, label
 
     from datagen.core.errors import DatagenError
     from datagen.files import write_image, write_text
-    from datagen.paths import report_folder
+    from datagen.paths import regular_file, report_folder
 
     labels = labels if labels is not None else view.recompute()
     index = {int(fid): b for b, fid in enumerate(view.frame_id)}
@@ -398,7 +397,8 @@ def write_previews(view: DatasetView, frames: list[int] | None, out: Path, label
     # which --overwrite removes and nothing else.
     record = out / "preview.json"
     try:  # the record of earlier sheets, never through a link
-        earlier = [] if record.is_symlink() else json.loads(record.read_text()).get("files", [])
+        earlier = json.loads(record.read_text()).get("files", []) \
+            if regular_file(record) and not record.is_symlink() else []
     except (OSError, ValueError, AttributeError):
         earlier = []
     files = sorted({*(f for f in earlier if isinstance(f, str)), *(p.name for p in written)})

@@ -1,7 +1,7 @@
 """The images, each decoded once: every image a manifest names decodes to the dataset's size
-(``images``), and shows something where its labels are (``image_content``): a label whose box
-is saturated, black or flat in its frame's image teaches a detector nothing
-(:func:`datagen.core.content.blank_boxes`)."""
+(``images``), no frame shows nothing in all its label boxes (``image_content``), and nearly
+every label box shows something (``label_content``): a label whose box is saturated, black
+or flat in its frame's image teaches a detector nothing (:func:`datagen.core.content.blank_boxes`)."""
 
 from __future__ import annotations
 
@@ -26,7 +26,9 @@ def check_images(view: DatasetView) -> list[Check]:
     k = view.intrinsics
     images = Check("images", f"every image a manifest names decodes fully, {k.width}x{k.height} 8-bit colour as "
                    "dataset.json states")
-    content = Check("image_content", "the image shows something inside each label box (not saturated, black or "
+    frames = Check("image_content", "every frame's image shows something inside at least one of its label boxes "
+                   "(not saturated, black or flat)")
+    content = Check("label_content", "the image shows something inside each label box (not saturated, black or "
                     f"flat) for at least {100 * MIN_SHOWING_SHARE:g}% of the boxes", min_pass_share=MIN_SHOWING_SHARE)
     rows = [b for b, rel in enumerate(view.image_path) if rel and not view.folder.problem(rel)]
 
@@ -43,13 +45,19 @@ def check_images(view: DatasetView) -> list[Check]:
                 images.fail(view.image_path[b], problem, row=b)
             if codes is None:
                 continue
+            where = f"{view.manifest_file[b]} frame {view.frame_id[b]}"
             content.checked += len(codes)
             for c, code in zip(view.class_id[b][view.labeled[b]], codes, strict=True):
                 if code:
-                    content.fail(f"{view.manifest_file[b]} frame {view.frame_id[b]}",
-                                 f"class {c}: the label box is {BLANK_REASONS[code]} in the image", row=b)
-    content.applicable = bool(rows)
-    return [images, content]
+                    content.fail(where, f"class {c}: the label box is {BLANK_REASONS[code]} in the image", row=b)
+            if len(codes):
+                frames.checked += 1
+                if codes.all():
+                    reasons = sorted({BLANK_REASONS[c] for c in codes})
+                    frames.fail(where, f"none of its {len(codes)} label boxes shows anything ({', '.join(reasons)})",
+                                row=b)
+    frames.applicable = content.applicable = bool(rows)
+    return [images, frames, content]
 
 
 class ImageChecks:
@@ -64,4 +72,4 @@ class ImageChecks:
         return GroupPart(check_images(view))
 
     def finish(self, meta: DatasetMeta, done: Finish) -> tuple[list[Check], tuple[str, dict] | None]:
-        return [done.merged["images"], done.merged["image_content"]], None
+        return [done.merged["images"], done.merged["image_content"], done.merged["label_content"]], None

@@ -12,9 +12,11 @@ from typing import Final
 import numpy as np
 
 from datagen.analysis.audit.check import MAX_OFFENDERS, Check
+from datagen.config.inputs import parse_yaml, read_text
 from datagen.core.camera import Intrinsics
-from datagen.dataset.layout import MANIFEST_NAME
-from datagen.dataset.reader import DatasetIndex, DatasetView, image_size, plan_gaps
+from datagen.core.errors import DatagenError
+from datagen.dataset.layout import DATA_YAML_KEYS, HYP_PATH_KEYS, MANIFEST_NAME
+from datagen.dataset.reader import DatasetIndex, DatasetMeta, DatasetView, image_size, plan_gaps
 from datagen.files import is_temporary
 
 #: Files Ultralytics writes into a dataset it trains on: label caches beside the label
@@ -39,7 +41,7 @@ def check_files(view: DatasetIndex | DatasetView) -> Check:
             check.fail(rel, "named in a manifest but missing")
     for rel in folder.links_out():
         check.checked += 1
-        check.fail(rel, "a symbolic link that leads outside the dataset, or nowhere: no reader follows it")
+        check.fail(rel, "a symbolic link that leads outside the dataset: no reader follows it")
     for tree in ("images", "labels", "exr", *(("pose/labels",) if view.label_format == "both" else ())):
         if folder.problem(tree):
             continue  # a link out of the dataset: named above, not walked
@@ -85,6 +87,41 @@ def check_files(view: DatasetIndex | DatasetView) -> Check:
     check.checked += len(splits) if isinstance(splits, dict) else 0
     for gap in plan_gaps(view):
         check.fail("dataset.json", gap)
+    return check
+
+
+def check_recipe(meta: DatasetMeta) -> Check:
+    """data.yaml and hyp.yaml (and the pose set's) hold only what datagen writes there: the
+    image lists of this dataset, no ``path`` or ``download`` (Ultralytics resolves the one
+    and runs the other), and no setting that names a file, model or command."""
+    check = Check("training_recipe", "data.yaml and hyp.yaml name only this dataset's image lists and no other "
+                  "file, folder, model or command (what Ultralytics reads and runs when it trains)")
+    sets = ["", "pose/"] if meta.label_format == "both" else [""]
+    for prefix in sets:
+        data = meta.pose_yaml if prefix else meta.data_yaml
+        name = f"{prefix}data.yaml"
+        check.checked += 1
+        for key in sorted(set(map(str, data)) - set(DATA_YAML_KEYS)):
+            check.fail(name, f"{key[:40]!r}: not a key datagen writes ({', '.join(DATA_YAML_KEYS)})")
+        for key in ("train", "val"):
+            if data.get(key) not in ("train.txt", "val.txt"):
+                check.fail(name, f"{key}: {str(data.get(key))[:60]!r}; expected train.txt or val.txt, the image "
+                           "lists beside it")
+        hyp = f"{prefix}hyp.yaml"
+        check.checked += 1
+        try:
+            doc = parse_yaml(read_text(meta.folder.file(hyp), "hyp.yaml"), meta.root / hyp)
+        except DatagenError as exc:
+            check.fail(hyp, " ".join(str(exc).split())[:160])
+            continue
+        if not isinstance(doc, dict):
+            check.fail(hyp, "expected a mapping of Ultralytics settings")
+            continue
+        for key, value in doc.items():
+            if str(key) in HYP_PATH_KEYS:
+                check.fail(hyp, f"{str(key)[:40]!r}: names a file, folder, model or command; datagen writes none")
+            elif not isinstance(value, (int, float, bool)) and not (isinstance(value, str) and value.isalnum()):
+                check.fail(hyp, f"{str(key)[:40]!r}: {str(value)[:40]!r} is not a number, a flag or a word")
     return check
 
 

@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from datagen.analysis.audit.check import AuditResult, Check, CheckGroup, Finish, GroupPart, Recomputed
 from datagen.analysis.audit.content import ImageChecks
-from datagen.analysis.audit.files import check_files, check_texels
+from datagen.analysis.audit.files import check_files, check_recipe, check_texels
 from datagen.analysis.audit.label_lines import MIN_LEARNABLE_SHARE, LabelLineChecks
 from datagen.analysis.audit.manifest import ManifestChecks
 from datagen.analysis.audit.pose import PoseChecks
@@ -103,6 +103,6 @@ def audit(dataset: DatasetView | DatasetSource, *, min_learnable: float = MIN_LE
             if section is not None:
                 stats[section[0]] = section[1]
         stats["appearance"] = appearance_finish(spill, totals.appearance)
-    checks += [check_files(index), check_texels(index)]
+    checks += [check_files(index), check_recipe(dataset), check_texels(index)]
     return AuditResult(dataset.root, str(dataset.doc.get("name", dataset.root.name)), len(index),
                        [c.finish() for c in checks], stats, found_stats.plot)
