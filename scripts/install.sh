@@ -26,13 +26,14 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install -q --disable-pip-version-check --upgrade pip
 .venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test]"
-# The lowest pyarrow pyproject.toml declares, in a folder of its own beside the venv's:
-# tests/test_versions.py builds, audits and reads a dataset with it on PYTHONPATH.
-FLOOR=$(.venv/bin/python scripts/declared_floor.py pyarrow)
-if [ ! -f ".venv/floor/pyarrow-$FLOOR/.complete" ]; then
-    rm -rf ".venv/floor/pyarrow-$FLOOR"
-    .venv/bin/python -m pip install -q --disable-pip-version-check --no-deps --target ".venv/floor/pyarrow-$FLOOR" \
-        "pyarrow==$FLOOR"
-    touch ".venv/floor/pyarrow-$FLOOR/.complete"
+# The lowest versions pyproject.toml declares, in a venv of their own (.venv/floor):
+# tests/test_versions.py builds, audits and reads a dataset there. Remade when they change.
+.venv/bin/python scripts/declared_floor.py --constraints > .venv/floor-constraints.txt
+if ! cmp -s .venv/floor-constraints.txt .venv/floor/constraints.txt 2>/dev/null; then
+    rm -rf .venv/floor
+    "$PYTHON" -m venv .venv/floor
+    .venv/floor/bin/python -m pip install -q --disable-pip-version-check -c .venv/floor-constraints.txt \
+        -e . pandas polars
+    cp .venv/floor-constraints.txt .venv/floor/constraints.txt
 fi
 .venv/bin/python -c "import datagen, mitsuba; print('datagen', datagen.__version__, '| mitsuba', mitsuba.__version__, '| variants', ', '.join(mitsuba.variants()))"
