@@ -165,6 +165,8 @@ def test_a_dataset_missing_a_manifest_is_refused_unless_partial(ds, tmp_path) ->
         refused(datagen(args[0], str(ds), *args[1:]), "7 frames planned, 4 in the manifests", "--partial")
     run = datagen("export", str(ds), "--format", "coco", "--out", str(tmp_path / "x"), "--partial")
     assert run.returncode == 0 and "partial:" in run.stderr and "export of 5 frames" in run.stdout
+    run = datagen("evaluate", str(ds), "--noise-px", "0", "--split", "val")  # the val split is whole
+    assert run.returncode == 0 and "partial" not in run.stderr, run.stderr
 
 
 @pytest.mark.render

@@ -289,7 +289,7 @@ def evaluate(
                            make=False)
     source = open_dataset(dataset)
     index = source.index(allow_duplicates=False)
-    require_plan(index, partial)
+    require_plan(index, partial, split if split in ("train", "val") else None)
     progress = BuildProgress(source.root.name, verb="evaluate", announce=False)
     if predictions is not None:
         k = source.intrinsics

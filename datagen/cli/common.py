@@ -110,12 +110,13 @@ PartialOption = Annotated[bool, typer.Option("--partial", help="Go on when the m
                                              "use the frames there are.")]
 
 
-def require_plan(rows, partial: bool) -> None:
+def require_plan(rows, partial: bool, only: str | None = None) -> None:
     """Refuse a dataset whose manifests differ from what its dataset.json planned (one
-    line), or with ``partial`` say so on stderr and go on (:func:`datagen.dataset.reader.plan_gaps`)."""
+    line), or with ``partial`` say so on stderr and go on (:func:`datagen.dataset.reader.plan_gaps`);
+    ``only``: the split the command reads, when it reads one."""
     from datagen.dataset.reader import plan_gaps
 
-    gaps = plan_gaps(rows)
+    gaps = plan_gaps(rows, only)
     if gaps and not partial:
         raise DatagenError(f"{rows.root / 'dataset.json'}: {gaps[0]}; or pass --partial to go on with the "
                            f"{len(rows.frame_id)} frames there are")

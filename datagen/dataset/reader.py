@@ -189,14 +189,18 @@ class DatasetIndex:
         return DatasetFolder(self.root)
 
 
-def plan_gaps(rows: DatasetIndex | DatasetView) -> list[str]:
+def plan_gaps(rows: DatasetIndex | DatasetView, only: str | None = None) -> list[str]:
     """How the frames in the manifests differ from what dataset.json planned
-    (``splits.SPLIT.frames``), one text per split that differs (none: as planned)."""
+    (``splits.SPLIT.frames``), one text per split that differs (none: as planned); ``only``:
+    of that split alone."""
     splits = rows.doc.get("splits")
     if not isinstance(splits, dict):
         return ["splits: expected a mapping of each split to its planned frames"]
-    gaps = [f"splits: no plan for the {s} frames in the manifests" for s in sorted(set(rows.split) - set(splits))]
+    gaps = [f"splits: no plan for the {s} frames in the manifests" for s in sorted(set(rows.split) - set(splits))
+            if only in (None, s)]
     for split, planned in splits.items():
+        if only not in (None, split):
+            continue
         have = len({int(f) for f, s in zip(rows.frame_id, rows.split, strict=True) if s == split})
         want = planned.get("frames") if isinstance(planned, dict) else None
         if split not in SPLITS or not isinstance(want, int) or isinstance(want, bool) or want < 0:
