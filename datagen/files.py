@@ -189,7 +189,7 @@ def link_or_copy(source: str | Path, target: str | Path) -> Path:
     file, never the link itself."""
     source = os.path.realpath(source)
     if not stat.S_ISREG(os.stat(source).st_mode):
-        raise IsADirectoryError(errno.EINVAL, "not a regular file", source)
+        raise OSError(errno.EINVAL, "not a regular file", source)
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
     try:

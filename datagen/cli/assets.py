@@ -74,7 +74,7 @@ def assets_show(
 def assets_preview(
     out: Annotated[Path | None, typer.Option("--out", parser=path_value,
                                              help="Folder for the PNGs (default: assets/previews, the "
-                                            "repository's documentation).")] = None,
+                                             "repository's documentation).")] = None,
     objects: Annotated[list[str] | None, typer.Option("--object", help="Only this object (repeatable).")] = None,
     spp: Annotated[int, typer.Option("--spp", min=1, max=MAX_SPP, help="Samples per pixel.")] = 64,
     config: Annotated[Path | None, typer.Option("--config", parser=path_value,

@@ -62,10 +62,11 @@ def unit_value(text: str) -> float:
         raise typer.BadParameter(f"{text!r}: expected a number from 0 to 1")
     return value
 
+
 #: The ``--config`` option of the commands that read a scene config.
 ConfigOption = Annotated[Path, typer.Option("--config", parser=path_value,
                                             help="Scene config file (YAML), or a shipped scene by name "
-                                                             "(datagen scenes).")]
+                                                 "(datagen scenes).")]
 
 
 def user_errors(func: F) -> F:
