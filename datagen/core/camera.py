@@ -22,6 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 from datagen.core.conventions import NEAR_PLANE_M
 
 __all__ = [
+    "FOCAL_BOUNDS_PX",
     "MAX_IMAGE_PX",
     "MIN_FOCAL_PX",
     "MIN_PIXEL_ANGLE_RAD",
@@ -49,12 +50,17 @@ MIN_PIXEL_ANGLE_RAD: Final = 2.0**-20
 MIN_FOCAL_PX: Final = 1.0
 
 
+#: The focal lengths, pixels, a pinhole can be made with: from :data:`MIN_FOCAL_PX` to the
+#: one whose neighbouring rays at the image centre are :data:`MIN_PIXEL_ANGLE_RAD` apart.
+FOCAL_BOUNDS_PX: Final = (MIN_FOCAL_PX, 1.0 / MIN_PIXEL_ANGLE_RAD)
+
+
 def hfov_bounds_deg(width: int) -> tuple[float, float]:
     """The horizontal fields of view, degrees, that a ``width``-pixel pinhole can be made
-    with (:data:`MIN_PIXEL_ANGLE_RAD`, :data:`MIN_FOCAL_PX`)."""
+    with (:data:`FOCAL_BOUNDS_PX`), narrowest first."""
+    shortest, longest = FOCAL_BOUNDS_PX
     half = width / 2.0
-    return (math.degrees(2.0 * math.atan(half * MIN_PIXEL_ANGLE_RAD)),
-            math.degrees(2.0 * math.atan(half / MIN_FOCAL_PX)))
+    return math.degrees(2.0 * math.atan(half / longest)), math.degrees(2.0 * math.atan(half / shortest))
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
 from datagen.config.inputs import parse_json, parse_yaml, read_text
-from datagen.core.camera import MAX_IMAGE_PX, MIN_FOCAL_PX, MIN_PIXEL_ANGLE_RAD, Intrinsics
+from datagen.core.camera import FOCAL_BOUNDS_PX, MAX_IMAGE_PX, Intrinsics
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import DatagenError
 from datagen.core.features import FeatureTable
@@ -300,7 +300,7 @@ def _check_document(doc: dict, path: Path) -> None:
         if not isinstance(k, dict) or key not in k:
             raise DatagenError(f"{path}: intrinsics.{key}: missing")
         size = doc["image_width"] if key in ("fx", "cx") else doc["image_height"]
-        lo, hi = (MIN_FOCAL_PX, 1.0 / MIN_PIXEL_ANGLE_RAD) if key in ("fx", "fy") else (0.0, size)
+        lo, hi = FOCAL_BOUNDS_PX if key in ("fx", "fy") else (0.0, size)
         what = "a focal length a camera can be made with, px" if key in ("fx", "fy") else "a point of the image"
         if not number(k[key]) or not lo <= k[key] <= hi:
             raise DatagenError(f"{path}: intrinsics.{key}: value {str(k[key])[:40]!r}: expected a number from {lo:g} "
@@ -381,7 +381,7 @@ def open_dataset(root: str | Path) -> DatasetSource:
     intrinsics = Intrinsics(doc["image_width"], doc["image_height"], float(k["fx"]), float(k["fy"]),
                             float(k["cx"]), float(k["cy"]))
     return DatasetSource(root=root, doc=doc, data_yaml=data_yaml, pose_yaml=pose_yaml, features=features,
-                         intrinsics=intrinsics, hulls=hulls, manifests=_manifest_names(root))
+                         intrinsics=intrinsics, hulls=hulls, manifests=_manifest_names(folder))
 
 
 def _read_tables(root: Path) -> tuple[FeatureTable, dict[str, NDArray[np.float64]]]:
@@ -404,10 +404,9 @@ def _read_tables(root: Path) -> tuple[FeatureTable, dict[str, NDArray[np.float64
     return features, hulls
 
 
-def _manifest_names(root: Path) -> tuple[str, ...]:
-    """The shards' manifests, relative to ``root`` (a dataset without one is refused)."""
-    manifests = []
-    folder = DatasetFolder(root)
+def _manifest_names(folder: DatasetFolder) -> tuple[str, ...]:
+    """The shards' manifests, relative to the dataset's root (a dataset without one is refused)."""
+    manifests, root = [], folder.root
     for path in sorted((root / "manifests").glob("*.parquet")):
         if not MANIFEST_NAME.fullmatch(path.name):
             continue  # not a shard's manifest (the audit names it)

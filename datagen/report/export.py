@@ -72,9 +72,6 @@ def export_dataset(view: DatasetView, out: Path, fmt: str, progress: Callable[[i
         for rel in paths:
             if not regular_file(view.folder.file(rel)):  # nothing outside the dataset, nothing but files
                 raise DatagenError(f"{view.root / rel}: missing or not a regular file")
-    if fmt == "bop":
-        for name in view.features.objects:
-            _recorded_mesh(view, name)
     out = Path(os.path.abspath(out))
     if out.is_symlink():
         raise DatagenError(f"--out: {out}: a symbolic link; an export is written only into a new real folder")
