@@ -5,9 +5,9 @@
 Each scene is built as a user builds it (a subprocess: ``datagen build --config NAME
 --frames N --workers W``, shards of ``frames_per_approach`` frames so that every worker
 has work), after a warm-up build of the same frames: Dr.Jit compiles its kernels once per
-machine and keeps them on disk, one per combination of the sky's scale levels
-(``datagen.scene.look.SKY_SCALE_LEVELS`` squared), which a 10,000-frame build pays once;
-a timed build whose frames drew combinations not seen before would count their compiles.
+machine and keeps them on disk (after a process's first frame no frame compiles one:
+``tests/test_render.py``), so the timed build pays no compile; ``--workers auto`` is
+accepted as the build takes it.
 Prints a markdown table: the estimate the build printed in its first line, the measured
 frames/h of the build's own summary, and its split of a rendered frame.
 """
@@ -37,14 +37,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="+", default=list(shipped_scenes()))
     parser.add_argument("--frames", type=int, default=48)
-    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--workers", default="2", help="a count, or auto (datagen.pipeline.estimate.auto_workers)")
     args = parser.parse_args()
     print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}; "
           f"{args.frames} frames per scene, --workers {args.workers}")
     print("\n| scene | setting | estimate frames/h | measured frames/h | per rendered frame |")
     print("|---|---|---|---|---|")
     for name in args.scenes:
-        shard = max(1, min(load_config(name).approach.frames_per_approach, args.frames // max(1, args.workers)))
+        count = int(args.workers) if args.workers != "auto" else os.cpu_count() or 1  # shards enough for any count
+        shard = max(1, min(load_config(name).approach.frames_per_approach, args.frames // max(1, count)))
         with tempfile.TemporaryDirectory() as tmp:
             build(name, Path(tmp) / "warm", args.frames, args.workers, shard)
             text = build(name, Path(tmp) / "ds", args.frames, args.workers, shard)

@@ -1,14 +1,13 @@
 """Rendering cost per frame at the config's full resolution (2048x1080 by default).
 
     python bench/bench_render.py [--config scenes/wingcam55.yaml] [--spp 4 16 64] [--frames 3]
-                                 [--variant auto] [--denoise off|oidn]
+                                 [--every 1] [--variant auto] [--denoise off|oidn]
     python bench/bench_render.py --randomizers [--frames 8]
 
 ``--randomizers`` times the world's randomizers at the config's spp: every one off
-(today's images), each one alone, and all on, interleaved frame by frame (frame i in
-every mode, then frame i + 1), so that a noisy machine slows every mode alike; it
-prints each mode's mean and median whole-frame time, its ratio to all-off, and the
-process's peak RSS.
+(today's images), each one alone, and all on, one mode after another (a process holds
+one scene at a time); it prints each mode's mean and median whole-frame time, its ratio
+to all-off, and the process's peak RSS.
 
 ``--variant cuda_ad_rgb`` renders and denoises on the GPU where one is (nothing else
 changes: the denoiser takes the render's Dr.Jit tensors on their device).
@@ -17,8 +16,9 @@ For each spp: seconds per frame in ``mi.render`` and in the denoiser; every othe
 stage's seconds (:class:`datagen.render.timing.StageClock`); seconds per
 frame for the whole frame (approach state, material draws, posing through
 ``mi.traverse``, render, denoise, geometry pass, feature visibility, 8-bit PNG
-encoding); the share of frame time spent outside ``mi.render`` (and the
-denoiser's part of it); and the process's peak RSS. The first
+encoding); the host work per frame (everything outside ``mi.render`` and the
+denoiser) and its share of the frame; the kernels the counted frames compiled (launched,
+and launched by no earlier frame: 0 once warm); and the process's peak RSS. The first
 frame of each spp is a warm-up (kernel compilation) and is not counted.
 """
 
@@ -45,6 +45,8 @@ def main() -> None:
     parser.add_argument("--config", default="scenes/wingcam55.yaml")
     parser.add_argument("--spp", type=int, nargs="+", default=[4, 16, 64])
     parser.add_argument("--frames", type=int, default=3, help="counted frames per spp")
+    parser.add_argument("--every", type=int, default=1, help="frames 0, K, 2K, ...: K > 1 spreads them over "
+                        "approach chains (frame_per_approach frames each)")
     parser.add_argument("--variant", default=None)
     parser.add_argument("--denoise", default=None, choices=["off", "oidn"], help="override render.denoise")
     parser.add_argument("--randomizers", action="store_true", help="time each world randomizer and all of them")
@@ -58,27 +60,36 @@ def main() -> None:
     scene = Scene.resolve(config)
     print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs; config {args.config}, "
           f"{config.camera.width}x{config.camera.height}")
-    with tempfile.TemporaryDirectory() as tmp:
+    import drjit as dr
+
+    with tempfile.TemporaryDirectory() as tmp, dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
         for spp in args.spp:
             renderer = Renderer(scene, spp=spp, variant=args.variant)
             states = FrameStates(config)
             stages: dict[str, float] = {}
             total_s = 0.0
-            for n, i in enumerate(range(args.frames + 1)):
+            warm: set[str] = set()
+            compiles = 0  # kernels launched by a counted frame that no frame before it launched
+            for n, i in enumerate(range(0, (args.frames + 1) * args.every, args.every)):
                 # The build's frame pipeline (datagen.pipeline.frame), timed whole and by stage.
+                dr.kernel_history()
                 elapsed, clock = timed_frame(scene, renderer, states, i, Path(tmp) / f"{i}.png")
+                launched = {k["hash"] for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT}
                 if n > 0:
+                    compiles += len(launched - warm)
                     total_s += elapsed
                     for name, seconds in clock.items():
                         stages[name] = stages.get(name, 0.0) + seconds
+                warm |= launched
             k = args.frames
             render_s, denoise_s = stages.get(PATH_TRACING, 0.0), stages.get(DENOISE, 0.0)
             peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
             print(f"{renderer.variant} spp {spp:3d}, denoise {renderer.denoise}: "
                   f"mi.render {render_s / k:6.2f} s/frame, "
-                  f"denoise {denoise_s / k:5.2f} s/frame, whole frame {total_s / k:6.2f} s/frame, outside mi.render "
-                  f"{100 * (1 - render_s / total_s):4.1f}% (denoise {100 * denoise_s / total_s:4.1f}%), "
-                  f"peak RSS {peak:,.0f} MiB")
+                  f"denoise {denoise_s / k:5.2f} s/frame, whole frame {total_s / k:6.2f} s/frame, "
+                  f"host work (outside mi.render and the denoiser) {(total_s - render_s - denoise_s) / k:5.2f} s/frame "
+                  f"= {100 * (1 - (render_s + denoise_s) / total_s):4.1f}%, "
+                  f"kernels compiled after warm-up {compiles}, peak RSS {peak:,.0f} MiB")
             rest = rest_of_frame(stages)
             print("    stages: " + ", ".join(f"{name} {t / k:.3f} s" for name, t in rest)
                   + f" ({sum(t for _, t in rest) / total_s:.0%} of the frame)")
@@ -93,15 +104,13 @@ def randomizers(config, args) -> None:
     modes = {"all off": world_off(), **others, "all on": {}}  # "on": as the config (shipped: all on)
     print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs; config {args.config}, "
           f"{config.camera.width}x{config.camera.height}, spp {config.render.spp}, denoise {config.render.denoise}")
-    runs = {}
-    for name, switches in modes.items():
-        mode_config = override_config(config, switches)
-        scene = Scene.resolve(mode_config)
-        runs[name] = (scene, Renderer(scene), FrameStates(mode_config))
     times: dict[str, list[float]] = {name: [] for name in modes}
     with tempfile.TemporaryDirectory() as tmp:
-        for n in range(args.frames + 1):  # frame 0 warms every mode up (kernel compilation)
-            for name, (scene, renderer, states) in runs.items():
+        for name, switches in modes.items():  # one scene at a time (datagen.render.runtime.hold_scene)
+            mode_config = override_config(config, switches)
+            scene = Scene.resolve(mode_config)
+            renderer, states = Renderer(scene), FrameStates(mode_config)
+            for n in range(args.frames + 1):  # frame 0 warms the mode up (its scene, kernel compilation)
                 # frame n * 7: spread over approach chains and distances
                 elapsed, _ = timed_frame(scene, renderer, states, n * 7, Path(tmp) / "frame.png")
                 if n > 0:
@@ -110,7 +119,7 @@ def randomizers(config, args) -> None:
     for name, t in times.items():
         print(f"{name:12s} whole frame {np.mean(t):6.2f} s/frame (median {np.median(t):5.2f}), "
               f"{np.mean(t) / base:4.2f}x all off")
-    print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:,.0f} MiB ({len(modes)} scenes loaded)")
+    print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:,.0f} MiB")
 
 
 if __name__ == "__main__":

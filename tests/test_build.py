@@ -368,6 +368,41 @@ def test_a_build_prints_its_estimate_first_and_the_model_grows_with_the_work(tmp
     assert frame_cost(shipped, 2, render=False).seconds < cost.seconds / 100
 
 
+
+def test_the_estimate_knows_the_device_a_gpu_frame_bounded_by_its_kernels_or_its_host_work() -> None:
+    from datagen.pipeline.estimate import GPU_TRACE_S, frame_cost
+
+    shipped = load_config("wingcam55")
+    cpu, gpu = frame_cost(shipped, 16), frame_cost(shipped, 16, variant="cuda_ad_rgb")
+    assert "cuda_ad_rgb" in gpu.setting and "llvm_ad_rgb" in cpu.setting
+    assert gpu.seconds < cpu.seconds / 4  # path tracing and OIDN move to the GPU
+    assert frame_cost(shipped, 1, variant="cuda_ad_rgb").seconds == pytest.approx(16 * gpu.seconds)  # host-bound
+    heavy = override_config(shipped, {"render.spp": 1024})  # the GPU's own time bounds it
+    mpx = shipped.camera.width * shipped.camera.height / 1e6
+    assert frame_cost(heavy, 16, variant="cuda_ad_rgb").seconds >= 1024 * mpx * GPU_TRACE_S
+
+
+@pytest.mark.parametrize(("variant", "cores", "render", "expected"), [
+    ("cuda_ad_rgb", 16, True, 16), ("cuda_ad_rgb", 1, True, 1), ("llvm_ad_rgb", 16, True, "cpu"),
+    ("llvm_ad_rgb", 1, True, 1), ("scalar_rgb", 4, True, "cpu"), ("cuda_ad_rgb", 16, False, "cpu")])
+def test_auto_workers_fill_a_gpu_machines_cores_and_share_a_cpus(variant, cores, render, expected) -> None:
+    from datagen.pipeline.estimate import CPU_WORKERS, auto_workers
+
+    want = min(cores, CPU_WORKERS) if expected == "cpu" else expected
+    assert auto_workers(variant, cores, render=render) == want
+
+
+def test_workers_auto_builds_and_a_bad_count_is_one_line(tmp_path: Path) -> None:
+    from tests.test_hostile import TINY, datagen, refused, write
+
+    config = write(tmp_path, "t.yaml", TINY)
+    done = datagen("build", "--config", str(config), "--no-render", "--workers", "auto", "--out", str(tmp_path / "a"))
+    assert done.returncode == 0, done.stderr
+    for bad in ("0", "many", "-2"):
+        refused(datagen("build", "--config", str(config), "--no-render", "--workers", bad,
+                        "--out", str(tmp_path / "b")), "--workers")
+    assert not (tmp_path / "b").exists()
+
 @pytest.mark.render
 def test_layout_is_what_ultralytics_reads(reference) -> None:
     root, _ = reference

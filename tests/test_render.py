@@ -10,6 +10,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Final
 
 import numpy as np
 import pytest
@@ -348,46 +349,80 @@ def test_looks_are_drawn_from_the_frame_rng_within_the_config() -> None:
     assert all(lo <= m["paint"].roughness <= hi for m in a.materials.values())
 
 
-def new_kernels_per_frame(frames: tuple[int, ...] = (0, 17, 40, 63, 90)) -> list[int]:
-    """Render ``frames`` of a tiny wingcam55 (one thread, the sunsky scales held at one level)
-    and count, per frame, the JIT kernels it launched that no earlier frame had."""
+#: A warm-up frame, then 24 frames over 23 approach chains (each a new weather, sea and
+#: livery), their skies, lenses and sensor draws.
+KERNEL_FRAMES: Final = (0, 1, 5, *(16 * k + (7 * k) % 16 for k in range(1, 23)))
+
+
+def kernel_census(seed: int = 31, frames: tuple[int, ...] = KERNEL_FRAMES) -> dict:
+    """In this process (one thread, ``llvm_ad_rgb``), a tiny wingcam55 with every world
+    randomizer on, each frame made as a build makes it: per frame, the JIT kernels launched
+    that no earlier frame launched (``new``); and the render kernel (the largest: hash,
+    operation count) of one frame alone, and again with a second renderer of another
+    config built and rendered beside it (``alone``, ``beside``)."""
+    import tempfile
+
     import drjit as dr
 
+    from datagen.pipeline.writer import timed_frame
+
+    use_variant("llvm_ad_rgb")
     set_threads(1)
-    config = override_config(load_config(ROOT / "scenes" / "wingcam55.yaml"), {
-        "render.spp": 1, "camera.width": 16, "camera.height": 9, "labels.edge_margin_px": 1.0})
-    scales = {(draw_look(config, frame_rng(55, i)).sun_scale, draw_look(config, frame_rng(55, i)).sky_scale)
-              for i in range(300)}
-    assert len(scales) == 25  # 5 levels each, all used
-    renderer = Renderer(Scene.resolve(config))
-    features = feature_table(config)
-    sun, sky = next(iter(scales))
+    tiny = {"render.spp": 1, "camera.width": 32, "camera.height": 17, "labels.edge_margin_px": 1.0,
+            "dataset.seed": seed}
+    config = override_config(load_config(ROOT / "scenes" / "wingcam55.yaml"), tiny)
+    assert all(getattr(config.randomization, name).enabled for name in ("clouds", "livery", "sensor"))
+    scene, states = Scene.resolve(config), FrameStates(config)
+    renderer = Renderer(scene)
     dr.set_flag(dr.JitFlag.KernelHistory, True)
+    out: dict = {"new": []}
     seen: set[str] = set()
-    new = []
-    for i in frames:
-        look = dataclasses.replace(draw_look(config, frame_rng(55, i)), sun_scale=sun, sky_scale=sky)
-        renderer.render(frame_state(config, i), look, render_seed(55, i), geometry=True)
-        renderer.feature_visibility(frame_state(config, i), features)
-        hashes = {k["hash"] for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT}
-        new.append(len(hashes - seen))
-        seen |= hashes
-    return new
+    with tempfile.TemporaryDirectory() as tmp:
+        def kernels(r, s, st, i) -> list[tuple[str, int]]:
+            dr.kernel_history()
+            timed_frame(s, r, st, i, Path(tmp) / "frame.png")
+            return [(k["hash"], k["operation_count"]) for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
+
+        for i in frames:
+            launched = kernels(renderer, scene, states, i)
+            out["new"].append(len({h for h, _ in launched} - seen))
+            seen |= {h for h, _ in launched}
+        out["alone"] = max(kernels(renderer, scene, states, frames[1]), key=lambda k: k[1])
+        other = override_config(load_config(ROOT / "scenes" / "podcam15.yaml"), {**tiny, "render.spp": 2})
+        other_scene = Scene.resolve(other)
+        second = Renderer(other_scene)
+        kernels(second, other_scene, FrameStates(other), 0)
+        out["beside"] = max(kernels(renderer, scene, states, frames[1]), key=lambda k: k[1])
+        assert second.config is other  # alive until here
+    return out
 
 
-def test_frames_reuse_compiled_kernels() -> None:
-    """Every per-frame parameter reaches Mitsuba without being baked into a kernel, except
-    the sunsky scales, which take only a few levels: memory and compile time per frame stay
-    flat over long builds (a continuous sun_scale draw compiled a new kernel every frame).
-    In a process of its own: Mitsuba objects other tests leave in this one (scenes, shapes)
-    change a few kernels' hashes when they go."""
-    code = ("import json; from tests.test_render import new_kernels_per_frame; "
-            "print(json.dumps(new_kernels_per_frame()))")
+@pytest.fixture(scope="module")
+def census() -> dict:
+    """:func:`kernel_census` in a process of its own: Mitsuba objects other tests leave in
+    this one would change the kernels."""
+    code = ("import json; from tests.test_render import kernel_census; "
+            "print(json.dumps(kernel_census()))")
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=600,
                           check=False)
     assert done.returncode == 0, done.stderr[-2000:]
-    new = json.loads(done.stdout.strip().splitlines()[-1])
-    assert new[0] > 0 and new[2:] == [0, 0, 0], f"new kernels per frame: {new} (two frames of warm-up, then none)"
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_frames_after_the_first_compile_no_kernel(census) -> None:
+    """Every per-frame value reaches the kernels as an opaque value (the sky's scales
+    included): after one frame, frames of other approaches, skies, clouds, seas, liveries
+    and sensor draws compile nothing (each compile costs seconds, and memory)."""
+    new = census["new"]
+    assert new[0] > 0 and new[1:] == [0] * (len(new) - 1), f"new kernels per frame: {new}"
+
+
+def test_the_render_kernel_is_the_same_with_another_renderer_alive(census) -> None:
+    """Dr.Jit compiles a call through a Mitsuba class for every live instance in the
+    process: a second renderer's scene grew the render kernel (and on CUDA disabled its
+    ray tracing). It is released while another renderer renders, so the kernel is the
+    one a lone renderer compiles, operation for operation."""
+    assert census["alone"] == census["beside"]
 
 
 def _placed(values: np.ndarray, on_boundary: bool) -> np.ndarray:

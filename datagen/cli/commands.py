@@ -22,10 +22,12 @@ from datagen.cli.common import (
     require_plan,
     unit_value,
     user_errors,
+    workers_value,
 )
 from datagen.config import find_config, load_config
 from datagen.core.errors import ConfigError, DatagenError
 from datagen.core.training import MATCH_PX
+from datagen.pipeline.estimate import CPU_WORKERS
 
 
 @app.command()
@@ -120,9 +122,11 @@ def build(
     frames: Annotated[int | None, typer.Option("--frames", min=1, help="Override dataset.frames.")] = None,
     seed: Annotated[int | None, typer.Option("--seed", min=0, help="Override dataset.seed.")] = None,
     spp: Annotated[int | None, typer.Option("--spp", min=1, help="Override render.spp.")] = None,
-    workers: Annotated[int | None, typer.Option("--workers", min=1, help="Shards rendered in parallel "
-                                                "(local: processes, default 1; ray: tasks, default one "
-                                                "per node).")] = None,
+    workers: Annotated[str | None, typer.Option("--workers", parser=workers_value, metavar="auto|N",
+                                                help="Shards rendered in parallel (local: processes, default "
+                                                "1; ray: tasks, default one per node); auto: what suits the "
+                                                f"render's device (a GPU: one per core; the CPU: {CPU_WORKERS}, at "
+                                                "most one per core).")] = None,
     shard_size: Annotated[int | None, typer.Option("--shard-size", min=1, help="Override dataset.shard_size.")] = None,
     threads: Annotated[int | None, typer.Option("--threads", min=1, help="Mitsuba threads per worker (default: the "
                                                 "cores divided among the workers); 1 gives the same image bytes "

@@ -52,6 +52,19 @@ def path_value(text: str) -> Path:
     return Path(text)
 
 
+def workers_value(text: str) -> int | str:
+    """``auto`` or a whole number of workers, at least 1."""
+    if isinstance(text, int) or text == "auto":
+        return text
+    try:
+        value = int(text)
+    except (TypeError, ValueError):
+        raise typer.BadParameter(f"{text!r}: expected auto or a whole number of workers") from None
+    if value < 1:
+        raise typer.BadParameter(f"{text!r}: expected auto or at least 1")
+    return value
+
+
 def unit_value(text: str) -> float:
     """A number in [0, 1] (a threshold or share), NaN refused as not a number."""
     try:

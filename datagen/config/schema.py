@@ -372,12 +372,11 @@ class SkyConfig(_Section):
     """Atmospheric turbidity (sunsky accepts 1 to 10)."""
 
     sun_scale: Range = (0.8, 1.2)
-    """Multiplier on the sun's radiance, drawn from 5 evenly spaced levels across the
-    range (Mitsuba bakes it into the compiled kernel: a continuous draw would compile
-    a new kernel for every frame)."""
+    """Multiplier on the sun's radiance, drawn uniformly across the range (a kernel input:
+    :mod:`datagen.render.sky`)."""
 
     sky_scale: Range = (0.8, 1.2)
-    """Multiplier on the sky's radiance, drawn from 5 evenly spaced levels across the range."""
+    """Multiplier on the sky's radiance, drawn uniformly across the range."""
 
     backlit_fraction: Number = Field(0.2, ge=0.0, le=1.0)
     """Share of frames whose sun is put within ``backlit_azimuth_deg`` of the camera's

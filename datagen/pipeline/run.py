@@ -17,7 +17,7 @@ from datagen.core.errors import DatagenError
 from datagen.dataset.layout import LOCK_NAME, Layout
 from datagen.dataset.schema import read_manifest_summary
 from datagen.parallel import cpu_count
-from datagen.pipeline.estimate import frame_cost
+from datagen.pipeline.estimate import auto_workers, frame_cost
 from datagen.pipeline.executors import Executor, local_threads, ray_cluster, run_local, run_ray
 from datagen.pipeline.folder import DatasetLock, check_folder, prepare_folder, remove_owned, sweep_temporaries
 from datagen.pipeline.metadata import (
@@ -28,11 +28,12 @@ from datagen.pipeline.metadata import (
 )
 from datagen.pipeline.plan import dataset_layout, plan_shards
 from datagen.pipeline.progress import BuildReport, ShardSummary
+from datagen.render.runtime import resolve_variant
 from datagen.scene.resolved import Scene
 
 __all__ = ["build_dataset"]
 
-def build_dataset(config: Config, out: Path, *, workers: int | None = None, executor: Executor = "local",
+def build_dataset(config: Config, out: Path, *, workers: int | str | None = None, executor: Executor = "local",
                   overwrite: bool = False, render: bool = True, progress=None,
                   threads: int | None = None) -> BuildReport:
     """Build (or resume) the dataset of ``config`` in ``out``.
@@ -41,7 +42,8 @@ def build_dataset(config: Config, out: Path, *, workers: int | None = None, exec
         config: the resolved config (command-line overrides already applied).
         out: dataset folder (created when missing).
         workers: shards in parallel (``local``: processes, default 1; ``ray``:
-            tasks, default one per node).
+            tasks, default one per node); ``"auto"``: what suits the render's device
+            (:func:`~datagen.pipeline.estimate.auto_workers`; ``ray``: one per node).
         executor: ``local`` or ``ray``.
         overwrite: replace a dataset of another config in ``out``.
         render: render images (False writes labels and manifests only).
@@ -58,6 +60,9 @@ def build_dataset(config: Config, out: Path, *, workers: int | None = None, exec
     started = time.perf_counter()
     if threads is not None and not 1 <= threads <= cpu_count():
         raise DatagenError(f"--threads: {threads} is not between 1 and the {cpu_count()} cores this process may use")
+    variant = resolve_variant(config.render.variant) if render else "labels only"
+    if workers == "auto":
+        workers = auto_workers(variant, cpu_count(), render=render) if executor == "local" else None
     if executor == "local" and workers is not None and workers > cpu_count():
         raise DatagenError(f"--workers: {workers} is more than the {cpu_count()} cores this process may use "
                            f"(at most {cpu_count()}; --executor ray for a cluster)")
@@ -102,7 +107,7 @@ def build_dataset(config: Config, out: Path, *, workers: int | None = None, exec
                 busy = max(1, min(workers or 1, len(todo)))  # run_local's workers
                 cores = busy * local_threads(busy, threads) if executor == "local" else cpu_count()
                 progress.start(report.frames, report.frames - sum(len(j.frames) for j in todo),
-                               frame_cost(scene.config, min(cores, cpu_count()), render=render))
+                               frame_cost(scene.config, min(cores, cpu_count()), render=render, variant=variant))
             try:
                 if todo:
                     run = run_ray if executor == "ray" else run_local

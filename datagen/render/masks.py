@@ -15,14 +15,16 @@ from numpy.typing import ArrayLike, NDArray
 from datagen.core.camera import Intrinsics
 from datagen.core.conventions import pixel_centres
 from datagen.render.mitsuba import jit_vectors, mitsuba_mesh
-from datagen.render.runtime import use_variant
+from datagen.render.runtime import hold_scene, use_variant
 
 __all__ = ["Silhouettes"]
 
 
 class Silhouettes:
     """One Mitsuba scene per object mesh (``name -> (vertices (V, 3), faces (F, 3))``, body
-    frame, metres), loaded once; :meth:`mask` casts a frame's pixel rays against one."""
+    frame, metres), loaded when first needed (and again after :meth:`release`, when another
+    holder took the process's scene: :func:`datagen.render.runtime.hold_scene`); :meth:`mask`
+    casts a frame's pixel rays against one."""
 
     def __init__(self, meshes: dict[str, tuple[ArrayLike, ArrayLike]], intrinsics: Intrinsics,
                  variant: str = "auto") -> None:
@@ -31,14 +33,22 @@ class Silhouettes:
         use_variant(variant)
         self._mi = mi
         self.intrinsics = k = intrinsics
-        self.scenes = {name: mi.load_dict({"type": "scene", "object": mitsuba_mesh(name, v, f)}, optimize=False)
-                       for name, (v, f) in meshes.items()}
+        self._meshes = meshes
+        self.scenes: dict | None = None
         uu, vv = pixel_centres(k.width, k.height)
         self._d_cam = np.stack([(uu - k.cx) / k.fx, (vv - k.cy) / k.fy, np.ones_like(uu)], axis=-1).reshape(-1, 3)
+
+    def release(self) -> None:
+        """Drop the Mitsuba scenes (loaded again by the next :meth:`mask`)."""
+        self.scenes = None
 
     def mask(self, name: str, cam_from_object: ArrayLike) -> NDArray[np.bool_]:
         """``(H, W)`` the pixels whose centre ray meets object ``name`` posed at ``cam_from_object``."""
         mi = self._mi
+        if self.scenes is None:
+            hold_scene(self)
+            self.scenes = {n: mi.load_dict({"type": "scene", "object": mitsuba_mesh(n, v, f)}, optimize=False)
+                           for n, (v, f) in self._meshes.items()}
         object_from_cam = np.linalg.inv(np.asarray(cam_from_object, dtype=np.float64))
         directions = self._d_cam @ object_from_cam[:3, :3].T
         origins = np.broadcast_to(object_from_cam[:3, 3], directions.shape)

@@ -43,7 +43,8 @@ from datagen.render.mitsuba import (
     visible,
     world_from_micam,
 )
-from datagen.render.runtime import use_variant
+from datagen.render.runtime import hold_scene, use_variant
+from datagen.render.sky import sky_class
 from datagen.render.timing import DENOISE, PATH_TRACING, StageClock
 from datagen.render.tonemap import exposure_scale, haze
 from datagen.render.world import CLOUD_LAYERS, SEA_COLOUR, SURFACES, World
@@ -108,7 +109,7 @@ class Renderer:
         #: The image the renderer returns; with lens distortion, the pinhole render has a margin.
         self.output_intrinsics = scene.intrinsics if width is None and height is None else \
             Intrinsics.from_hfov_deg(width or cam.width, height or cam.height, cam.hfov_deg)
-        self.world = World(config, pixel_rad=1.0 / self.output_intrinsics.fx)
+        self.world = World(config, pixel_rad=1.0 / self.output_intrinsics.fx)  # remade by each build
         sensor = config.randomization.sensor
         self.sensor = sensor if sensor.enabled else None
         self.margin_px = 0
@@ -125,26 +126,44 @@ class Renderer:
             from datagen.render.denoise import oidn_version
 
             oidn_version()  # one line saying how to install it, before any rendering
-        first = neutral_look(config)
+        self._first = neutral_look(config)
+        self._meshes_loaded = {obj: load_mesh(scene.mesh_path(obj), obj) for obj in RIGID_OBJECTS}
+        self._mi, self._dr = mi, dr
+        self._hose_points = None
+        self._camera_render = np.zeros(3)
+        self.release()
+
+    # -- scene construction (deferred until the hose's point count is known) --------------
+    def release(self) -> None:
+        """Drop every Mitsuba object of the scene (:func:`datagen.render.runtime.hold_scene`);
+        the next :meth:`pose` builds them again."""
+        self.scene = self.params = self.sky = None
+        self._meshes: dict = {}
+        self._parts: dict[str, list[tuple[str, str]]] = {}  # object -> [(param key prefix, material class)]
+        self._sky_probe_inputs = None
+        self._hose_points = None
+        self.world = World(self.config, pixel_rad=1.0 / self.output_intrinsics.fx)
+
+    def _description(self) -> dict:
+        """The scene's ``mi.load_dict`` entries, the hose aside (its Mitsuba objects made here)."""
+        mi, config, first = self._mi, self.config, self._first
         sea_bsdf = self.world.sea_bsdf(_principled(Material(SEA_COLOUR, 0.1, 0.0, 0.5)))
         integrator: dict = {"type": self.world.integrator, "max_depth": config.render.max_depth}
         if self.guides:  # the beauty channels are the path tracer's own (same samples, same bytes)
             from datagen.render.denoise import guided_integrator
 
             integrator = guided_integrator(integrator)
+        self.sky = sky_class(self.variant)()
         description: dict = {
             "type": "scene",
             "integrator": integrator,
             "sensor": sensor_dict(self.intrinsics, np.eye(4), self.spp),
             # Mitsuba 3.9's sunsky is z-up, like our world frame (measured: black below z = 0).
-            "sky": {"type": "sunsky", "sun_direction": [0.0, 0.5, 0.866]},
+            "sky": self.sky,
             "sea": {"type": "rectangle", "bsdf": sea_bsdf},
             **self.world.cloud_shapes(),
         }
-        self._parts: dict[str, list[tuple[str, str]]] = {}  # object -> [(param key prefix, material class)]
-        meshes = {}
-        for obj in RIGID_OBJECTS:
-            mesh = load_mesh(scene.mesh_path(obj), obj)
+        for obj, mesh in self._meshes_loaded.items():
             group = {"type": "shapegroup"}
             self._parts[obj] = []
             for i, (part, tm) in enumerate(mesh.parts.items()):
@@ -160,27 +179,20 @@ class Renderer:
                     bsdf = mi.load_dict(_principled(first.materials[obj][cls]))
                     shape = mitsuba_mesh(f"{obj}.{part}", tm.vertices, tm.faces, bsdf)
                 group[key] = shape
-                meshes[(obj, key)] = shape
+                self._meshes[(obj, key)] = shape
                 self._parts[obj].append((f"{obj}_group.{key}", cls))
             description[f"{obj}_group"] = group
             description[obj] = {"type": "instance", "shapegroup": {"type": "ref", "id": f"{obj}_group"}}
-        self._hose_points = None
-        self._sky_probe = None
-        self._sky_probe_inputs = None
-        self._camera_render = np.zeros(3)
-        self.scene = None
-        self._scene_dict = description
-        self._meshes = meshes
-        self._mi, self._dr = mi, dr
-        self._first = first
+        return description
 
-    # -- scene construction (deferred until the hose's point count is known) --------------
     def _build(self, hose_points: int) -> None:
         mi, dr = self._mi, self._dr
+        hold_scene(self)
+        self.release()
+        description = self._description()
         hose = mitsuba_mesh("hose", hose_placeholder(hose_points), hose_faces(hose_points),
                             mi.load_dict(_principled(self._first.materials["hose"]["rubber"])))
-        scene = dict(self._scene_dict, hose=hose)
-        self.scene = mi.load_dict(scene, optimize=False)
+        self.scene = mi.load_dict(dict(description, hose=hose), optimize=False)
         self.params = mi.traverse(self.scene)
         self._hose_points = hose_points
         # Map every shape's registry id to its object id (scalar variants name shapes instead).
@@ -224,10 +236,9 @@ class Renderer:
         render_from_world = make_transform(np.eye(3), -origin)
         self._world_from_cam = state.world_from_cam
         self._camera_render = cam_pos - origin
-        sun_dir = [float(v) for v in sun_direction_world(state, look)]
+        self.sky.set(sun_direction_world(state, look), look.turbidity, look.sun_scale, look.sky_scale)
         with clock.stage("cloud-lighting probe"):
-            irradiance = (self._sky_irradiance(sun_dir, look.turbidity, look.sun_scale, look.sky_scale)
-                          if self.world.clouds else None)
+            irradiance = self._sky_irradiance() if self.world.clouds else None
         liveries = self.world.livery_textures(look)
         for obj in RIGID_OBJECTS:
             p[f"{obj}.to_world"] = mi.Transform4f((render_from_world @ state.world_from(obj)).tolist())
@@ -243,10 +254,6 @@ class Renderer:
         p["sensor.to_world"] = mi.Transform4f(sensor.tolist())
         sea = make_transform(np.eye(3), [0.0, 0.0, -origin[2]]) @ np.diag([SEA_SIZE_M / 2, SEA_SIZE_M / 2, 1.0, 1.0])
         p["sea.to_world"] = mi.Transform4f(sea.tolist())
-        p["sky.sun_direction"] = mi.Vector3f(*sun_dir)
-        p["sky.turbidity"] = look.turbidity
-        p["sky.sun_scale"] = look.sun_scale
-        p["sky.sky_scale"] = look.sky_scale
         self.world.apply(p, look, float(origin[2]), irradiance, camera_render=self._camera_render)
         p.update()
 
@@ -266,23 +273,14 @@ class Renderer:
         z = round(float(cam_pos[2]) / CLOUD_REFERENCE_STEP_M) * CLOUD_REFERENCE_STEP_M
         return np.array([cam_pos[0], cam_pos[1], z])
 
-    def _sky_irradiance(self, sun_direction, turbidity, sun_scale, sky_scale) -> NDArray[np.float64]:
+    def _sky_irradiance(self) -> NDArray[np.float64]:
         """RGB irradiance of the frame's sun and sky on a horizontal surface, no occluders,
-        from a fixed stratified set of a probe emitter's own importance samples
-        (deterministic; the scene itself is not updated for it). The probe's inputs are
+        from a fixed stratified set of the scene's own sky's importance samples
+        (deterministic; nothing else of the scene is involved). The samples' inputs are
         made once and opaque: built per call, they sometimes compiled three new kernels
         (a literal folded into one frame's probe and not another's)."""
         mi, dr = self._mi, self._dr
-        if self._sky_probe is None:
-            self._sky_probe = mi.load_dict({"type": "sunsky", "sun_direction": [0.0, 0.5, 0.866]})
-            self._sky_probe_params = mi.traverse(self._sky_probe)
-        q = self._sky_probe_params
-        q["sun_direction"] = mi.Vector3f(*sun_direction)
-        q["turbidity"] = turbidity
-        q["sun_scale"] = sun_scale
-        q["sky_scale"] = sky_scale
-        q.update()
-        sky = self._sky_probe
+        sky = self.sky
         scalar = self.variant.startswith("scalar")
         n = 16 if scalar else 64  # the scalar fallback samples one direction per call
         grid = ((np.stack(np.meshgrid(np.arange(n), np.arange(n)), -1).reshape(-1, 2) + 0.5) / n).astype(np.float32)
@@ -450,13 +448,17 @@ class Renderer:
                     ids[i] = object_id(name) if name in OBJECT_NAMES else 0
                     background[i] = codes.get(shape, -1)
             return valid, hit_t, ids, background
-        ray = mi.Ray3f(jit_vectors(mi.Point3f, origins), jit_vectors(mi.Vector3f, directions))
+        # One ray is cast as two: Dr.Jit compiles a kernel over one element apart from the
+        # same kernel over more (a new kernel the first time one ray passed a cloud edge).
+        m = max(n, 2)
+        ray = mi.Ray3f(jit_vectors(mi.Point3f, np.resize(origins, (m, 3))),
+                       jit_vectors(mi.Vector3f, np.resize(directions, (m, 3))))
         si = self.scene.ray_intersect(ray, ray_flags=mi.RayFlags.Minimal, coherent=True)
         valid_dr, shape_dr = si.is_valid(), dr.reinterpret_array(mi.UInt32, si.shape)
         dr.eval(valid_dr, si.t, shape_dr)
-        valid = np.asarray(valid_dr, dtype=bool)
-        hit_t = np.where(valid, np.asarray(si.t, dtype=np.float64), np.inf)
-        shape_ids = np.where(valid, np.asarray(shape_dr, dtype=np.int64), -1)
+        valid = np.asarray(valid_dr, dtype=bool)[:n]
+        hit_t = np.where(valid, np.asarray(si.t, dtype=np.float64)[:n], np.inf)
+        shape_ids = np.where(valid, np.asarray(shape_dr, dtype=np.int64)[:n], -1)
         in_table = (shape_ids >= 0) & (shape_ids < len(self._id_table))
         ids = self._id_table[np.where(in_table, shape_ids, 0)]
         background = np.full(n, -1)

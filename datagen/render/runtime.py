@@ -1,19 +1,32 @@
-"""Mitsuba's process-wide settings, set in one place: the variant and the thread count.
+"""Mitsuba's process-wide settings, set in one place: the variant, the thread count, and
+which object holds the process's one scene.
 
 Nothing calls ``mi.set_variant`` or ``dr.set_thread_count`` but this module; the
 CLI and the build's worker bootstrap call :func:`use_variant` and
 :func:`set_threads` (a :class:`~datagen.render.renderer.Renderer` asks for its
 variant through :func:`use_variant` too). Importing datagen sets nothing.
+
+One scene at a time (:func:`hold_scene`): Dr.Jit compiles a call through a Mitsuba
+class (a shape's BSDF, an emitter) for every live instance of that class in the process,
+so a second scene's objects grew the render kernel and changed its hash when they came or
+went; on CUDA, a kernel that touched two scenes' OptiX tables had those rays disabled
+(read as misses: wrong images with a warning, mitsuba3 issue 1349). Whatever builds
+Mitsuba objects (a renderer, the silhouettes, the contact sheets' views) takes the
+process's scene first; the holder before it releases its objects and builds them again
+when it is next used.
 """
 
 from __future__ import annotations
 
 import functools
-from typing import Final
+import gc
+import weakref
+from typing import Final, Protocol
 
 from datagen.core.errors import DatagenError
 
-__all__ = ["LLVM_HINT", "VARIANTS", "has_backend", "set_threads", "thread_count", "use_variant"]
+__all__ = ["LLVM_HINT", "VARIANTS", "SceneHolder", "has_backend", "hold_scene", "resolve_variant", "set_threads",
+           "thread_count", "use_variant"]
 
 VARIANTS: Final = ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
 
@@ -35,20 +48,25 @@ def has_backend(name: str) -> bool:
         return False
 
 
+def resolve_variant(requested: str = "auto") -> str:
+    """The Mitsuba variant ``requested`` names on this machine (``auto``: CUDA, then LLVM,
+    then scalar), without setting it; one clear line when it cannot run here."""
+    if requested == "auto":
+        return "cuda_ad_rgb" if has_backend("cuda") else "llvm_ad_rgb" if has_backend("llvm") else "scalar_rgb"
+    if requested not in VARIANTS:
+        raise DatagenError(f"render.variant: unknown Mitsuba variant {requested!r} (use auto or {', '.join(VARIANTS)})")
+    if requested == "llvm_ad_rgb" and not has_backend("llvm"):
+        raise DatagenError(f"render.variant: llvm_ad_rgb is unavailable: {LLVM_HINT}")
+    if requested == "cuda_ad_rgb" and not has_backend("cuda"):
+        raise DatagenError("render.variant: cuda_ad_rgb is unavailable: no CUDA GPU or driver found")
+    return requested
+
+
 def use_variant(requested: str = "auto") -> str:
-    """Set and return the Mitsuba variant: ``auto`` prefers CUDA, then LLVM, then scalar."""
+    """Set and return the Mitsuba variant :func:`resolve_variant` names."""
     import mitsuba as mi
 
-    if requested == "auto":
-        chosen = "cuda_ad_rgb" if has_backend("cuda") else "llvm_ad_rgb" if has_backend("llvm") else "scalar_rgb"
-    elif requested in VARIANTS:
-        chosen = requested
-        if requested == "llvm_ad_rgb" and not has_backend("llvm"):
-            raise DatagenError(f"render.variant: llvm_ad_rgb is unavailable: {LLVM_HINT}")
-        if requested == "cuda_ad_rgb" and not has_backend("cuda"):
-            raise DatagenError("render.variant: cuda_ad_rgb is unavailable: no CUDA GPU or driver found")
-    else:
-        raise DatagenError(f"render.variant: unknown Mitsuba variant {requested!r} (use auto or {', '.join(VARIANTS)})")
+    chosen = resolve_variant(requested)
     if mi.variant() != chosen:
         mi.set_variant(chosen)
     return chosen
@@ -66,3 +84,26 @@ def thread_count() -> int:
     import drjit as dr
 
     return int(dr.thread_count())
+
+
+class SceneHolder(Protocol):
+    """An object that builds Mitsuba objects when it needs them and can let them go."""
+
+    def release(self) -> None:
+        """Drop every Mitsuba object held (built again on next use)."""
+
+
+_holders: weakref.WeakSet = weakref.WeakSet()
+
+
+def hold_scene(holder: SceneHolder) -> None:
+    """Make ``holder`` the only object in the process that holds Mitsuba scene objects:
+    every other holder releases its own, and they are collected, before ``holder``
+    builds its scene."""
+    others = [h for h in list(_holders) if h is not holder]
+    for other in others:
+        other.release()
+        _holders.discard(other)
+    if others:
+        gc.collect()  # Python-side textures and emitters hold their C++ objects through cycles
+    _holders.add(holder)

@@ -17,7 +17,7 @@ from datagen.assets.files import ObjectMesh
 from datagen.assets.models import material_class
 from datagen.core.camera import Intrinsics
 from datagen.render.mitsuba import mitsuba_mesh, sensor_dict, visible, world_from_micam
-from datagen.render.runtime import use_variant
+from datagen.render.runtime import hold_scene, use_variant
 
 __all__ = ["render_views"]
 
@@ -58,6 +58,16 @@ def _scene(mesh: ObjectMesh, world_from_cam: NDArray, intrinsics: Intrinsics, sp
     return mi.load_dict(scene, optimize=False)
 
 
+class _Views:
+    """The views' scene, held for :func:`datagen.render.runtime.hold_scene` while they render."""
+
+    def __init__(self) -> None:
+        self.scene = None
+
+    def release(self) -> None:
+        self.scene = None
+
+
 def render_views(mesh: ObjectMesh, poses: Sequence[NDArray], intrinsics: Intrinsics, points: NDArray, *,
                  spp: int = 64, variant: str = "auto") -> list[tuple[NDArray[np.uint8], NDArray[np.bool_]]]:
     """Per OpenCV-convention ``world_from_cam`` pose: the 8-bit BGR image of ``mesh`` and which
@@ -65,7 +75,9 @@ def render_views(mesh: ObjectMesh, poses: Sequence[NDArray], intrinsics: Intrins
     import mitsuba as mi
 
     use_variant(variant)
-    scene = _scene(mesh, poses[0], intrinsics, spp)  # loaded once; each view only moves the sensor
+    held = _Views()
+    hold_scene(held)  # no other scene in the views' kernels
+    held.scene = scene = _scene(mesh, poses[0], intrinsics, spp)  # loaded once; each view only moves the sensor
     params = mi.traverse(scene)
     out = []
     for world_from_cam in poses:

@@ -356,16 +356,18 @@ def _layer_radiance(layer: textures.CloudLayer, light: tuple[float, float, float
     """What a layer's side facing the camera emits, premultiplied by its opacity: the tops
     ``light`` (albedo / pi times the sky's irradiance) from their thick cores, a little over
     half of it from their thin parts; a base (``above`` the camera) the part its thickness
-    lets through, 0.3 of it at full opacity and half that again in a core."""
+    lets through, 0.3 of it at full opacity and half that again in a core. Both are traced
+    and ``above`` weighs them as a kernel input: a layer passing from below the camera to
+    above it compiles no new kernel."""
     import mitsuba as mi
 
     value = layer.value(x, y, footprint_m, ops)
     opacity, core = layer.opacity_of(value, ops), layer.core_of(value, ops)
     f = ops.f32
-    if above:
-        shade = opacity * (f(1.0) - f(0.7) * opacity) * (f(1.0) - f(0.5) * core)
-    else:
-        shade = opacity * (f(0.55) + f(0.45) * core)
+    base = opacity * (f(1.0) - f(0.7) * opacity) * (f(1.0) - f(0.5) * core)
+    top = opacity * (f(0.55) + f(0.45) * core)
+    w = ops.param_f32(1.0 if above else 0.0)
+    shade = w * base + (f(1.0) - w) * top
     return mi.Color3f(*(shade * ops.param_f32(c) for c in light))
 
 

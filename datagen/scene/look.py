@@ -28,7 +28,6 @@ if TYPE_CHECKING:
 
 __all__ = [
     "HAZE_VISIBILITY_M",
-    "SKY_SCALE_LEVELS",
     "FrameLook",
     "Material",
     "draw_look",
@@ -38,10 +37,6 @@ __all__ = [
     "neutral_look",
     "sun_direction_world",
 ]
-
-#: Number of distinct values sun_scale and sky_scale take (see :func:`_levels`).
-SKY_SCALE_LEVELS: Final = 5
-
 
 #: Haze visibility (distance at which contrast falls to 1/e), metres, when haze is on.
 HAZE_VISIBILITY_M: Final = (15_000.0, 60_000.0)
@@ -113,15 +108,13 @@ class _Uniforms:
         return lo + (hi - lo) * self._next()
 
 
-def _levels(rng: np.random.Generator, bounds) -> float:
-    """One of :data:`SKY_SCALE_LEVELS` evenly spaced values across ``bounds``, each
-    equally likely. Mitsuba's ``sunsky`` keeps its sun and sky scales as scalars that
-    are baked into the compiled kernel: a continuous draw would compile (and keep in
-    memory) a new kernel for every frame; a few levels bound the kernels at
-    ``SKY_SCALE_LEVELS**2`` for the whole dataset."""
-    lo, hi = bounds
-    step = int(rng.integers(SKY_SCALE_LEVELS))  # every level equally likely
-    return lo + (hi - lo) * step / (SKY_SCALE_LEVELS - 1)
+def _scales(rng: np.random.Generator, sun_bounds, sky_bounds) -> tuple[float, float]:
+    """The sun's and the sky's scales, uniform across their bounds, from one 64-bit draw
+    of the generator (two float32 uniforms: every later draw of the look is what it was
+    when these were two of five levels, which took one)."""
+    u_sun, u_sky = rng.random(2, dtype=np.float32).tolist()
+    return (sun_bounds[0] + (sun_bounds[1] - sun_bounds[0]) * u_sun,
+            sky_bounds[0] + (sky_bounds[1] - sky_bounds[0]) * u_sky)
 
 
 def _hsv(rng: np.random.Generator | _Uniforms, saturation, value) -> tuple[float, float, float]:
@@ -142,10 +135,9 @@ def draw_look(config: Config, rng: np.random.Generator) -> FrameLook:
         sun_elevation_deg=_uniform(rng, sky.sun_elevation_deg),
         sun_azimuth_deg=_uniform(rng, sky.sun_azimuth_deg),
         turbidity=_uniform(rng, sky.turbidity),
-        sun_scale=_levels(rng, sky.sun_scale),
-        sky_scale=_levels(rng, sky.sky_scale),
-        exposure_ev=_uniform(rng, r.exposure_ev),
     )
+    look["sun_scale"], look["sky_scale"] = _scales(rng, sky.sun_scale, sky.sky_scale)
+    look["exposure_ev"] = _uniform(rng, r.exposure_ev)
     # One draw either way, so that the sea's model changes no other draw.
     if r.sea.model == "cox_munk":
         wind = _uniform(rng, r.sea.wind_speed_mps)
