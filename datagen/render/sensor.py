@@ -26,7 +26,6 @@ from numpy.typing import NDArray
 from datagen.core.camera import Intrinsics, distortion_margin_px, undistort_px
 from datagen.core.conventions import (
     OBJECT_NAMES,
-    drawing_px,
     index_px,
     object_id,
     pixel_centre,
@@ -67,6 +66,11 @@ AUTO_EXPOSURE_KEY: Final = 0.18
 AUTO_EXPOSURE_STOPS: Final = 2.0
 #: Glare is applied when the sun is within this many degrees outside the field of view.
 GLARE_REACH_DEG: Final = 25.0
+#: The glare's grid is at most this many times coarser than the image (:func:`sun_glare`).
+GLARE_STEP: Final = 4
+#: The lens's ghosts: where on the line from the image centre to the sun (0: the centre,
+#: 1: the sun), their radius (a share of the image's width) and their tint.
+GHOSTS: Final = ((-0.4, 0.05, (0.6, 0.8, 1.0)), (-0.9, 0.09, (0.7, 1.0, 0.6)), (0.5, 0.03, (1.0, 0.7, 0.5)))
 #: Most samples along a pixel's motion.
 MAX_BLUR_SAMPLES: Final = 24
 
@@ -199,11 +203,17 @@ def vignette(rgb: NDArray[np.float32], strength: float) -> NDArray[np.float32]:
 
 
 def sun_glare(shape: tuple[int, int], intrinsics: Intrinsics, sun_cam: NDArray, strength: float,
-              radiance: float) -> tuple[NDArray[np.float32] | None, bool]:
+              radiance: float, step: int | None = None) -> tuple[NDArray[np.float32] | None, bool]:
     """Veiling glare (a ``theta0^2 / (theta^2 + theta0^2)`` halo around the sun, theta0 = 2
     degrees) and three ghosts on the line from the sun through the image centre, in linear
     radiance, or None when the sun is more than :data:`GLARE_REACH_DEG` outside the view.
-    Also returns whether the sun is inside the image."""
+    Also returns whether the sun is inside the image.
+
+    Both are smooth over many pixels (the halo's core spans 4 degrees; the ghosts' edges are
+    blurred over 0.4% of the width, as a disc seen through a Gaussian of that width): they
+    are computed on a grid ``step`` times coarser than the image and resized bilinearly (by
+    default the step is half the ghosts' blur, at most :data:`GLARE_STEP`; 1: at every
+    pixel)."""
     import cv2
 
     h, w = shape
@@ -215,28 +225,42 @@ def sun_glare(shape: tuple[int, int], intrinsics: Intrinsics, sun_cam: NDArray, 
     off_axis = math.degrees(math.acos(np.clip(d[2], -1.0, 1.0)))
     if strength <= 0.0 or off_axis > half_diagonal + GLARE_REACH_DEG:
         return None, False
-    x = (pixel_centre(np.arange(w, dtype=np.float32)) - k.cx) / k.fx
-    y = (pixel_centre(np.arange(h, dtype=np.float32)) - k.cy) / k.fy
-    rays = np.stack(np.broadcast_arrays(x[None, :], y[:, None], np.float32(1.0)), axis=-1)
-    cos = (rays @ d.astype(np.float32)) / np.linalg.norm(rays, axis=-1)
+    blur_px = max(1.0, 0.004 * w)
+    step = step or max(1, min(GLARE_STEP, int(blur_px / 2.0)))
+    pad = 1  # samples beyond the image on every side
+    cw, ch = -(-w // step) + 2 * pad, -(-h // step) + 2 * pad
+    # Sample i of the grid sits at continuous pixel (i - pad + 1/2) step of the image: where
+    # an exact resize by ``step`` puts it, the image starting ``pad * step`` pixels in.
+    x = ((np.arange(cw) - pad + 0.5) * step - k.cx) / k.fx
+    y = ((np.arange(ch) - pad + 0.5) * step - k.cy) / k.fy
+    cos = (x[None, :] * d[0] + y[:, None] * d[1] + d[2]) / np.sqrt(x[None, :] ** 2 + y[:, None] ** 2 + 1.0)
     theta = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-    halo = np.float32(4.0) / (theta * theta + np.float32(4.0))
+    halo = (4.0 / (theta * theta + 4.0)).astype(np.float32)
     glare = np.repeat(halo[..., None], 3, axis=-1) * np.float32(strength * radiance)
     inside = False
     if d[2] > 0:
         su, sv = k.fx * d[0] / d[2] + k.cx, k.fy * d[1] / d[2] + k.cy
         inside = bool(0 <= su < w and 0 <= sv < h)
-        ghosts = np.zeros((h, w, 3), np.float32)
-        for t, radius, tint in ((-0.4, 0.05, (0.6, 0.8, 1.0)), (-0.9, 0.09, (0.7, 1.0, 0.6)),
-                                (0.5, 0.03, (1.0, 0.7, 0.5))):
+        from scipy.special import ndtr
+
+        u, v = x * k.fx + k.cx, y * k.fy + k.cy  # the samples' continuous pixels
+        for t, radius, tint in GHOSTS:
             gu, gv = k.cx + t * (su - k.cx), k.cy + t * (sv - k.cy)
-            if not (-w < gu < 2 * w and -h < gv < 2 * h):
+            radius_px = max(2.0 * blur_px, radius * w)
+            reach = radius_px + 4.0 * blur_px  # the samples the ghost's blurred edge reaches
+            cols = slice(*np.searchsorted(u, [gu - reach, gu + reach]))
+            rows = slice(*np.searchsorted(v, [gv - reach, gv + reach]))
+            if cols.start == cols.stop or rows.start == rows.stop:
                 continue
-            centre = (int(drawing_px(gu)), int(drawing_px(gv)))
-            cv2.circle(ghosts, centre, max(2, int(radius * w)), tint, -1, cv2.LINE_AA)
-        ghosts = cv2.GaussianBlur(ghosts, (0, 0), max(1.0, 0.004 * w))
-        glare += ghosts * np.float32(0.04 * strength * radiance)
-    return glare, inside
+            # A disc blurred by a Gaussian of blur_px, by its edge's profile; the radius that
+            # keeps the disc's light (pi radius^2) in the profile's (pi (r^2 + blur^2)).
+            r = np.sqrt((u[None, cols] - gu) ** 2 + (v[rows, None] - gv) ** 2)
+            disc = ndtr((math.sqrt(radius_px**2 - blur_px**2) - r) / blur_px).astype(np.float32)
+            light = np.asarray(tint, np.float32) * np.float32(0.04 * strength * radiance)
+            glare[rows, cols] += disc[..., None] * light
+    if step > 1:
+        glare = cv2.resize(glare, (cw * step, ch * step), interpolation=cv2.INTER_LINEAR)
+    return glare[pad * step:pad * step + h, pad * step:pad * step + w], inside
 
 
 # --- exposure and noise ------------------------------------------------------------------
