@@ -43,6 +43,7 @@ from datagen.render.mitsuba import (
     visible,
     world_from_micam,
 )
+from datagen.render.procedural import drjit_ops
 from datagen.render.runtime import hold_scene, use_variant
 from datagen.render.sky import sky_class
 from datagen.render.timing import DENOISE, PATH_TRACING, StageClock
@@ -60,6 +61,8 @@ __all__ = ["RenderResult", "Renderer", "visibility_tolerance_m"]
 #: Sea level is world z = 0; the sea plane is a square this many metres across (its edge
 #: then lies under 0.04 degrees below the horizon, where sunsky is black, seen from 8 km).
 SEA_SIZE_M: Final = 2.0e7
+#: A ray cast by the geometry pass passes a cloud layer where the layer's opacity is below this.
+CLOUD_PASS_OPACITY: Final = 0.5
 #: With clouds, the render frame's origin is at a multiple of this altitude (see Renderer._render_origin).
 CLOUD_REFERENCE_STEP_M: Final = 50.0
 
@@ -68,6 +71,12 @@ def visibility_tolerance_m(distance_m: NDArray[np.float64]) -> NDArray[np.float6
     """How far before a feature point a hit still counts as the point itself: 1 cm
     plus 1e-4 of the distance (float32 intersection error and mesh rounding)."""
     return 0.01 + 1e-4 * np.asarray(distance_m)
+
+
+def _past(t, maximum):
+    """How far a ray that passes a cloud layer at distance ``t`` goes on before it is cast
+    again: just past the layer (``maximum``: numpy's or Dr.Jit's)."""
+    return t + 1e-3 * maximum(t, 1.0)
 
 
 @dataclass(frozen=True)
@@ -198,6 +207,7 @@ class Renderer:
         # Map every shape's registry id to its object id (scalar variants name shapes instead).
         self._id_table = np.zeros(1, dtype=np.uint32)
         self._background: dict[int, str] = {}
+        self._device_tables = None
         if self.variant.startswith("scalar"):
             return
         lookup = {}
@@ -211,6 +221,10 @@ class Renderer:
         sea = next(shape for shape in self.scene.shapes() if str(shape.id()) == "sea")
         for name, shape in (("sea", sea), *self.world.cloud_meshes.items()):
             self._background[int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0])] = name
+        # registry id + 1 -> index into ("sea", *CLOUD_LAYERS) (0: no hit; -1: neither)
+        self._background_codes = np.full(max(self._background) + 2, -1, dtype=np.int64)
+        for key, name in self._background.items():
+            self._background_codes[key + 1] = ("sea", *CLOUD_LAYERS).index(name)
 
     # -- per frame ----------------------------------------------------------------------------
     def pose(self, state: FrameState, look: FrameLook, clock: StageClock | None = None) -> None:
@@ -391,10 +405,17 @@ class Renderer:
     def cast(self, origin_render: NDArray, directions_render: NDArray):
         """Intersect rays (render frame); returns (t, object id, surface) as numpy arrays,
         ``surface`` indexing :data:`datagen.render.world.SURFACES`. A ray passes through a
-        cloud layer where the layer's opacity is below one half (Mitsuba's intersection
-        sees the layer's cells; the mask is a texture)."""
+        cloud layer where the layer's opacity is below :data:`CLOUD_PASS_OPACITY` (Mitsuba's
+        intersection sees the layer's cells; the mask is a texture). Vectorized variants
+        cast on their device (:meth:`_cast_on_device`, from the posed camera), a scalar one
+        here, one ray at a time."""
         n = len(directions_render)
         directions = np.asarray(directions_render, dtype=np.float32)
+        if not self.variant.startswith("scalar"):  # on the variant's device
+            mi = self._mi
+            d = jit_vectors(mi.Vector3f, np.resize(directions, (max(n, 2), 3)))  # one ray is cast as two
+            t, ids, surface = self._cast_on_device(d)
+            return tuple(np.asarray(a)[:n] for a in (t, ids, surface))
         origins = np.broadcast_to(np.asarray(origin_render, dtype=np.float32), (n, 3)).copy()
         t = np.full(n, np.inf)
         ids = np.zeros(n, dtype=np.uint32)
@@ -413,7 +434,7 @@ class Renderer:
                     surface_now[on] = SURFACES.index("cloud")
                     at = origins[todo[on]] + directions[todo[on]] * hit_t[on, None].astype(np.float32)
                     opacity = self.world.cloud_opacity_at(name, at[:, :2], travelled[todo[on]] + hit_t[on])
-                    passing[np.flatnonzero(on)[opacity < 0.5]] = True
+                    passing[np.flatnonzero(on)[opacity < CLOUD_PASS_OPACITY]] = True
             done = ~passing
             idx = todo[done]
             t[idx] = travelled[idx] + hit_t[done]
@@ -422,50 +443,30 @@ class Renderer:
             if not passing.any():
                 break
             go = todo[passing]
-            step = hit_t[passing] + 1e-3 * np.maximum(hit_t[passing], 1.0)
+            step = _past(hit_t[passing], np.maximum)
             travelled[go] += step
             origins[go] += directions[go] * step[:, None].astype(np.float32)
             todo = go
         return t, ids, surface
 
     def _intersect(self, origins: NDArray[np.float32], directions: NDArray[np.float32]):
-        """First hits of rays: (valid, t (inf on a miss), object id, background code
-        (index into ``("sea", *CLOUD_LAYERS)``, -1 for none))."""
-        mi, dr = self._mi, self._dr
+        """First hits of rays under a scalar variant, one ray at a time (slow; shapes go by
+        their names): (valid, t (inf on a miss), object id, background code (index into
+        ``("sea", *CLOUD_LAYERS)``, -1 for none))."""
+        mi = self._mi
         n = len(origins)
-        if self.variant.startswith("scalar"):  # one ray at a time (slow): shapes go by their names
-            valid, hit_t = np.zeros(n, dtype=bool), np.full(n, np.inf)
-            ids, background = np.zeros(n, np.uint32), np.full(n, -1)
-            codes = {name: c for c, name in enumerate(("sea", *CLOUD_LAYERS))}
-            for i in range(n):
-                ray = mi.Ray3f(mi.Point3f(*(float(v) for v in origins[i])),
-                               mi.Vector3f(*(float(v) for v in directions[i])))
-                si = self.scene.ray_intersect(ray)
-                if si.is_valid():
-                    valid[i], hit_t[i] = True, si.t
-                    shape = str(si.shape.id())
-                    name = shape.split("_")[0]  # shape ids are object_pN or hose
-                    ids[i] = object_id(name) if name in OBJECT_NAMES else 0
-                    background[i] = codes.get(shape, -1)
-            return valid, hit_t, ids, background
-        # One ray is cast as two: Dr.Jit compiles a kernel over one element apart from the
-        # same kernel over more (a new kernel the first time one ray passed a cloud edge).
-        m = max(n, 2)
-        ray = mi.Ray3f(jit_vectors(mi.Point3f, np.resize(origins, (m, 3))),
-                       jit_vectors(mi.Vector3f, np.resize(directions, (m, 3))))
-        si = self.scene.ray_intersect(ray, ray_flags=mi.RayFlags.Minimal, coherent=True)
-        valid_dr, shape_dr = si.is_valid(), dr.reinterpret_array(mi.UInt32, si.shape)
-        dr.eval(valid_dr, si.t, shape_dr)
-        valid = np.asarray(valid_dr, dtype=bool)[:n]
-        hit_t = np.where(valid, np.asarray(si.t, dtype=np.float64)[:n], np.inf)
-        shape_ids = np.where(valid, np.asarray(shape_dr, dtype=np.int64)[:n], -1)
-        in_table = (shape_ids >= 0) & (shape_ids < len(self._id_table))
-        ids = self._id_table[np.where(in_table, shape_ids, 0)]
-        background = np.full(n, -1)
-        for code, name in enumerate(("sea", *CLOUD_LAYERS)):
-            key = next((k for k, v in self._background.items() if v == name), None)
-            if key is not None:
-                background[shape_ids == key] = code
+        valid, hit_t = np.zeros(n, dtype=bool), np.full(n, np.inf)
+        ids, background = np.zeros(n, np.uint32), np.full(n, -1)
+        codes = {name: c for c, name in enumerate(("sea", *CLOUD_LAYERS))}
+        for i in range(n):
+            ray = mi.Ray3f(mi.Point3f(*(float(v) for v in origins[i])), mi.Vector3f(*(float(v) for v in directions[i])))
+            si = self.scene.ray_intersect(ray)
+            if si.is_valid():
+                valid[i], hit_t[i] = True, si.t
+                shape = str(si.shape.id())
+                name = shape.split("_")[0]  # shape ids are object_pN or hose
+                ids[i] = object_id(name) if name in OBJECT_NAMES else 0
+                background[i] = codes.get(shape, -1)
         return valid, hit_t, ids, background
 
     def geometry_pass(self, stride: int = 1) -> tuple[NDArray[np.float32], NDArray[np.uint32], NDArray[np.uint8]]:
@@ -476,12 +477,93 @@ class Renderer:
         d_cam, z_per_t = self._pixel_rays(stride)
         w, h = -(-k.width // stride), -(-k.height // stride)
         r = self._world_from_cam[:3, :3].astype(np.float32)  # the render frame shares the world's axes
-        t, ids, surface = self.cast(self._camera_render, d_cam @ r.T)
-        out = ((t * z_per_t).reshape(h, w).astype(np.float32), ids.reshape(h, w).astype(np.uint32),
+        if self.variant.startswith("scalar"):
+            t, ids, surface = self.cast(self._camera_render, d_cam @ r.T)
+            depth = t * z_per_t
+        else:  # the rays made and rotated on the device
+            mi, dr = self._mi, self._dr
+            d_dev, z_dev = self._device_rays(stride)
+            m = [[dr.opaque(mi.Float, float(r[i, j])) for j in range(3)] for i in range(3)]
+            d = mi.Vector3f(*(m[i][0] * d_dev.x + m[i][1] * d_dev.y + m[i][2] * d_dev.z for i in range(3)))
+            t, ids, surface = self._cast_on_device(d)
+            depth = t * z_dev
+            dr.eval(depth)
+            depth, ids, surface = (np.asarray(a) for a in (depth, ids, surface))
+        out = (depth.reshape(h, w).astype(np.float32), ids.reshape(h, w).astype(np.uint32),
                surface.reshape(h, w).astype(np.uint8))
         if stride == 1:
             return out
         return tuple(np.repeat(np.repeat(a, stride, axis=0), stride, axis=1)[:k.height, :k.width] for a in out)
+
+    @functools.cache  # noqa: B019 (one renderer per process; two strides at most)
+    def _device_rays(self, stride: int):
+        """:meth:`_pixel_rays` as Dr.Jit arrays on the variant's device (made once, opaque)."""
+        mi, dr = self._mi, self._dr
+        d_cam, z_per_t = self._pixel_rays(stride)
+        rays = jit_vectors(mi.Vector3f, d_cam), jit_array(mi.Float, z_per_t)
+        dr.make_opaque(*rays)
+        return rays
+
+    def _cast_on_device(self, d):
+        """:meth:`cast` of rays ``d`` (``mi.Vector3f``, render frame) from the posed camera, as
+        Dr.Jit work on the variant's device: (t, object id, surface), evaluated there. The
+        same as the scalar loop but for float32 rounding of the distance travelled through
+        cloud layers (a pixel or two of 2 million at a cloud's edge)."""
+        mi, dr = self._mi, self._dr
+        n = dr.width(d)
+        o = mi.Point3f(*(dr.zeros(mi.Float, n) + dr.opaque(mi.Float, float(c)) for c in self._camera_render))
+        if self._device_tables is None:
+            self._device_tables = (jit_array(mi.UInt32, self._id_table),
+                                   jit_array(mi.Int32, self._background_codes.astype(np.int32)))
+        id_table, codes = self._device_tables
+        travelled = dr.opaque(mi.Float, 0.0, n)
+        t_out = dr.opaque(mi.Float, dr.inf, n)
+        ids_out = dr.opaque(mi.UInt32, 0, n)
+        surface_out = dr.opaque(mi.UInt32, 0, n)
+        active = dr.opaque(mi.Bool, True, n)
+        dr.make_opaque(d, o)
+        # Each step is evaluated on its own, so that every kernel is the same whichever
+        # layers a frame's rays meet, and how many passes they take.
+        layers = ("sea", *CLOUD_LAYERS)
+        ops = drjit_ops()
+        for _ in range(len(CLOUD_LAYERS) + 1):
+            si = self.scene.ray_intersect(mi.Ray3f(o, d), ray_flags=mi.RayFlags.Minimal, coherent=True,
+                                          active=active)
+            shape = dr.reinterpret_array(mi.UInt32, si.shape)
+            valid = active & si.is_valid()
+            known = valid & (shape + 1 < len(self._background_codes))
+            ids = dr.gather(mi.UInt32, id_table, shape, valid & (shape < len(self._id_table)))
+            code = dr.select(known, dr.gather(mi.Int32, codes, shape + 1, known), -1)
+            surface = mi.UInt32(dr.select(valid, SURFACES.index("object"), SURFACES.index("sky")))
+            surface = dr.select(code == 0, SURFACES.index("sea"), surface)
+            surface = dr.select(code > 0, SURFACES.index("cloud"), surface)
+            hit_t = si.t
+            dr.eval(hit_t, ids, code, surface)
+            passing = dr.opaque(mi.Bool, False, n)
+            for c, name in enumerate(layers[1:], start=1):
+                layer = self.world.cloud_layer(name)
+                at = dr.compress(active & (code == c))  # the rays that met this layer
+                if layer is None or dr.width(at) == 0:
+                    continue
+                if dr.width(at) == 1:  # one ray is cast as two (see _intersect)
+                    at = dr.gather(mi.UInt32, at, dr.opaque(mi.UInt32, 0, 2))
+                t = dr.gather(mi.Float, hit_t, at)
+                p = dr.gather(mi.Point3f, o, at) + dr.gather(mi.Vector3f, d, at) * t
+                opacity = layer(p.x, p.y, (dr.gather(mi.Float, travelled, at) + t) * self.world.pixel_rad, ops)
+                dr.scatter(passing, opacity < CLOUD_PASS_OPACITY, at)
+                dr.eval(passing)
+            done = active & ~passing
+            t_out = dr.select(done, travelled + hit_t, t_out)
+            ids_out = dr.select(done, ids, ids_out)
+            surface_out = dr.select(done, surface, surface_out)
+            active = passing
+            step = _past(hit_t, dr.maximum)
+            travelled = dr.select(passing, travelled + step, travelled)
+            o = dr.select(passing, o + d * step, o)
+            dr.eval(t_out, ids_out, surface_out, active, travelled, o)
+            if not dr.any(active)[0]:
+                break
+        return t_out, ids_out, surface_out
 
     def feature_visibility(self, state: FrameState, features: FeatureTable
                            ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:

@@ -295,6 +295,10 @@ class World:
             out["livery_texel_px"] = max(worst) if worst else None
         return out
 
+    def cloud_layer(self, name: str) -> textures.CloudLayer | None:
+        """Cloud layer ``name`` as this frame draws it (None without clouds)."""
+        return self._cloud_layers.get(name)
+
     def cloud_opacity_at(self, name: str, xy: NDArray, distance_m: NDArray) -> NDArray[np.float32]:
         """The opacity of cloud layer ``name`` this frame at render-frame points ``xy``
         (N, 2) seen from ``distance_m`` (N,) away, as the renderer shades it (evaluated by
