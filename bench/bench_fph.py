@@ -9,7 +9,9 @@ machine and keeps them on disk (after a process's first frame no frame compiles 
 ``tests/test_render.py``), so the timed build pays no compile; ``--workers auto`` is
 accepted as the build takes it.
 Prints a markdown table: the estimate the build printed in its first line, the measured
-frames/h of the build's own summary, and its split of a rendered frame.
+frames/h of the build's own summary, its split of a rendered frame (``other``: the host
+work outside ``mi.render`` and the denoiser) and the kernels its workers compiled after
+their first frame (0 once warm).
 """
 
 from __future__ import annotations
@@ -41,8 +43,9 @@ def main() -> None:
     args = parser.parse_args()
     print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}; "
           f"{args.frames} frames per scene, --workers {args.workers}")
-    print("\n| scene | setting | estimate frames/h | measured frames/h | per rendered frame |")
-    print("|---|---|---|---|---|")
+    print("\n| scene | setting | estimate frames/h | measured frames/h | per rendered frame | kernels compiled after "
+          "each worker's first frame |")
+    print("|---|---|---|---|---|---|")
     for name in args.scenes:
         count = int(args.workers) if args.workers != "auto" else os.cpu_count() or 1  # shards enough for any count
         shard = max(1, min(load_config(name).approach.frames_per_approach, args.frames // max(1, count)))
@@ -52,8 +55,9 @@ def main() -> None:
         estimate = re.search(r"estimate [0-9.]+ s a frame = ([0-9,]+) frames/h on \d+ cores \(([^)]*)\)", text)
         measured = re.search(r"this run: .* = ([0-9,]+) frames/h", text)
         split = re.search(r"per rendered frame: (.*)\n", text)
-        print(f"| {name} | {estimate.group(2)} | {estimate.group(1)} | {measured.group(1)} | {split.group(1)} |",
-              flush=True)
+        compiled = re.search(r"kernels compiled after each worker's first frame: (\d+)", text)
+        print(f"| {name} | {estimate.group(2)} | {estimate.group(1)} | {measured.group(1)} | {split.group(1)} | "
+              f"{compiled.group(1)} |", flush=True)
 
 
 if __name__ == "__main__":

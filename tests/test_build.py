@@ -308,7 +308,8 @@ def img2label(image: str) -> str:
 
 
 @pytest.mark.render
-def test_a_rendered_builds_stages_add_up_to_its_frames_and_the_summary_names_them(reference) -> None:
+def test_a_rendered_builds_stages_add_up_to_its_frames_and_the_summary_names_them_and_its_compiles(reference
+                                                                                                    ) -> None:
     root, config = reference
     report = build_dataset(config, root, workers=1, threads=1)  # resumed: nothing rendered, no stages
     assert report.rendered == 0 and report.stages == {}
@@ -324,6 +325,7 @@ def test_a_rendered_builds_stages_add_up_to_its_frames_and_the_summary_names_the
     assert all((f"{name} {t / k:.2f} s" in other) == (round(t / k, 2) > 0)
                for name, t in stages.items() if name not in ("path tracing", "denoise"))
     assert "path tracing" not in other
+    assert "  kernels compiled after each worker's first frame: 0" in report.lines()  # 7 frames, none compiled
 
 
 def test_a_stage_timed_inside_another_counts_for_the_inner_one_only() -> None:

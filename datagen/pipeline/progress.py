@@ -32,6 +32,7 @@ class ShardSummary:
     stages: dict[str, float] = field(default_factory=dict)  # seconds per stage of the rendered frames
     blank: int = 0  # label boxes of the rendered frames that show nothing (datagen.core.content)
     blank_frames: int = 0  # rendered frames with such a box
+    compiled: int = 0  # JIT kernels first launched by a rendered frame after its process's first
 
     def counts(self) -> dict:
         """The deterministic part, stored in the manifest's metadata."""
@@ -117,6 +118,8 @@ class BuildReport:
             rest = [(name, s / k) for name, s in rest_of_frame(self.stages) if round(s / k, 2) > 0]  # what shows
             if rest:
                 out.append("  other, per rendered frame: " + ", ".join(f"{name} {s:.2f} s" for name, s in rest))
+            compiled = sum(s.compiled for s in self.shards.values())
+            out.append(f"  kernels compiled after each worker's first frame: {compiled}")
         excluded = ", ".join(f"{k} {v}" for k, v in self.excluded.items())
         scope = "" if done == len(self.jobs) else f" (in the {done} finished shards)"
         out.append(f"  labels: {self.labels} boxes{scope}; excluded: {excluded}")

@@ -107,10 +107,14 @@ class ShardWriter:
         self._writes: deque[Future] = deque()
         self._clock = StageClock()  # the frame being written
         self._stages: dict[str, float] = {}  # the last rendered frame's seconds per stage
+        self._census = None  # the kernels each rendered frame launches (datagen.render.runtime.KernelCensus)
+        self._first_frame = True  # this process has rendered no frame yet
         if render:
             from datagen.render.renderer import Renderer  # Mitsuba only when rendering
+            from datagen.render.runtime import KernelCensus
 
             self.renderer = Renderer(scene)
+            self._census = KernelCensus()
 
     def run_group(self, jobs: list[ShardJob], progress: Progress | None = None,
                   stop: Callable[[], bool] | None = None) -> Iterator[ShardSummary]:
@@ -135,7 +139,7 @@ class ShardWriter:
         start = time.perf_counter()
         self._stop = stop or (lambda: False)
         rows, excluded, labels = [], Counter(), 0
-        rendered, render_s, denoise_s, frame_s, blank, blank_frames = 0, 0.0, 0.0, 0.0, 0, 0
+        rendered, render_s, denoise_s, frame_s, blank, blank_frames, compiled = 0, 0.0, 0.0, 0.0, 0, 0, 0
         stages: Counter = Counter()  # seconds per stage of the rendered frames
         self.states.prefetch(job.frames)  # the shard's approach chains, simulated together
         approaches = {} if approaches is None else approaches  # each chain's weather and liveries, drawn once
@@ -150,6 +154,9 @@ class ShardWriter:
             excluded.update(row["features"].exclusion_counts())
             if row["render_s"] is not None:
                 rendered += 1
+                new = self._census.new_kernels()
+                compiled += 0 if self._first_frame else new  # the first frame compiles (or loads) them all
+                self._first_frame = False
                 render_s += row["render_s"]
                 blank += self._blank
                 blank_frames += self._blank > 0
@@ -160,7 +167,8 @@ class ShardWriter:
                 progress(1)
         self._wait_for_writes(0)
         summary = ShardSummary(job.name, len(job.frames), labels, dict(excluded), rendered, render_s, denoise_s,
-                               frame_s, stages=dict(stages), blank=blank, blank_frames=blank_frames)
+                               frame_s, stages=dict(stages), blank=blank, blank_frames=blank_frames,
+                               compiled=compiled)
         write_manifest(self.layout.manifest(job), rows, summary.counts())
         summary.wall_s = time.perf_counter() - start
         return summary

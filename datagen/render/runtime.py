@@ -25,8 +25,8 @@ from typing import Final, Protocol
 
 from datagen.core.errors import DatagenError
 
-__all__ = ["LLVM_HINT", "VARIANTS", "SceneHolder", "has_backend", "hold_scene", "resolve_variant", "set_threads",
-           "thread_count", "use_variant"]
+__all__ = ["LLVM_HINT", "VARIANTS", "KernelCensus", "SceneHolder", "has_backend", "hold_scene", "resolve_variant",
+           "set_threads", "thread_count", "use_variant"]
 
 VARIANTS: Final = ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
 
@@ -107,3 +107,25 @@ def hold_scene(holder: SceneHolder) -> None:
     if others:
         gc.collect()  # Python-side textures and emitters hold their C++ objects through cycles
     _holders.add(holder)
+
+
+class KernelCensus:
+    """The JIT kernels a process launches, frame by frame (Dr.Jit's kernel history): how
+    many a frame launched that no earlier frame of the process had, which is a compile
+    (or, for the process's first frame, a load from the kernel cache)."""
+
+    def __init__(self) -> None:
+        import drjit as dr
+
+        self._dr = dr
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        dr.kernel_history()  # what came before is not a frame's
+        self._seen: set[str] = set()
+
+    def new_kernels(self) -> int:
+        """Kernels launched since the last call that no earlier call saw (and the history cleared)."""
+        dr = self._dr
+        hashes = {k["hash"] for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT}
+        new = len(hashes - self._seen)
+        self._seen |= hashes
+        return new
