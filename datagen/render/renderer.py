@@ -2,18 +2,21 @@
 
 :class:`Renderer` loads the meshes once and builds one scene: each rigid object
 is a ``shapegroup`` of its parts (one principled BSDF per part) placed by an
-``instance``; the hose is a mesh of fixed topology; a ``sunsky`` emitter lights
-a sea plane far below. Per frame only parameters change through
-``mi.traverse``: instance transforms, hose vertices, sensor pose, sun and sky,
-sea height and the materials of the frame's :class:`~datagen.scene.look.FrameLook`.
-The scene is rendered in a camera-centred frame (world translated so the camera
-is at the origin), because world coordinates reach kilometres and Mitsuba
-computes in float32.
+``instance``; the hose is a mesh of fixed topology; the sun and sky
+(:mod:`datagen.render.sky`) light a sea plane far below. Per frame only parameters
+change, as kernel inputs (``mi.traverse``, opaque values): instance transforms, hose
+vertices, sensor pose, sun and sky, sea height and the materials of the frame's
+:class:`~datagen.scene.look.FrameLook`. The scene is rendered in a camera-centred
+frame (world translated so the camera is at the origin), because world coordinates
+reach kilometres and Mitsuba computes in float32. A renderer builds its Mitsuba
+objects when first posed and holds the process's only scene while it does
+(:func:`datagen.render.runtime.hold_scene`).
 
 Besides the image, a geometry pass casts one ray through each pixel centre
-(continuous convention: pixel (i, j) has its centre at (i + 0.5, j + 0.5)) for
-the camera z-depth ``Z`` and the :func:`~datagen.core.conventions.object_id` of
-each object (0 where the ray hits the sea or nothing). Feature visibility is a
+(continuous convention: pixel (i, j) has its centre at (i + 0.5, j + 0.5)), on the
+variant's device, for the camera z-depth ``Z`` and the
+:func:`~datagen.core.conventions.object_id` of each object (0 where the ray hits the
+sea or nothing). Feature visibility is a
 ray cast from the camera to each feature point: a point is visible when it is in
 front of the camera and nothing is hit before it, up to
 :func:`visibility_tolerance_m`.
