@@ -59,6 +59,7 @@ __all__ = [
     "MATCH_PX",
     "MAX_ASPECT_RATIO",
     "MIN_TRAIN_SIDE_PX",
+    "SIDE_TOLERANCE_PX",
     "TRAIN_BATCH",
     "TrainView",
 ]
@@ -80,7 +81,7 @@ ASSIGNABLE_SIDE_PX: Final[float] = 32.0
 #: A box side counts as ASSIGNABLE_SIDE_PX long down to this much less (px at the training
 #: size): a label line's rounding (well under 1e-4 px at 2048 px across) must not make a box
 #: grown to exactly the side unassignable.
-_SIDE_TOLERANCE_PX: Final[float] = 1e-3
+SIDE_TOLERANCE_PX: Final[float] = 1e-3
 #: An anchor centre counts as inside a box when it is further than this from every side (the assigner's eps).
 _ANCHOR_EPS: Final[float] = 1e-9
 
@@ -165,7 +166,7 @@ class TrainView:
         t = self.to_train(xyxy)
         with np.errstate(invalid="ignore"):
             # A box grown to exactly the side comes back short by its label line's rounding.
-            return (t[..., 2:] - t[..., :2]) < ASSIGNABLE_SIDE_PX - _SIDE_TOLERANCE_PX
+            return (t[..., 2:] - t[..., :2]) < ASSIGNABLE_SIDE_PX - SIDE_TOLERANCE_PX
 
     def assignable(self, xyxy: ArrayLike) -> NDArray[np.bool_]:
         """``(...)`` both sides at least :data:`ASSIGNABLE_SIDE_PX` at the training size (original
