@@ -381,7 +381,8 @@ class Renderer:
                            margin_px=self.margin_px, depth=depth, ids=ids, surface=surface,
                            sun_cam=state.cam_from_world[:3, :3] @ sun_world,
                            sun_transmittance=float(not np.isfinite(t_sun[0])),
-                           auto_exposure=self.sensor.auto_exposure, clock=clock)
+                           auto_exposure=self.sensor.auto_exposure, clock=clock,
+                           device=not self.variant.startswith("scalar"))
         return RenderResult(out.rgb, out.depth, out.object_id, render_s, denoise_s, out.surface,
                             {**out.measured, **texels}, clock.seconds)
 

@@ -52,6 +52,7 @@ __all__ = [
     "image_motion",
     "jpeg_round_trip",
     "motion_blur",
+    "noise_sigma",
     "sensor_noise",
     "sun_glare",
 ]
@@ -71,6 +72,8 @@ GLARE_STEP: Final = 4
 #: The lens's ghosts: where on the line from the image centre to the sun (0: the centre,
 #: 1: the sun), their radius (a share of the image's width) and their tint.
 GHOSTS: Final = ((-0.4, 0.05, (0.6, 0.8, 1.0)), (-0.9, 0.09, (0.7, 1.0, 0.6)), (0.5, 0.03, (1.0, 0.7, 0.5)))
+#: Mixed into the noise's seed for the PCG32 streams' increment (any odd-bit pattern will do).
+NOISE_STREAM: Final = 0x9E3779B97F4A7C15
 #: Most samples along a pixel's motion.
 MAX_BLUR_SAMPLES: Final = 24
 
@@ -281,13 +284,36 @@ def auto_exposure_scale(rgb: NDArray[np.float32]) -> float:
     return float(np.clip(metered, fixed * 2**-AUTO_EXPOSURE_STOPS, fixed * 2**AUTO_EXPOSURE_STOPS))
 
 
-def sensor_noise(rgb: NDArray[np.float32], iso: float, rng: np.random.Generator) -> NDArray[np.float32]:
+def sensor_noise(rgb: NDArray[np.float32], iso: float, seed: int, *, device: bool = False) -> NDArray[np.float32]:
     """Photon shot noise (Poisson, as its Gaussian limit) and read noise on display-linear
-    ``rgb`` (1 = a full pixel): a full pixel holds ``FULL_WELL_E * 100 / iso`` electrons."""
+    ``rgb`` (1 = a full pixel): a full pixel holds ``FULL_WELL_E * 100 / iso`` electrons.
+    The draws come from ``seed``: Dr.Jit's PCG32 on the render's device when ``device``
+    (a vectorized Mitsuba variant is set; one stream per value, Box-Muller), else numpy's
+    generator (:func:`datagen.core.conventions.texture_rng`)."""
     electrons = FULL_WELL_E * 100.0 / float(iso)
-    signal = np.clip(rgb, 0.0, 1.0)
-    sigma = np.sqrt(signal * np.float32(electrons) + np.float32(READ_NOISE_E**2)) / np.float32(electrons)
-    return rgb + sigma * rng.standard_normal(rgb.shape, dtype=np.float32)
+    if not device:
+        normal = texture_rng(seed).standard_normal(rgb.shape, dtype=np.float32)
+        return rgb + noise_sigma(np.clip(rgb, 0.0, 1.0), np.float32(electrons), np.sqrt) * normal
+    import drjit as dr
+    import mitsuba as mi
+
+    from datagen.render.mitsuba import jit_array
+
+    x = jit_array(mi.Float, rgb.reshape(-1))
+    state = seed % 2**64
+    pcg = mi.PCG32(rgb.size, dr.opaque(mi.UInt64, state), dr.opaque(mi.UInt64, state ^ NOISE_STREAM))
+    u1, u2 = pcg.next_float32(), pcg.next_float32()
+    normal = dr.sqrt(-2.0 * dr.log(1.0 - u1)) * dr.cos(2.0 * dr.pi * u2)
+    noisy = x + noise_sigma(dr.clip(x, 0.0, 1.0), dr.opaque(mi.Float, electrons), dr.sqrt) * normal
+    dr.eval(noisy)
+    return np.asarray(noisy, dtype=np.float32).reshape(rgb.shape)
+
+
+def noise_sigma(signal, electrons, sqrt):
+    """The standard deviation of the noise on display-linear ``signal`` in [0, 1] (numpy or
+    Dr.Jit arrays, ``sqrt`` theirs): shot noise of ``signal * electrons`` electrons and
+    :data:`READ_NOISE_E`, over the full pixel's ``electrons``."""
+    return sqrt(signal * electrons + READ_NOISE_E**2) / electrons
 
 
 def jpeg_round_trip(srgb8: NDArray[np.uint8], quality: int) -> NDArray[np.uint8]:
@@ -303,10 +329,11 @@ def jpeg_round_trip(srgb8: NDArray[np.uint8], quality: int) -> NDArray[np.uint8]
 # --- the whole camera --------------------------------------------------------------------
 def apply_sensor(rgb: NDArray[np.float32], look: FrameLook, state: FrameState, *, render: Intrinsics,
                  output: Intrinsics, margin_px: int, depth, ids, surface, sun_cam: NDArray,
-                 sun_transmittance: float, auto_exposure: bool, clock: StageClock | None = None) -> SensorResult:
+                 sun_transmittance: float, auto_exposure: bool, clock: StageClock | None = None,
+                 device: bool = False) -> SensorResult:
     """Linear radiance (the render grid, ``margin_px`` wider than ``output`` on every side)
     to display-linear RGB on the output grid, through the frame's drawn camera (each step
-    timed on ``clock``)."""
+    timed on ``clock``; ``device``: the noise is drawn on the render's device)."""
     clock = clock or StageClock()
     measured: dict = {"motion_blur_px": None, "auto_exposure_ev": None, "sun_in_view": None}
     if look.sensor_exposure_time_s is not None and depth is not None:
@@ -334,6 +361,6 @@ def apply_sensor(rgb: NDArray[np.float32], look: FrameLook, state: FrameState, *
         rgb = rgb * np.float32(scale * 2.0**look.exposure_ev)
     with clock.stage("sensor noise"):
         if look.sensor_iso is not None:
-            rgb = sensor_noise(rgb, look.sensor_iso, texture_rng(look.sensor_seed))
+            rgb = sensor_noise(rgb, look.sensor_iso, look.sensor_seed, device=device)
         rgb = np.maximum(rgb, np.float32(0.0)).astype(np.float32)
     return SensorResult(rgb, depth, ids, surface, measured)
