@@ -35,6 +35,7 @@ from datagen.config import load_config, override_config
 from datagen.config.schema import WORLD_RANDOMIZERS, world_off
 from datagen.pipeline.writer import timed_frame
 from datagen.render.renderer import Renderer
+from datagen.render.runtime import KernelCensus
 from datagen.render.timing import DENOISE, PATH_TRACING, rest_of_frame
 from datagen.scene.approach import FrameStates
 from datagen.scene.resolved import Scene
@@ -60,27 +61,24 @@ def main() -> None:
     scene = Scene.resolve(config)
     print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs; config {args.config}, "
           f"{config.camera.width}x{config.camera.height}")
-    import drjit as dr
-
-    with tempfile.TemporaryDirectory() as tmp, dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+    with tempfile.TemporaryDirectory() as tmp:
         for spp in args.spp:
             renderer = Renderer(scene, spp=spp, variant=args.variant)
             states = FrameStates(config)
+            census = KernelCensus()
             stages: dict[str, float] = {}
             total_s = 0.0
-            warm: set[str] = set()
             compiles = 0  # kernels launched by a counted frame that no frame before it launched
-            for n, i in enumerate(range(0, (args.frames + 1) * args.every, args.every)):
-                # The build's frame pipeline (datagen.pipeline.frame), timed whole and by stage.
-                dr.kernel_history()
-                elapsed, clock = timed_frame(scene, renderer, states, i, Path(tmp) / f"{i}.png")
-                launched = {k["hash"] for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT}
-                if n > 0:
-                    compiles += len(launched - warm)
-                    total_s += elapsed
-                    for name, seconds in clock.items():
-                        stages[name] = stages.get(name, 0.0) + seconds
-                warm |= launched
+            with census.recording():
+                for n, i in enumerate(range(0, (args.frames + 1) * args.every, args.every)):
+                    # The build's frame pipeline (datagen.pipeline.frame), timed whole and by stage.
+                    elapsed, clock = timed_frame(scene, renderer, states, i, Path(tmp) / f"{i}.png")
+                    new = census.new_kernels()
+                    if n > 0:
+                        compiles += new
+                        total_s += elapsed
+                        for name, seconds in clock.items():
+                            stages[name] = stages.get(name, 0.0) + seconds
             k = args.frames
             render_s, denoise_s = stages.get(PATH_TRACING, 0.0), stages.get(DENOISE, 0.0)
             peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

@@ -10,6 +10,7 @@ rendered again (their labels and rows are recomputed, which is cheap).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import platform
@@ -145,26 +146,28 @@ class ShardWriter:
         approaches = {} if approaches is None else approaches  # each chain's weather and liveries, drawn once
         draws = [draw_frame(self.scene, self.states, i, approaches) for i in job.frames]
         labels_all, objects_all = shard_labels(self.scene, draws)  # every frame's labels at once
-        for b, frame_draws in enumerate(draws):
-            if self._stop():
-                raise KeyboardInterrupt
-            row = self.frame(job, frame_draws, labels_all.frame(b), objects_all.frame(b))
-            rows.append(row)
-            labels += row["n_labeled"]
-            excluded.update(row["features"].exclusion_counts())
-            if row["render_s"] is not None:
-                rendered += 1
-                new = self._census.new_kernels()
-                compiled += 0 if self._first_frame else new  # the first frame compiles (or loads) them all
-                self._first_frame = False
-                render_s += row["render_s"]
-                blank += self._blank
-                blank_frames += self._blank > 0
-                denoise_s += row["denoise_s"] or 0.0
-                frame_s += row["frame_s"]
-                stages.update(self._stages)
-            if progress is not None:
-                progress(1)
+        recording = self._census.recording() if self._census is not None else contextlib.nullcontext()
+        with recording:  # the kernels each frame launches
+            for b, frame_draws in enumerate(draws):
+                if self._stop():
+                    raise KeyboardInterrupt
+                row = self.frame(job, frame_draws, labels_all.frame(b), objects_all.frame(b))
+                rows.append(row)
+                labels += row["n_labeled"]
+                excluded.update(row["features"].exclusion_counts())
+                if row["render_s"] is not None:
+                    rendered += 1
+                    new = self._census.new_kernels()
+                    compiled += 0 if self._first_frame else new  # the first frame compiles (or loads) them all
+                    self._first_frame = False
+                    render_s += row["render_s"]
+                    blank += self._blank
+                    blank_frames += self._blank > 0
+                    denoise_s += row["denoise_s"] or 0.0
+                    frame_s += row["frame_s"]
+                    stages.update(self._stages)
+                if progress is not None:
+                    progress(1)
         self._wait_for_writes(0)
         summary = ShardSummary(job.name, len(job.frames), labels, dict(excluded), rendered, render_s, denoise_s,
                                frame_s, stages=dict(stages), blank=blank, blank_frames=blank_frames,

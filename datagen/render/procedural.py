@@ -79,12 +79,8 @@ def evaluate(fn, *arrays: np.ndarray) -> np.ndarray:
     if ops is NUMPY:
         out = fn(*flat, ops)
     else:
-        # One point is padded to two: Dr.Jit compiles a kernel over arrays of one element
-        # apart from the same kernel over more (a new kernel the first time a frame had one).
-        n = flat[0].size
-        out = fn(*(jit_array(mi.Float, np.resize(a, max(n, 2))) for a in flat), ops)
+        out = fn(*(jit_array(mi.Float, a) for a in flat), ops)
         dr.eval(out)
-        out = np.asarray(out, dtype=np.float32)[:n]
     return np.asarray(out, dtype=np.float32).reshape(np.shape(arrays[0]))
 
 

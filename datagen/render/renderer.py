@@ -121,7 +121,7 @@ class Renderer:
         #: The image the renderer returns; with lens distortion, the pinhole render has a margin.
         self.output_intrinsics = scene.intrinsics if width is None and height is None else \
             Intrinsics.from_hfov_deg(width or cam.width, height or cam.height, cam.hfov_deg)
-        self.world = World(config, pixel_rad=1.0 / self.output_intrinsics.fx)  # remade by each build
+        self.release()  # no Mitsuba object yet: each build makes them (and the World that holds some)
         sensor = config.randomization.sensor
         self.sensor = sensor if sensor.enabled else None
         self.margin_px = 0
@@ -141,9 +141,7 @@ class Renderer:
         self._first = neutral_look(config)
         self._meshes_loaded = {obj: load_mesh(scene.mesh_path(obj), obj) for obj in RIGID_OBJECTS}
         self._mi, self._dr = mi, dr
-        self._hose_points = None
         self._camera_render = np.zeros(3)
-        self.release()
 
     # -- scene construction (deferred until the hose's point count is known) --------------
     def release(self) -> None:
@@ -207,27 +205,25 @@ class Renderer:
         self.scene = mi.load_dict(dict(description, hose=hose), optimize=False)
         self.params = mi.traverse(self.scene)
         self._hose_points = hose_points
-        # Map every shape's registry id to its object id (scalar variants name shapes instead).
-        self._id_table = np.zeros(1, dtype=np.uint32)
-        self._background: dict[int, str] = {}
-        self._device_tables = None
-        if self.variant.startswith("scalar"):
+        if self.variant.startswith("scalar"):  # its ray casts name the shapes they hit
             return
-        lookup = {}
-        for (obj, _), shape in self._meshes.items():
-            lookup[int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0])] = object_id(obj)
-        lookup[int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(hose))[0])] = object_id("hose")
-        self._id_table = np.zeros(max(lookup) + 1, dtype=np.uint32)
-        for k, v in lookup.items():
-            self._id_table[k] = v
-        # The background shapes by registry id: the sea and the cloud layers.
+
+        def registry_id(shape) -> int:
+            return int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0])
+
+        # Per shape registry id: its object id; per id + 1 (0: no hit): its index in
+        # ("sea", *CLOUD_LAYERS), -1 for the other shapes. Tables on the device (_cast_on_device).
+        objects = {registry_id(shape): object_id(obj) for (obj, _), shape in self._meshes.items()}
+        objects[registry_id(hose)] = object_id("hose")
         sea = next(shape for shape in self.scene.shapes() if str(shape.id()) == "sea")
-        for name, shape in (("sea", sea), *self.world.cloud_meshes.items()):
-            self._background[int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0])] = name
-        # registry id + 1 -> index into ("sea", *CLOUD_LAYERS) (0: no hit; -1: neither)
-        self._background_codes = np.full(max(self._background) + 2, -1, dtype=np.int64)
-        for key, name in self._background.items():
-            self._background_codes[key + 1] = ("sea", *CLOUD_LAYERS).index(name)
+        layers = ("sea", *CLOUD_LAYERS)
+        backgrounds = {registry_id(shape): layers.index(name)
+                       for name, shape in (("sea", sea), *self.world.cloud_meshes.items())}
+        ids = np.zeros(max(objects) + 1, dtype=np.uint32)
+        ids[list(objects)] = list(objects.values())
+        codes = np.full(max(backgrounds) + 2, -1, dtype=np.int32)
+        codes[[k + 1 for k in backgrounds]] = list(backgrounds.values())
+        self._id_table, self._background_codes = jit_array(mi.UInt32, ids), jit_array(mi.Int32, codes)
 
     # -- per frame ----------------------------------------------------------------------------
     def pose(self, state: FrameState, look: FrameLook, clock: StageClock | None = None) -> None:
@@ -516,10 +512,7 @@ class Renderer:
         mi, dr = self._mi, self._dr
         n = dr.width(d)
         o = mi.Point3f(*(dr.zeros(mi.Float, n) + dr.opaque(mi.Float, float(c)) for c in self._camera_render))
-        if self._device_tables is None:
-            self._device_tables = (jit_array(mi.UInt32, self._id_table),
-                                   jit_array(mi.Int32, self._background_codes.astype(np.int32)))
-        id_table, codes = self._device_tables
+        id_table, codes = self._id_table, self._background_codes
         travelled = dr.opaque(mi.Float, 0.0, n)
         t_out = dr.opaque(mi.Float, dr.inf, n)
         ids_out = dr.opaque(mi.UInt32, 0, n)
@@ -535,8 +528,8 @@ class Renderer:
                                           active=active)
             shape = dr.reinterpret_array(mi.UInt32, si.shape)
             valid = active & si.is_valid()
-            known = valid & (shape + 1 < len(self._background_codes))
-            ids = dr.gather(mi.UInt32, id_table, shape, valid & (shape < len(self._id_table)))
+            known = valid & (shape + 1 < dr.width(codes))
+            ids = dr.gather(mi.UInt32, id_table, shape, valid & (shape < dr.width(id_table)))
             code = dr.select(known, dr.gather(mi.Int32, codes, shape + 1, known), -1)
             surface = mi.UInt32(dr.select(valid, SURFACES.index("object"), SURFACES.index("sky")))
             surface = dr.select(code == 0, SURFACES.index("sea"), surface)
@@ -549,7 +542,7 @@ class Renderer:
                 at = dr.compress(active & (code == c))  # the rays that met this layer
                 if layer is None or dr.width(at) == 0:
                     continue
-                if dr.width(at) == 1:  # one ray is cast as two (see _intersect)
+                if dr.width(at) == 1:  # Dr.Jit compiles a kernel over one element apart: two
                     at = dr.gather(mi.UInt32, at, dr.opaque(mi.UInt32, 0, 2))
                 t = dr.gather(mi.Float, hit_t, at)
                 p = dr.gather(mi.Point3f, o, at) + dr.gather(mi.Vector3f, d, at) * t

@@ -18,9 +18,11 @@ when it is next used.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import gc
 import weakref
+from collections.abc import Iterator
 from typing import Final, Protocol
 
 from datagen.core.errors import DatagenError
@@ -110,21 +112,28 @@ def hold_scene(holder: SceneHolder) -> None:
 
 
 class KernelCensus:
-    """The JIT kernels a process launches, frame by frame (Dr.Jit's kernel history): how
-    many a frame launched that no earlier frame of the process had, which is a compile
-    (or, for the process's first frame, a load from the kernel cache)."""
+    """The JIT kernels a process launches, frame by frame (Dr.Jit's kernel history, on
+    while :meth:`recording`): how many a frame launched that no earlier frame of the census
+    had, which is a compile (or, for the first frame, a load from the kernel cache)."""
 
     def __init__(self) -> None:
-        import drjit as dr
-
-        self._dr = dr
-        dr.set_flag(dr.JitFlag.KernelHistory, True)
-        dr.kernel_history()  # what came before is not a frame's
         self._seen: set[str] = set()
 
+    @contextlib.contextmanager
+    def recording(self) -> Iterator[None]:
+        """Keep the kernel history while the block runs (the flag as it was after it)."""
+        import drjit as dr
+
+        with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+            dr.kernel_history()  # what came before is not a frame's
+            yield
+            dr.kernel_history()  # nor kept after it
+
     def new_kernels(self) -> int:
-        """Kernels launched since the last call that no earlier call saw (and the history cleared)."""
-        dr = self._dr
+        """Kernels launched since the last call (or since :meth:`recording` began) that no
+        earlier call saw; the history is cleared."""
+        import drjit as dr
+
         hashes = {k["hash"] for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT}
         new = len(hashes - self._seen)
         self._seen |= hashes

@@ -26,6 +26,8 @@ __all__ = ["SUN_APERTURE_DEG", "sky_class"]
 
 #: The sun's angular diameter, degrees (``sunsky``'s default, passed to it explicitly).
 SUN_APERTURE_DEG: Final = 0.5338
+#: Where the sun is until the first frame sets it (a unit vector, world frame).
+_FIRST_SUN: Final = (0.0, 0.5, math.sqrt(0.75))
 
 
 @functools.cache
@@ -44,11 +46,11 @@ def sky_class(variant: str):
     class SunSky(mi.Emitter):
         def __init__(self, props=None):
             super().__init__(props if props is not None else mi.Properties())
-            self.inner = mi.load_dict({"type": "sunsky", "sun_direction": [0.0, 0.5, math.sqrt(0.75)],
+            self.inner = mi.load_dict({"type": "sunsky", "sun_direction": list(_FIRST_SUN),
                                        "sun_aperture": SUN_APERTURE_DEG})
             self._params = mi.traverse(self.inner)
             self.m_flags = mi.EmitterFlags.Infinite | mi.EmitterFlags.SpatiallyVarying
-            self.sun = mi.Vector3f(0.0, 0.5, math.sqrt(0.75))
+            self.sun = mi.Vector3f(*_FIRST_SUN)
             self.sun_scale = self.sky_scale = opaque(1.0)
 
         def set(self, sun_direction: ArrayLike, turbidity: float, sun_scale: float, sky_scale: float) -> None:

@@ -303,7 +303,7 @@ class World:
         """The opacity of cloud layer ``name`` this frame at render-frame points ``xy``
         (N, 2) seen from ``distance_m`` (N,) away, as the renderer shades it (evaluated by
         Dr.Jit: the geometry pass classifies hundreds of thousands of pixels a frame)."""
-        layer = self._cloud_layers.get(name)
+        layer = self.cloud_layer(name)
         if layer is None:
             return np.zeros(len(xy), np.float32)
         from datagen.render.procedural import evaluate
