@@ -377,7 +377,7 @@ def test_the_estimate_knows_the_device_a_gpu_frame_bounded_by_its_kernels_or_its
     shipped = load_config("wingcam55")
     cpu, gpu = frame_cost(shipped, 16), frame_cost(shipped, 16, variant="cuda_ad_rgb")
     assert "cuda_ad_rgb" in gpu.setting and "llvm_ad_rgb" in cpu.setting
-    assert gpu.seconds < cpu.seconds / 4  # path tracing and OIDN move to the GPU
+    assert gpu.seconds < cpu.seconds / 2  # path tracing and OIDN move to the GPU
     assert frame_cost(shipped, 1, variant="cuda_ad_rgb").seconds == pytest.approx(16 * gpu.seconds)  # host-bound
     heavy = override_config(shipped, {"render.spp": 1024})  # the GPU's own time bounds it
     mpx = shipped.camera.width * shipped.camera.height / 1e6

@@ -354,8 +354,8 @@ def test_looks_are_drawn_from_the_frame_rng_within_the_config() -> None:
 KERNEL_FRAMES: Final = (0, 1, 5, *(16 * k + (7 * k) % 16 for k in range(1, 23)))
 
 
-def kernel_census(seed: int = 31, frames: tuple[int, ...] = KERNEL_FRAMES) -> dict:
-    """In this process (one thread, ``llvm_ad_rgb``), a tiny wingcam55 with every world
+def kernel_census(seed: int = 31, frames: tuple[int, ...] = KERNEL_FRAMES, name: str = "wingcam55") -> dict:
+    """In this process (one thread, ``llvm_ad_rgb``), a tiny shipped config ``name`` with every world
     randomizer on, each frame made as a build makes it: per frame, the JIT kernels launched
     that no earlier frame launched (``new``); and the render kernel (the largest: hash,
     operation count) of one frame alone, and again with a second renderer of another
@@ -370,7 +370,7 @@ def kernel_census(seed: int = 31, frames: tuple[int, ...] = KERNEL_FRAMES) -> di
     set_threads(1)
     tiny = {"render.spp": 1, "camera.width": 32, "camera.height": 17, "labels.edge_margin_px": 1.0,
             "dataset.seed": seed}
-    config = override_config(load_config(ROOT / "scenes" / "wingcam55.yaml"), tiny)
+    config = override_config(load_config(ROOT / "scenes" / f"{name}.yaml"), tiny)
     assert all(getattr(config.randomization, name).enabled for name in ("clouds", "livery", "sensor"))
     scene, states = Scene.resolve(config), FrameStates(config)
     renderer = Renderer(scene)

@@ -1,4 +1,5 @@
-"""The camera model's shortcuts against the computation they shorten (numpy, no Mitsuba)."""
+"""The camera model's shortcuts against the computation they shorten, and its steps on the
+render's device against the same steps in numpy and OpenCV."""
 
 from __future__ import annotations
 
@@ -79,3 +80,73 @@ def test_device_noise_is_the_same_for_a_seed_and_another_for_another() -> None:
     _, b = _noisy(True, seed=7, n=4_000)
     _, c = _noisy(True, seed=8, n=4_000)
     assert np.array_equal(a, b) and not np.allclose(a[1:], c[1:])
+
+
+def _llvm() -> None:
+    pytest.importorskip("mitsuba")
+    from datagen.render.runtime import has_backend, use_variant
+
+    if not has_backend("llvm"):
+        pytest.skip("the device path needs Dr.Jit's LLVM backend")
+    use_variant("llvm_ad_rgb")
+
+
+@pytest.mark.parametrize(("shift", "spread"), [((0.3, 0.1), 0.0), ((2.5, -1.5), 1.0), ((7.0, 3.0), 4.0),
+                                               ((-40.0, 25.0), 30.0), ((1e4, 0.0), 0.0)],
+                         ids=["short", "mixed", "long", "past-the-border", "past-the-diagonal"])
+@pytest.mark.parametrize("stride", [1, 2])
+def test_motion_blur_on_the_device_is_opencvs_remap_average(shift, spread, stride) -> None:
+    """The device's blur (bilinear gathers, reflected border) against OpenCV's remap, for
+    short, long and varying motion, displacements crossing the border several times and
+    one shortened to the diagonal, given at every pixel or at every 2 x 2 block of an
+    image of odd size."""
+    import cv2
+
+    from datagen.render.sensor import motion_blur
+
+    _llvm()
+    rng = np.random.default_rng(5)
+    h, w = 61, 97
+    rgb = cv2.GaussianBlur(rng.random((h, w, 3), dtype=np.float32) * 4, (0, 0), 1.5)
+    grid = (-(-h // stride), -(-w // stride), 2)
+    displacement = (np.asarray(shift, np.float32) + spread * rng.standard_normal(grid)).astype(np.float32)
+    cpu = motion_blur(rgb, displacement, stride=stride)
+    dev = motion_blur(rgb, displacement, stride=stride, device=True)
+    assert dev.shape == cpu.shape and dev.dtype == np.float32
+    np.testing.assert_allclose(dev, cpu, atol=2e-3 * rgb.max())  # OpenCV rounds positions to 1/32 px
+
+
+def test_motion_blur_on_the_device_keeps_the_light_and_blurs_along_the_motion_only() -> None:
+    """A vertical line moved 6 px sideways during the exposure becomes a 6 px wide band of
+    the same total light; a horizontal line moved the same way stays sharp."""
+    from datagen.render.sensor import motion_blur
+
+    _llvm()
+    h, w = 40, 64
+    rgb = np.zeros((h, w, 3), np.float32)
+    rgb[:, 30] = 1.0
+    rgb[20, :] = 1.0
+    moved = motion_blur(rgb, np.broadcast_to(np.float32([6.0, 0.0]), (h, w, 2)).copy(), device=True)
+    row = moved[5, :, 0]
+    assert row.sum() == pytest.approx(1.0, rel=1e-5)
+    assert np.count_nonzero(row > 1e-6) in (6, 7) and row.max() < 0.2
+    np.testing.assert_allclose(moved[20, 10:50, 0], 1.0, atol=1e-6)
+
+
+def test_the_warm_up_compiles_the_kernel_a_frames_motion_blur_runs() -> None:
+    """A worker whose first frames stand still compiles the blur's kernel at warm-up, not
+    frames later: a full-size blur afterwards launches no kernel the warm-up did not."""
+    from datagen.render.runtime import KernelCensus
+    from datagen.render.sensor import MOTION_STRIDE, motion_blur, warm_up_on_device
+
+    _llvm()
+    census = KernelCensus()
+    rng = np.random.default_rng(2)
+    with census.recording():
+        warm_up_on_device()
+        assert census.new_kernels() > 0
+        h, w = 91, 160
+        grid = (-(-h // MOTION_STRIDE), -(-w // MOTION_STRIDE), 2)
+        motion_blur(rng.random((h, w, 3), dtype=np.float32), rng.normal(0.0, 5.0, grid).astype(np.float32),
+                    stride=MOTION_STRIDE, device=True)
+        assert census.new_kernels() == 0

@@ -22,18 +22,17 @@ __all__ = ["FrameCost", "auto_workers", "frame_cost"]
 
 #: Core-seconds of path tracing per megapixel and sample: the world's randomizers off
 #: (``path``), and with cloud layers (``volpath``, procedural clouds and sea, liveries:
-#: the shipped scenes' mean; podcam15, which sees the most cloud, is a third above it).
-TRACE_CORE_S: Final = {"path": 0.21, "volpath": 0.89}
-#: Core-seconds per frame that do not grow with the samples: posing the scene, tracing
-#: the integrator, the kernels a frame's draws compile (measured: a new frame's first
-#: render of the world took 1-2.5 s longer than its repeat).
-FIXED_CORE_S: Final = {"path": 0.5, "volpath": 2.0}
-#: Core-seconds of OIDN per megapixel, by quality (with two workers denoising at once: one
-#: alone is faster); guides (albedo, normal) cost this factor.
-DENOISE_CORE_S: Final = {"fast": 1.3, "balanced": 2.3, "high": 2.2}
+#: wingcam55 measured 0.57; podcam15 sees more cloud, dashcam75 less).
+TRACE_CORE_S: Final = {"path": 0.21, "volpath": 0.6}
+#: Core-seconds per frame that do not grow with the image: posing the scene (0.03 s a frame,
+#: 0.5 s more at an approach chain's first frame, where its weather and liveries are drawn).
+FIXED_CORE_S: Final = {"path": 0.1, "volpath": 0.1}
+#: Core-seconds of OIDN per megapixel, by quality (the guides, albedo and normal, cost
+#: the filter nothing measurable; the integrator that makes them costs this factor).
+DENOISE_CORE_S: Final = {"fast": 0.63, "balanced": 1.15, "high": 1.13}
 GUIDES_FACTOR: Final = 1.4
 #: Core-seconds per megapixel of the geometry pass, the camera model, encoding (sensor on, off).
-REST_CORE_S: Final = {True: 0.45, False: 0.25}
+REST_CORE_S: Final = {True: 0.135, False: 0.086}
 #: Seconds per frame of a labels-only build (labels, manifests), one core.
 LABELS_ONLY_S: Final = 1.0 / 250
 #: Local workers ``--workers auto`` runs on the CPU (at most one per core), the cores
@@ -75,17 +74,17 @@ def frame_cost(config: Config, cores: int, *, render: bool = True, variant: str 
     clouds = world.clouds.enabled
     integrator = "volpath" if clouds else "path"
     denoised = r.denoise != "off"
-    guides = GUIDES_FACTOR if r.denoise_guides else 1.0
+    guides = GUIDES_FACTOR if r.denoise_guides else 1.0  # on the path tracing (the aov integrator)
     denoiser = f"oidn {r.denoise_quality}{' guided' if r.denoise_guides else ''}" if denoised else "no denoiser"
     world_text = f"clouds {'on' if clouds else 'off'}, camera model {'on' if world.sensor.enabled else 'off'}"
     setting = f"{cam.width}x{cam.height}, {r.spp} spp, {denoiser}, {world_text}, {variant}"
     if variant.startswith("cuda"):
-        gpu_s = mpx * r.spp * GPU_TRACE_S + (mpx * GPU_DENOISE_S * guides if denoised else 0.0)
+        gpu_s = mpx * r.spp * GPU_TRACE_S * guides + (mpx * GPU_DENOISE_S if denoised else 0.0)
         host_s = (GPU_HOST_CORE_S + mpx * GPU_HOST_CORE_S_PER_MPX) / cores
         return FrameCost(max(gpu_s, host_s), cores, setting)
-    core_s = FIXED_CORE_S[integrator] + mpx * r.spp * TRACE_CORE_S[integrator]
+    core_s = FIXED_CORE_S[integrator] + mpx * r.spp * TRACE_CORE_S[integrator] * guides
     if denoised:
-        core_s += mpx * DENOISE_CORE_S[r.denoise_quality] * guides
+        core_s += mpx * DENOISE_CORE_S[r.denoise_quality]
     core_s += mpx * REST_CORE_S[world.sensor.enabled]
     return FrameCost(core_s / cores, cores, setting)
 

@@ -224,6 +224,10 @@ class Renderer:
         codes = np.full(max(backgrounds) + 2, -1, dtype=np.int32)
         codes[[k + 1 for k in backgrounds]] = list(backgrounds.values())
         self._id_table, self._background_codes = jit_array(mi.UInt32, ids), jit_array(mi.Int32, codes)
+        if self.sensor is not None and self.sensor.motion_blur:
+            from datagen.render.sensor import warm_up_on_device
+
+            warm_up_on_device()
 
     # -- per frame ----------------------------------------------------------------------------
     def pose(self, state: FrameState, look: FrameLook, clock: StageClock | None = None) -> None:
@@ -539,15 +543,17 @@ class Renderer:
             passing = dr.opaque(mi.Bool, False, n)
             for c, name in enumerate(layers[1:], start=1):
                 layer = self.world.cloud_layer(name)
-                at = dr.compress(active & (code == c))  # the rays that met this layer
-                if layer is None or dr.width(at) == 0:
+                if layer is None:
                     continue
-                if dr.width(at) == 1:  # Dr.Jit compiles a kernel over one element apart: two
-                    at = dr.gather(mi.UInt32, at, dr.opaque(mi.UInt32, 0, 2))
+                at = dr.compress(active & (code == c))  # the rays that met this layer
+                met = dr.width(at)
+                if met < 2:  # the same kernels whether 0, 1 or many rays met the layer: two lanes in memory
+                    at = jit_array(mi.UInt32, np.resize(np.asarray(at, dtype=np.uint32), 2) if met else [0, 0])
+                real = dr.arange(mi.UInt32, dr.width(at)) < dr.opaque(mi.UInt32, met)
                 t = dr.gather(mi.Float, hit_t, at)
                 p = dr.gather(mi.Point3f, o, at) + dr.gather(mi.Vector3f, d, at) * t
                 opacity = layer(p.x, p.y, (dr.gather(mi.Float, travelled, at) + t) * self.world.pixel_rad, ops)
-                dr.scatter(passing, opacity < CLOUD_PASS_OPACITY, at)
+                dr.scatter(passing, opacity < CLOUD_PASS_OPACITY, at, real)
                 dr.eval(passing)
             done = active & ~passing
             t_out = dr.select(done, travelled + hit_t, t_out)

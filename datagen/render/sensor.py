@@ -1,5 +1,6 @@
 """The camera after the render: what a real camera does to the light the path tracer
-computed, in the light's order (image arithmetic on numpy arrays, no Mitsuba).
+computed, in the light's order: image arithmetic on numpy arrays, and the motion blur
+and the noise as Dr.Jit kernels on the render's device where a vectorized variant renders.
 
 1. motion blur: each pixel averaged along its true image motion over the exposure,
    centred on the frame's time (:func:`image_motion`, :func:`motion_blur`);
@@ -43,6 +44,7 @@ if TYPE_CHECKING:
 __all__ = [
     "AUTO_EXPOSURE_KEY",
     "FULL_WELL_E",
+    "MOTION_STRIDE",
     "READ_NOISE_E",
     "SensorResult",
     "apply_sensor",
@@ -55,6 +57,7 @@ __all__ = [
     "noise_sigma",
     "sensor_noise",
     "sun_glare",
+    "warm_up_on_device",
 ]
 
 #: Electrons a pixel holds at ISO 100 (a 4-5 um industrial sensor); ISO S holds 100/S of it.
@@ -74,6 +77,8 @@ GLARE_STEP: Final = 4
 GHOSTS: Final = ((-0.4, 0.05, (0.6, 0.8, 1.0)), (-0.9, 0.09, (0.7, 1.0, 0.6)), (0.5, 0.03, (1.0, 0.7, 0.5)))
 #: Mixed into the noise's seed for the PCG32 streams' increment (any odd-bit pattern will do).
 NOISE_STREAM: Final = 0x9E3779B97F4A7C15
+#: The image motion is computed at one pixel of every ``MOTION_STRIDE`` x ``MOTION_STRIDE`` block.
+MOTION_STRIDE: Final = 2
 #: Most samples along a pixel's motion.
 MAX_BLUR_SAMPLES: Final = 24
 
@@ -98,15 +103,16 @@ def image_motion(state: FrameState, depth: NDArray[np.float32], ids: NDArray[np.
     point (from the z-depth) carried by its object's motion relative to the camera
     (background: the world's; the sky: the camera's rotation alone), by finite
     difference against ``state.earlier``. With ``stride`` 2, computed at the top-left
-    pixel of every 2 x 2 block and repeated over it (the motion field is smooth: a
-    quarter of the work)."""
+    pixel of every 2 x 2 block only, in the image's pixels per second, shape
+    ``(ceil(H / 2), ceil(W / 2), 2)``: the motion field is smooth, and :func:`motion_blur`
+    takes it on that grid (a quarter of the work)."""
     full = depth.shape
     if stride > 1:
         out = image_motion(state, depth[::stride, ::stride], ids[::stride, ::stride],
                            Intrinsics(-(-full[1] // stride), -(-full[0] // stride), intrinsics.fx / stride,
                                       intrinsics.fy / stride, pixel_centre(float(index_px(intrinsics.cx)) / stride),
                                       pixel_centre(float(index_px(intrinsics.cy)) / stride)))
-        return np.repeat(np.repeat(out * np.float32(stride), stride, axis=0), stride, axis=1)[:full[0], :full[1]]
+        return out * np.float32(stride)
     before = state.earlier
     h, w = depth.shape
     out = np.zeros((h, w, 2), np.float32)
@@ -139,16 +145,25 @@ def image_motion(state: FrameState, depth: NDArray[np.float32], ids: NDArray[np.
     return out
 
 
-def motion_blur(rgb: NDArray[np.float32], displacement_px: NDArray[np.float32]) -> NDArray[np.float32]:
+def motion_blur(rgb: NDArray[np.float32], displacement_px: NDArray[np.float32], *, stride: int = 1,
+                device: bool = False) -> NDArray[np.float32]:
     """Average each pixel over its displacement during the exposure, centred on the
-    pixel (the frame's time is the middle of the exposure, where the labels are).
+    pixel (the frame's time is the middle of the exposure, where the labels are): ``n``
+    bilinear samples evenly spaced along it, ``n`` from the longest displacement (at most
+    :data:`MAX_BLUR_SAMPLES`), the image reflected at its border (OpenCV's
+    ``BORDER_REFLECT``). ``displacement_px`` is given at the top-left pixel of every
+    ``stride`` x ``stride`` block and holds over the block (:func:`image_motion`). With
+    ``device``, on the render's device (a vectorized Mitsuba variant is set:
+    :func:`_motion_blur_on_device`), else with OpenCV's ``remap``.
 
     A displacement longer than the image's diagonal (a pixel near the horizon of a very
     wide lens) is shortened to it: beyond that, the average crosses the whole image
-    either way, and OpenCV's reflected border would walk the excess a width at a time."""
-    import cv2
-
+    either way, and the reflected border would walk the excess a width at a time."""
     h, w = rgb.shape[:2]
+    grid = (-(-h // stride), -(-w // stride))
+    if displacement_px.shape[:2] != grid:
+        raise ValueError(f"a {w}x{h} image's displacement at stride {stride} is {grid[1]}x{grid[0]}, "
+                         f"not {displacement_px.shape[1]}x{displacement_px.shape[0]}")
     lengths = np.sqrt((displacement_px**2).sum(axis=-1))
     diagonal = np.float32(math.hypot(w, h))
     if not (np.isfinite(lengths).all() and lengths.max(initial=0.0) <= diagonal):
@@ -161,12 +176,79 @@ def motion_blur(rgb: NDArray[np.float32], displacement_px: NDArray[np.float32]) 
     if length < 0.25:
         return rgb
     n = int(min(MAX_BLUR_SAMPLES, max(2, math.ceil(2.0 * length))))
+    if device:
+        return _motion_blur_on_device(rgb, displacement_px, stride, n)
+    import cv2
+
+    if stride > 1:
+        displacement_px = np.repeat(np.repeat(displacement_px, stride, axis=0), stride, axis=1)[:h, :w]
     gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
     out = np.zeros_like(rgb)
     for s in (np.arange(n, dtype=np.float32) + 0.5) / n - 0.5:
         out += cv2.remap(rgb, gx + s * displacement_px[..., 0], gy + s * displacement_px[..., 1],
                          cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
     return out / np.float32(n)
+
+
+def _motion_blur_on_device(rgb: NDArray[np.float32], displacement_px: NDArray[np.float32], stride: int,
+                           n: int) -> NDArray[np.float32]:
+    """:func:`motion_blur`'s ``n`` samples as one Dr.Jit kernel on the render's device: each
+    pixel's displacement gathered from its block, a symbolic loop over the samples (``n``,
+    the image's size and the step are opaque, so every frame runs the same kernel),
+    bilinear gathers from the image's channels."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from datagen.render.mitsuba import jit_array
+
+    h, w = rgb.shape[:2]
+    channels = [jit_array(mi.Float, rgb[..., c].reshape(-1)) for c in range(3)]
+    width, height = dr.opaque(mi.Int32, w), dr.opaque(mi.Int32, h)
+    index = mi.Int32(dr.arange(mi.UInt32, h * w))
+    col, row = index % width, index // width
+    block = dr.opaque(mi.Int32, stride)
+    block_index = mi.UInt32((row // block) * dr.opaque(mi.Int32, displacement_px.shape[1]) + col // block)
+    dx, dy = (dr.gather(mi.Float, jit_array(mi.Float, displacement_px[..., i].reshape(-1)), block_index)
+              for i in range(2))
+    px, py = mi.Float(col), mi.Float(row)  # OpenCV's grid: integers at pixel centres
+    samples, step = dr.opaque(mi.UInt32, n), dr.opaque(mi.Float, 1.0 / n)
+
+    def reflected(i, size):  # BORDER_REFLECT, repeated: ... c b a | a b c ... z | z y x ...
+        m = i % (2 * size)
+        m = dr.select(m < 0, m + 2 * size, m)
+        return dr.select(m < size, m, 2 * size - 1 - m)
+
+    def body(i, *sums):
+        s = (mi.Float(i) + 0.5) * step - 0.5
+        x, y = px + s * dx, py + s * dy
+        x0, y0 = dr.floor(x), dr.floor(y)
+        fx, fy = x - x0, y - y0
+        c0, c1 = reflected(mi.Int32(x0), width), reflected(mi.Int32(x0) + 1, width)
+        r0, r1 = reflected(mi.Int32(y0), height) * width, reflected(mi.Int32(y0) + 1, height) * width
+        out = []
+        for channel, total in zip(channels, sums):
+            def at(j, channel=channel):
+                return dr.gather(mi.Float, channel, mi.UInt32(j))
+            top = dr.lerp(at(r0 + c0), at(r0 + c1), fx)
+            bottom = dr.lerp(at(r1 + c0), at(r1 + c1), fx)
+            out.append(total + dr.lerp(top, bottom, fy))
+        return (i + 1, *out)
+
+    zero = dr.zeros(mi.Float, h * w)
+    _, *sums = dr.while_loop(state=(mi.UInt32(0), zero, mi.Float(zero), mi.Float(zero)),
+                             cond=lambda i, *_: i < samples, body=body)
+    sums = [total * step for total in sums]
+    dr.eval(sums)
+    return np.stack([np.asarray(total, dtype=np.float32) for total in sums], axis=-1).reshape(h, w, 3)
+
+
+def warm_up_on_device() -> None:
+    """Compile (or load) the camera model's device kernels that a frame launches only
+    sometimes, on a 4 x 4 image: the motion blur runs only where a frame's image moves a
+    quarter pixel or more, so without this a worker whose first frames stand still would
+    compile it frames later (the kernels do not depend on the image's size)."""
+    rgb = np.zeros((4, 4, 3), np.float32)
+    _motion_blur_on_device(rgb, np.ones((2, 2, 2), np.float32), MOTION_STRIDE, 2)
 
 
 # --- distortion --------------------------------------------------------------------
@@ -333,14 +415,15 @@ def apply_sensor(rgb: NDArray[np.float32], look: FrameLook, state: FrameState, *
                  device: bool = False) -> SensorResult:
     """Linear radiance (the render grid, ``margin_px`` wider than ``output`` on every side)
     to display-linear RGB on the output grid, through the frame's drawn camera (each step
-    timed on ``clock``; ``device``: the noise is drawn on the render's device)."""
+    timed on ``clock``; ``device``: the motion blur and the noise on the render's device)."""
     clock = clock or StageClock()
     measured: dict = {"motion_blur_px": None, "auto_exposure_ev": None, "sun_in_view": None}
     if look.sensor_exposure_time_s is not None and depth is not None:
         with clock.stage("motion blur"):
-            displacement = image_motion(state, depth, ids, render, stride=2) * np.float32(look.sensor_exposure_time_s)
+            displacement = image_motion(state, depth, ids, render, stride=MOTION_STRIDE) * np.float32(
+                look.sensor_exposure_time_s)
             measured["motion_blur_px"] = float(np.sqrt((displacement**2).sum(axis=-1)).max(initial=0.0))
-            rgb = motion_blur(rgb, displacement)
+            rgb = motion_blur(rgb, displacement, stride=MOTION_STRIDE, device=device)
     if look.sensor_distortion is not None:
         with clock.stage("lens distortion"):
             warped = distort_image({"rgb": rgb, "depth": depth, "ids": ids, "surface": surface}, output, margin_px,
