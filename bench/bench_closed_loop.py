@@ -45,11 +45,11 @@ import numpy as np
 import pyarrow.parquet as pq
 from matplotlib.figure import Figure
 
+from datagen.atomic import link_or_copy, write_figure
 from datagen.config import find_config, load_config, override_config
-from datagen.files import link_or_copy, write_figure
+from datagen.pipeline.build import build_dataset
 from datagen.pipeline.metadata import write_image_lists
 from datagen.pipeline.plan import dataset_layout, plan_shards
-from datagen.pipeline.run import build_dataset
 from datagen.report.plots import plot_evaluation
 
 NOISE_PX = (0.0, 0.5, 1.0, 2.5)

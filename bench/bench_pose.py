@@ -36,9 +36,9 @@ from datagen.config import load_config, override_config
 from datagen.config.schema import Config
 from datagen.core.training import TrainView
 from datagen.dataset.reader import load_dataset
+from datagen.pipeline.build import build_dataset
 from datagen.pipeline.metadata import write_placeholder_images
 from datagen.pipeline.plan import dataset_layout, plan_shards
-from datagen.pipeline.run import build_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = ("wingcam55", "podcam15", "dashcam75")

@@ -44,10 +44,10 @@ from pathlib import Path
 import numpy as np
 
 from datagen.analysis.image_quality import fireflies, luminance, noise_speckles, psnr, speckles, ssim
+from datagen.atomic import write_bytes, write_image
 from datagen.config import load_config, override_config
 from datagen.config.schema import world_off
 from datagen.core.conventions import object_id
-from datagen.files import write_bytes, write_image
 from datagen.pipeline.frame import draw_frame
 from datagen.pipeline.writer import timed_frame
 from datagen.render.renderer import Renderer

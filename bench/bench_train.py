@@ -53,7 +53,7 @@ import numpy as np
 from datagen.config import load_config, override_config
 from datagen.core.training import ANCHOR_STRIDES
 from datagen.dataset.reader import load_dataset
-from datagen.pipeline.run import build_dataset
+from datagen.pipeline.build import build_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -150,7 +150,7 @@ def plot_sweep(sizes, rows: dict[str, list[float]], path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from datagen.files import write_figure
+    from datagen.atomic import write_figure
 
     fig, ax = plt.subplots(figsize=(6.4, 3.6), layout="constrained")
     labels = {"learnable": "learnable share (datagen audit = Ultralytics' dataloader)"}

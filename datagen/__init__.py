@@ -8,7 +8,7 @@ from datagen.config import Config, load_config
 from datagen.core.camera import Intrinsics, in_front, project_points
 from datagen.core.errors import ConfigError, DatagenError, Problem
 from datagen.core.features import FeatureTable
-from datagen.core.labels import Exclusion, FrameLabels, boxes_from_uv, compute_labels
+from datagen.core.label_boxes import Exclusion, FrameLabels, boxes_from_uv, compute_labels
 from datagen.core.transforms import (
     Transform,
     apply_transform,

@@ -13,7 +13,7 @@ from collections import deque
 from collections.abc import Callable, Iterator
 from typing import Final
 
-__all__ = ["IN_FLIGHT_PER_WORKER", "MMAP_THRESHOLD_BYTES", "NullProgress", "cpu_count", "fixed_mmap_threshold",
+__all__ = ["IN_FLIGHT_PER_WORKER", "MMAP_THRESHOLD_BYTES", "cpu_count", "fixed_mmap_threshold",
            "map_in_order"]
 
 
@@ -68,23 +68,9 @@ def fixed_mmap_threshold() -> bool:
     own, handed back to the system when freed (once per process; False where the C library
     is not glibc). By default glibc raises that threshold to the largest block freed so far
     (up to 32 MiB), and a reader that takes shard after shard of arrays then keeps them in a
-    heap that fragments: the audit of 100,000 frames grew to 497 MiB in its parent process,
-    229 MiB with the threshold fixed."""
+    heap that fragments and grows with the number of shards; with the threshold fixed, the
+    memory of a shard's arrays goes back to the system when they are let go."""
     try:
         return bool(ctypes.CDLL("libc.so.6").mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES))
     except (OSError, AttributeError):
         return False
-
-
-class NullProgress:
-    """The progress interface of the commands (:class:`datagen.pipeline.progress.BuildProgress`),
-    showing nothing (a caller that passed none)."""
-
-    def start(self, total: int, done: int, estimate: object = None) -> None:
-        pass
-
-    def advance(self, n: int) -> None:
-        pass
-
-    def close(self) -> None:
-        pass

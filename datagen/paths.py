@@ -7,7 +7,7 @@ it stays inside the dataset folder, so that a symbolic link can lead nobody's re
 of it. A report or export folder is a real folder: a symbolic link at its name, or
 between the dataset and a report folder inside it, is refused, and every folder made
 under it is made, never followed. Files themselves are replaced by a rename
-(:mod:`datagen.files`), which replaces a link instead of writing through it.
+(:mod:`datagen.atomic`), which replaces a link instead of writing through it.
 """
 
 from __future__ import annotations

@@ -20,8 +20,8 @@ IMAGES = ("assets/previews/*.png",)
 
 
 def on_files(files, config):
-    from datagen.cli.reference import cli_reference
-    from datagen.config.reference import config_reference
+    from datagen.cli.command_reference import cli_reference
+    from datagen.config.key_reference import config_reference
 
     generated = {"reference/config.md": config_reference(), "reference/cli.md": cli_reference(),
                  "concepts/conventions.md": conventions_page()}

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 
+from datagen.atomic import is_temporary
 from datagen.config import load_config, override_config
-from datagen.dataset.schema import RUN_COLUMNS
-from datagen.files import is_temporary
+from datagen.dataset.columns import RUN_COLUMNS
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -14,8 +14,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from datagen.assets.files import BUILTIN_DIR, builtin_paths, hull_distance, load_features, load_mesh
 from datagen.assets.generate import asset_documents
+from datagen.assets.loader import BUILTIN_DIR, builtin_paths, hull_distance, load_features, load_mesh
 from datagen.assets.models import material_class
 from datagen.assets.models.drogue import HOSE_RADIUS_M, hose_faces, hose_mesh, hose_vertices
 from datagen.assets.rig import HOSE_PORT_TANKER_M, MOUNTS

@@ -22,10 +22,10 @@ from datagen.analysis.audit.frames import frames_to_draw
 from datagen.core.camera import Intrinsics
 from datagen.core.errors import DatagenError
 from datagen.core.features import FeatureTable
-from datagen.core.labels import compute_labels
+from datagen.core.label_boxes import compute_labels
 from datagen.core.transforms import make_transform
 from datagen.dataset.reader import load_dataset
-from datagen.pipeline.run import build_dataset
+from datagen.pipeline.build import build_dataset
 from datagen.report.audit_report import write_report
 from datagen.report.overlays import write_previews
 

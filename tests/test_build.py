@@ -28,14 +28,14 @@ from datagen.assets.table import feature_table
 from datagen.config import LabelsConfig, load_config, override_config
 from datagen.core.camera import Intrinsics
 from datagen.core.errors import ConfigError, DatagenError
-from datagen.core.labels import compute_labels
+from datagen.core.label_boxes import compute_labels
 from datagen.core.training import TrainView
+from datagen.dataset.columns import MANIFEST_VERSION, features_schema, manifest_schema, read_features
 from datagen.dataset.layout import SPLITS
-from datagen.dataset.schema import MANIFEST_VERSION, features_schema, manifest_schema, read_features
+from datagen.pipeline.build import build_dataset
 from datagen.pipeline.executors import PROGRESS_EVERY_S, _run_group
 from datagen.pipeline.folder import DatasetLock
 from datagen.pipeline.plan import dataset_layout, frame_split, plan_shards
-from datagen.pipeline.run import build_dataset
 from datagen.pipeline.writer import MAX_GROUP_SHARDS, ShardWriter, shard_groups
 from datagen.scene.resolved import Scene
 
@@ -110,7 +110,7 @@ def test_labels_only_builds_in_shard_groups_write_what_each_shard_writes_alone(t
     for job in jobs:  # each shard by a writer of its own: nothing simulated or drawn for another shard
         for folder in layout.shard_dirs(job):
             folder.mkdir(parents=True, exist_ok=True)
-        ShardWriter(scene, alone, render=False).run(job)
+        ShardWriter(scene, layout, render=False).run(job)
     assert label_files(alone) == label_files(tmp_path / "grouped")
     assert comparable(alone) == comparable(tmp_path / "grouped")
 
@@ -124,14 +124,16 @@ def test_a_worker_sends_its_frames_in_few_messages_and_all_of_them_at_each_shard
     for job in group:
         for folder in layout.shard_dirs(job):
             folder.mkdir(parents=True, exist_ok=True)
-    sent: list[int] = []
-    start = time.monotonic()
-    summaries = _run_group(ShardWriter(Scene.resolve(config), tmp_path, render=False), group, sent.append)
-    elapsed = time.monotonic() - start
+    writer = ShardWriter(Scene.resolve(config), layout, render=False)
+    ends = list(itertools.accumulate(len(job.frames) for job in group))
+    still: list[int] = []  # a clock that stands still: no interval ever passes
+    summaries = _run_group(writer, group, still.append, clock=lambda: 0.0)
     assert [s.name for s in summaries] == [job.name for job in group]
-    ends = set(itertools.accumulate(len(job.frames) for job in group))
-    assert ends <= set(itertools.accumulate(sent)) and sum(sent) == max(ends)  # flushed at each shard's end
-    assert len(sent) <= len(group) + elapsed / PROGRESS_EVERY_S + 1  # not a message per frame
+    assert list(itertools.accumulate(still)) == ends  # one message per shard, at its end: not one per frame
+    ticks = itertools.count(step=PROGRESS_EVERY_S)  # a clock that passes an interval at every reading
+    each: list[int] = []
+    _run_group(writer, group, each.append, clock=lambda: next(ticks))
+    assert each == [1] * ends[-1]  # an interval passed since the last message: the frame is sent
 
 
 def test_split_fraction_and_independence_from_sharding() -> None:
@@ -167,7 +169,7 @@ def test_manifest_readme_documents_every_column() -> None:
 
 
 def test_features_parquet_round_trips(tmp_path: Path) -> None:
-    from datagen.dataset.schema import write_features
+    from datagen.dataset.columns import write_features
 
     config = load_config(ROOT / "scenes/wingcam55-random.yaml")
     table = feature_table(config)
@@ -331,31 +333,32 @@ def test_a_rendered_builds_stages_add_up_to_its_frames_and_the_summary_names_the
 def test_a_stage_timed_inside_another_counts_for_the_inner_one_only() -> None:
     from datagen.render.timing import StageClock, rest_of_frame
 
-    clock = StageClock()
+    now = [0.0]
+    clock = StageClock(clock=lambda: now[0])
     with clock.stage("outer"):
-        time.sleep(0.01)
+        now[0] += 0.01
         with clock.stage("inner"):
-            time.sleep(0.15)
+            now[0] += 0.15
     with clock.stage("inner"):
-        time.sleep(0.05)
+        now[0] += 0.05
     with clock.stage("path tracing"):
         pass
     s = clock.seconds
     assert list(s) == ["inner", "outer", "path tracing"]  # in the order they ended
-    assert s["inner"] >= 0.2 and 0.01 <= s["outer"] < 0.15  # the outer stage without the inner one's 0.15 s
+    assert s["inner"] == pytest.approx(0.2) and s["outer"] == pytest.approx(0.01)  # without the inner 0.15 s
     assert [name for name, _ in rest_of_frame(s)] == ["inner", "outer"]
 
 
 def test_a_build_prints_its_estimate_first_and_the_model_grows_with_the_work(tmp_path: Path) -> None:
     import io
 
+    from datagen.console import ConsoleProgress
     from datagen.pipeline.estimate import frame_cost
-    from datagen.pipeline.progress import BuildProgress
 
     config = tiny_config(tmp_path)
     stream = io.StringIO()
     build_dataset(config, tmp_path / "ds", render=False,
-                  progress=BuildProgress("tiny", stream=stream, interval_s=1e9, live=False))
+                  progress=ConsoleProgress("tiny", stream=stream, interval_s=1e9, live=False))
     first = stream.getvalue().splitlines()[0]
     assert re.fullmatch(r"build tiny: estimate [0-9.]+ s a frame = [0-9,]+ frames/h on \d+ cores \(labels only\), "
                         r".* for 8 frames; measured rates follow", first), first

@@ -19,7 +19,7 @@ from datagen.analysis.predictions import Predictions
 from datagen.config import load_config, override_config
 from datagen.core.training import MATCH_PX
 from datagen.dataset.reader import load_dataset, open_dataset
-from datagen.pipeline.run import build_dataset
+from datagen.pipeline.build import build_dataset
 from tests.support import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from datagen.cli.reference import cli_reference, command_paths
-from datagen.config.reference import config_keys, config_reference, undocumented_fields
+from datagen.cli.command_reference import cli_reference, command_paths
+from datagen.config.key_reference import config_keys, config_reference, undocumented_fields
 
 ROOT = Path(__file__).resolve().parents[1]
 

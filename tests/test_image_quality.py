@@ -18,7 +18,7 @@ from datagen.analysis.image_quality import (
     speckles,
     ssim,
 )
-from datagen.assets.textures import cox_munk_roughness
+from datagen.assets.sea import cox_munk_roughness
 from datagen.config import load_config, override_config
 from datagen.core.conventions import frame_rng
 from datagen.scene.look import draw_look

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from datagen.assets.files import builtin_paths, load_mesh, mesh_hull
+from datagen.assets.loader import builtin_paths, load_mesh, mesh_hull
 from datagen.config import load_config
 from datagen.core.camera import Intrinsics, project_points
 from datagen.core.features import FeatureTable
@@ -25,7 +25,7 @@ from datagen.core.keypoints import (
     object_table,
     pose_rows,
 )
-from datagen.core.labels import Exclusion
+from datagen.core.label_boxes import Exclusion
 from datagen.core.transforms import make_transform
 from datagen.dataset.yolo import pose_lines
 from datagen.scene.resolved import Scene

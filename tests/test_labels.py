@@ -11,7 +11,7 @@ from hypothesis.extra.numpy import arrays
 
 from datagen.core.camera import Intrinsics
 from datagen.core.features import FeatureTable
-from datagen.core.labels import Exclusion, boxes_from_uv, compute_labels
+from datagen.core.label_boxes import Exclusion, boxes_from_uv, compute_labels
 from datagen.core.transforms import make_transform, rotation_from_ypr
 from datagen.dataset.yolo import YOLO_DECIMALS, yolo_lines
 

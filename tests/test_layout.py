@@ -1,6 +1,6 @@
 """The package layout keeps its promises: the pure stages import without Mitsuba or
 matplotlib, only ``datagen.render`` talks to Mitsuba, every file write goes through
-``datagen.files`` from the dataset writer and the report writers, no import sets
+``datagen.atomic`` from the dataset writer and the report writers, no import sets
 process-wide state, and conventions are used from their one place (the overlay's
 crosshair sits on the true centre)."""
 
@@ -62,7 +62,7 @@ def datagen_imports(tree: ast.Module) -> set[str]:
 
 
 def package_of(path_or_module: str) -> str:
-    """``dataset`` for ``dataset/reader.py`` or ``datagen.dataset.reader``; ``files`` for ``files.py``."""
+    """``dataset`` for ``dataset/reader.py`` or ``datagen.dataset.reader``; ``atomic`` for ``atomic.py``."""
     parts = (path_or_module.removeprefix("datagen.").split(".") if "/" not in path_or_module
              and not path_or_module.endswith(".py") else path_or_module.removesuffix(".py").split("/"))
     return parts[0]
@@ -71,8 +71,8 @@ def package_of(path_or_module: str) -> str:
 #: The packages from the bottom up: a package imports only packages of a lower rank (the
 #: build, ``pipeline``, and the reading commands, ``analysis``, share a rank and import neither
 #: the other); ``cli`` and the package's own ``__init__``/``__main__`` sit on top.
-RANKS = {"core": 0, "files": 1, "paths": 1, "parallel": 1, "config": 2, "dataset": 3, "assets": 4, "scene": 5,
-         "render": 6, "pipeline": 7, "analysis": 7, "report": 8, "cli": 9, "__init__": 10, "__main__": 10}
+RANKS = {"core": 0, "atomic": 1, "paths": 1, "parallel": 1, "console": 1, "config": 2, "dataset": 3, "assets": 4,
+         "scene": 5, "render": 6, "pipeline": 7, "analysis": 7, "report": 8, "cli": 9, "__init__": 10, "__main__": 10}
 
 
 def test_every_package_imports_only_packages_below_it() -> None:
@@ -93,7 +93,7 @@ def test_the_dataset_contract_imports_only_core_config_inputs_files_and_paths() 
     allowed = ("datagen.core.", "datagen.dataset.")
     offenders = {path: sorted(t for t in datagen_imports(tree)
                               if not t.startswith(allowed)
-                              and t not in ("datagen.config.inputs", "datagen.files", "datagen.paths"))
+                              and t not in ("datagen.config.inputs", "datagen.atomic", "datagen.paths"))
                  for path, tree in modules().items() if path.startswith("dataset/")}
     assert {p: o for p, o in offenders.items() if o} == {}
     assert len(offenders) >= 4
@@ -134,7 +134,7 @@ def test_the_module_import_graph_has_no_cycles() -> None:
 
 #: Calls that write a file (or create one), wherever they appear.
 WRITE_CALLS = {"write_text", "write_bytes", "savefig", "imwrite", "write_table", "write_to_dataset"}
-#: The functions of datagen.files that write.
+#: The functions of datagen.atomic that write.
 WRITERS = {"atomic_path", "write_bytes", "write_text", "write_parquet", "write_exr", "write_image", "write_figure",
            "scratch_file"}
 
@@ -161,17 +161,17 @@ def writes(tree: ast.Module) -> list[str]:
 
 
 def test_every_file_write_goes_through_one_module_called_by_the_writers() -> None:
-    """``datagen/files.py`` writes (and ``pipeline/folder.py`` creates the lock); the modules
+    """``datagen/atomic.py`` writes (and ``pipeline/folder.py`` creates the lock); the modules
     that call its writers are the dataset writer (``dataset/``, ``pipeline/``), the
     report writers (``report/``), the asset writer (``assets/generate.py``) and the audit's
     spill of values into a private temporary folder (``analysis/exact.py``)."""
     primitives = {path: found for path, tree in modules().items() if (found := writes(tree))}
-    assert set(primitives) == {"files.py", "pipeline/folder.py"}, primitives
+    assert set(primitives) == {"atomic.py", "pipeline/folder.py"}, primitives
     assert primitives["pipeline/folder.py"] == ["os.open"]  # the lock file
     callers = set()
     for path, tree in modules().items():
         for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom) and node.module == "datagen.files" and \
+            if isinstance(node, ast.ImportFrom) and node.module == "datagen.atomic" and \
                     {a.name for a in node.names} & WRITERS:
                 callers.add(path)
     allowed = {p for p in callers if p.startswith(("dataset/", "pipeline/", "report/"))} | {"assets/generate.py",
@@ -246,7 +246,7 @@ def test_a_drawn_crosshair_is_centred_on_its_continuous_point(u, v) -> None:
 
 
 def test_write_bytes_makes_its_folder_replaces_atomically_and_leaves_no_temporary(tmp_path) -> None:
-    from datagen.files import is_temporary, write_bytes, write_text
+    from datagen.atomic import is_temporary, write_bytes, write_text
 
     target = tmp_path / "a" / "b" / "labels.txt"
     assert write_text(target, "0 0.5 0.5 0.1 0.1\n") == target

@@ -11,13 +11,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from datagen.assets.clouds import CLOUD_CORE, CLOUD_CORE_TOLERANCE, CLOUD_EDGE, CloudLayer
 from datagen.assets.noise import FADE_HI, FADE_LO, NOISE_BOUND, NUMPY, FractalField, gradient_noise
-from datagen.assets.textures import (
-    CLOUD_CORE,
-    CLOUD_CORE_TOLERANCE,
-    CLOUD_EDGE,
+from datagen.assets.sea import (
     WAVE_SHARE_MAX,
-    CloudLayer,
     SeaWaves,
     cox_munk_roughness,
     cox_munk_slope_variance,
@@ -60,6 +57,7 @@ def test_a_field_far_away_keeps_only_the_octaves_a_pixel_can_hold() -> None:
     assert 0.0 < weight < 1.0
 
 
+@pytest.mark.render
 def test_a_kernel_series_sums_the_terms_before_each_lanes_stop_in_or_after_its_straight_line_rows(
         ) -> None:
     pytest.importorskip("mitsuba")
@@ -86,6 +84,7 @@ def test_a_kernel_series_sums_the_terms_before_each_lanes_stop_in_or_after_its_s
         assert (kernel != layer.field(x, y, footprint))[stops < UNROLLED].any()  # settled ones sum fewer terms
 
 
+@pytest.mark.render
 def test_the_kernel_evaluates_the_same_field_as_numpy() -> None:
     mi = pytest.importorskip("mitsuba")
     import drjit as dr
@@ -156,6 +155,7 @@ def test_a_lane_stops_asking_whether_cloud_covers_it_only_where_every_later_octa
     np.testing.assert_array_equal(layer.covers(x, y, footprint, u), answer)
 
 
+@pytest.mark.render
 def test_the_kernel_shades_the_same_opacity_as_numpy_and_the_core_within_its_tolerance_where_lanes_stop_early(
         ) -> None:
     pytest.importorskip("mitsuba")
@@ -211,10 +211,11 @@ def _cloud_masks():
     return mask_class(mi.variant())(opacity), theirs
 
 
+@pytest.mark.render
 def test_a_one_sided_emitters_texture_sums_no_term_behind_it_and_emits_the_same() -> None:
     mi = pytest.importorskip("mitsuba")
 
-    from datagen.assets.textures import CloudLayer
+    from datagen.assets.clouds import CloudLayer
     from datagen.render.procedural import texture_class
     from datagen.render.runtime import use_variant
 
@@ -236,6 +237,7 @@ def test_a_one_sided_emitters_texture_sums_no_term_behind_it_and_emits_the_same(
     assert (emitted[True][:, facing] > 0).any()  # (3, lanes): the front does emit
 
 
+@pytest.mark.render
 def test_the_cloud_mask_stops_and_passes_paths_and_shadows_exactly_as_mitsubas_mask_does() -> None:
     mi = pytest.importorskip("mitsuba")
     from datagen.render.runtime import use_variant
@@ -257,6 +259,7 @@ def test_the_cloud_mask_stops_and_passes_paths_and_shadows_exactly_as_mitsubas_m
     assert not np.asarray(ours.eval(ctx, si, mi.Vector3f(0, 0, 1))).any()
 
 
+@pytest.mark.render
 def test_the_cloud_mask_samples_under_the_scalar_variant_as_mitsubas_mask_does() -> None:
     mi = pytest.importorskip("mitsuba")
     from datagen.render.runtime import use_variant
@@ -316,6 +319,7 @@ def test_cloud_edges_have_no_preferred_direction() -> None:
     assert all(abs(s - 15.0 / 180.0) < 0.3 * 15.0 / 180.0 for s in shares), shares
 
 
+@pytest.mark.render
 def test_every_point_with_cloud_lies_in_a_cell_the_layer_keeps() -> None:
     pytest.importorskip("mitsuba")
     from datagen.render.runtime import use_variant
@@ -345,7 +349,7 @@ def test_opacity_ramps_over_the_edge_width_of_the_field() -> None:
 def test_the_texel_check_fails_each_frame_whose_world_texel_exceeds_the_limit() -> None:
     from types import SimpleNamespace
 
-    from datagen.analysis.audit.files import MAX_WORLD_TEXEL_PX, check_texels
+    from datagen.analysis.audit.dataset_files import MAX_WORLD_TEXEL_PX, check_texels
 
     rows = SimpleNamespace(world_texel_px=[0.2, None, MAX_WORLD_TEXEL_PX, 3.0], frame_id=np.arange(4),
                            manifest_file=["manifests/shard-00000.parquet"] * 4)
@@ -358,7 +362,7 @@ def test_the_texel_check_fails_each_frame_whose_world_texel_exceeds_the_limit() 
 
 
 def test_a_texel_spans_its_size_times_fx_over_the_nearest_depth_of_its_surface() -> None:
-    from datagen.assets.textures import LIVERY_TEXELS
+    from datagen.assets.liveries import LIVERY_TEXELS
     from datagen.config import load_config
     from datagen.core.conventions import object_id
     from datagen.render.world import SURFACES, World
@@ -420,6 +424,7 @@ def test_waves_a_pixel_cannot_hold_are_filtered_out_of_the_normals() -> None:
     assert power.sum() > 0 and beyond < 1e-3, beyond
 
 
+@pytest.mark.render
 def test_the_kernel_evaluates_the_same_sea_as_numpy() -> None:
     mi = pytest.importorskip("mitsuba")
     import drjit as dr

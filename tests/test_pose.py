@@ -21,7 +21,7 @@ from datagen.core.conventions import index_px, object_id
 from datagen.core.errors import DatagenError
 from datagen.core.keypoints import PoseLayout
 from datagen.dataset.reader import load_dataset
-from datagen.pipeline.run import build_dataset
+from datagen.pipeline.build import build_dataset
 from datagen.report.export import export_dataset, read_object_ids
 
 from .support import ROOT, comparable, run_cli, tiny_config

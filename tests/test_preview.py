@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from datagen.core.labels import Exclusion
+from datagen.core.label_boxes import Exclusion
 from datagen.dataset.reader import load_dataset
 from datagen.report.overlays import COLOURS, PANELS, draw_sheet
 
@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def wingcam(tmp_path_factory):
     """wingcam55 at its own 2048x1080, labels only (a black canvas under the drawing)."""
     from datagen.config import load_config, override_config
-    from datagen.pipeline.run import build_dataset
+    from datagen.pipeline.build import build_dataset
 
     tmp = tmp_path_factory.mktemp("preview")
     config = override_config(load_config(ROOT / "scenes" / "wingcam55.yaml"), {"dataset.frames": 240})

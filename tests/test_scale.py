@@ -7,7 +7,6 @@ from __future__ import annotations
 import io
 import json
 import shutil
-import time
 from pathlib import Path
 
 import numpy as np
@@ -18,10 +17,10 @@ import pytest
 from datagen.analysis.audit import audit
 from datagen.analysis.evaluate import Run, evaluate_runs
 from datagen.config import load_config, override_config
+from datagen.console import ConsoleProgress
 from datagen.dataset.reader import load_dataset, open_dataset
 from datagen.parallel import IN_FLIGHT_PER_WORKER, map_in_order
-from datagen.pipeline.progress import BuildProgress
-from datagen.pipeline.run import build_dataset
+from datagen.pipeline.build import build_dataset
 from datagen.report.audit_report import report_document
 
 from .support import run_cli, touch
@@ -145,7 +144,7 @@ def test_audit_and_evaluate_report_their_progress_in_frames(built) -> None:
     for verb, work in (("audit", lambda p: audit(open_dataset(built), progress=p)),
                        ("evaluate", lambda p: evaluate_runs(open_dataset(built), [Run()], progress=p))):
         stream = io.StringIO()
-        work(BuildProgress("ds", verb=verb, stream=stream, interval_s=0.0, live=False))
+        work(ConsoleProgress("ds", verb=verb, stream=stream, interval_s=0.0, live=False))
         lines = stream.getvalue().splitlines()
         assert lines[0] == f"{verb} ds: 600 frames, 0 already done"
         assert lines[-1].startswith(f"{verb} ds: 600/600 frames (100%)"), lines[-1]
@@ -174,13 +173,37 @@ def test_bulk_label_parsing_gives_what_parse_line_gives_line_by_line(lines) -> N
         assert (np.isnan(row).all() if expected is None else row.tolist() == expected)
 
 
-def test_map_in_order_keeps_only_a_few_tasks_ahead_of_the_results_taken(tmp_path) -> None:
+def test_map_in_order_submits_only_a_few_tasks_ahead_of_the_results_taken(monkeypatch) -> None:
     """Results are not piled up: while the caller holds the first result, at most
-    IN_FLIGHT_PER_WORKER tasks per worker (and the one it took) have started."""
-    results = map_in_order(touch, [(tmp_path, i) for i in range(40)], 2)
+    IN_FLIGHT_PER_WORKER tasks per worker (and the one that replaced it) were submitted.
+    Counted on a pool that records its submissions and runs them at once (no clock)."""
+    import concurrent.futures
+
+    submitted: list[int] = []
+
+    class RecordingPool:
+        def __init__(self, workers, mp_context=None) -> None:
+            assert workers == 2
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc) -> None:
+            return None
+
+        def submit(self, fn, *args) -> concurrent.futures.Future:
+            submitted.append(args[0])
+            done: concurrent.futures.Future = concurrent.futures.Future()
+            done.set_result(fn(*args))
+            return done
+
+    monkeypatch.setattr(concurrent.futures, "ProcessPoolExecutor", RecordingPool)
+    results = map_in_order(abs, [(-i,) for i in range(40)], 2)
     assert next(results) == 0
-    time.sleep(2.0)  # time for any task submitted ahead to start
-    started = len(list(tmp_path.iterdir()))
-    assert 1 <= started <= IN_FLIGHT_PER_WORKER * 2 + 1
-    assert list(results) == list(range(1, 40))
+    assert submitted == [-i for i in range(IN_FLIGHT_PER_WORKER * 2 + 1)]
+    assert list(results) == list(range(1, 40)) and len(submitted) == 40
+
+
+def test_map_in_order_yields_every_result_in_task_order_from_worker_processes(tmp_path) -> None:
+    assert list(map_in_order(touch, [(tmp_path, i) for i in range(40)], 2)) == list(range(40))
     assert len(list(tmp_path.iterdir())) == 40

@@ -55,7 +55,7 @@ def _noisy(device: bool, seed: int, iso: float = 400.0, n: int = 200_000) -> tup
     return levels, sensor_noise(rgb, iso, seed, device=device).reshape(len(levels), n)
 
 
-@pytest.mark.parametrize("device", [False, True], ids=["numpy", "device"])
+@pytest.mark.parametrize("device", [False, pytest.param(True, marks=pytest.mark.render)], ids=["numpy", "device"])
 def test_sensor_noise_has_the_models_mean_and_variance_at_every_level(device) -> None:
     from datagen.render.sensor import noise_sigma
 
@@ -66,6 +66,7 @@ def test_sensor_noise_has_the_models_mean_and_variance_at_every_level(device) ->
     np.testing.assert_allclose(noisy.var(axis=1), sigma**2, rtol=5 * np.sqrt(2 / n))
 
 
+@pytest.mark.render
 def test_device_noise_is_gaussian_and_independent_from_pixel_to_pixel() -> None:
     _, noisy = _noisy(True, seed=99)
     z = (noisy - noisy.mean(axis=1, keepdims=True)) / noisy.std(axis=1, keepdims=True)
@@ -75,6 +76,7 @@ def test_device_noise_is_gaussian_and_independent_from_pixel_to_pixel() -> None:
     assert np.all(np.abs((z[:, 4:] * z[:, :-4]).mean(axis=1)) < 0.012)  # and channels of a pixel's neighbour
 
 
+@pytest.mark.render
 def test_device_noise_is_the_same_for_a_seed_and_another_for_another() -> None:
     _, a = _noisy(True, seed=7, n=4_000)
     _, b = _noisy(True, seed=7, n=4_000)
@@ -91,6 +93,7 @@ def _llvm() -> None:
     use_variant("llvm_ad_rgb")
 
 
+@pytest.mark.render
 @pytest.mark.parametrize(("shift", "spread"), [((0.3, 0.1), 0.0), ((2.5, -1.5), 1.0), ((7.0, 3.0), 4.0),
                                                ((-40.0, 25.0), 30.0), ((1e4, 0.0), 0.0)],
                          ids=["short", "mixed", "long", "past-the-border", "past-the-diagonal"])
@@ -116,6 +119,7 @@ def test_motion_blur_on_the_device_is_opencvs_remap_average(shift, spread, strid
     np.testing.assert_allclose(dev, cpu, atol=2e-3 * rgb.max())  # OpenCV rounds positions to 1/32 px
 
 
+@pytest.mark.render
 def test_motion_blur_on_the_device_keeps_the_light_and_blurs_along_the_motion_only() -> None:
     """A vertical line moved 6 px sideways during the exposure becomes a 6 px wide band of
     the same total light; a horizontal line moved the same way stays sharp."""
@@ -133,6 +137,7 @@ def test_motion_blur_on_the_device_keeps_the_light_and_blurs_along_the_motion_on
     np.testing.assert_allclose(moved[20, 10:50, 0], 1.0, atol=1e-6)
 
 
+@pytest.mark.render
 def test_the_warm_up_compiles_the_kernel_a_frames_motion_blur_runs() -> None:
     """A worker whose first frames stand still compiles the blur's kernel at warm-up, not
     frames later: a full-size blur afterwards launches no kernel the warm-up did not."""

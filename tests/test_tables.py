@@ -13,7 +13,7 @@ import pytest
 
 from datagen.config import load_config, override_config
 from datagen.dataset.reader import load_dataset
-from datagen.pipeline.run import build_dataset
+from datagen.pipeline.build import build_dataset
 
 from .support import ROOT
 

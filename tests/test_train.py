@@ -22,9 +22,9 @@ from datagen.analysis.audit import audit
 from datagen.config import load_config, override_config
 from datagen.dataset.layout import Layout
 from datagen.dataset.reader import load_dataset
+from datagen.pipeline.build import build_dataset
 from datagen.pipeline.metadata import write_placeholder_images
 from datagen.pipeline.plan import dataset_layout, plan_shards
-from datagen.pipeline.run import build_dataset
 
 pytestmark = pytest.mark.train
 pytest.importorskip("ultralytics", reason="needs the train extra: pip install -e '.[train]'")

@@ -279,7 +279,7 @@ def test_motion_longer_than_the_image_blurs_as_motion_across_its_diagonal() -> N
 
 # --- frames that show nothing ----------------------------------------------------------------------------------------
 def test_blank_boxes_tell_saturated_black_flat_and_showing_apart() -> None:
-    from datagen.core.content import BLANK_REASONS, blank_boxes
+    from datagen.core.box_content import BLANK_REASONS, blank_boxes
 
     image = np.zeros((20, 40, 3), np.uint8)
     image[:, :10] = 255
@@ -370,7 +370,7 @@ def test_a_split_that_is_a_path_is_refused_before_anything_is_written(ds, tmp_pa
 
 @pytest.mark.parametrize("kind", ["link", "fifo"])
 def test_a_file_in_the_temporarys_place_is_neither_written_through_nor_waited_on(tmp_path, kind) -> None:
-    from datagen.files import write_bytes, write_parquet
+    from datagen.atomic import write_bytes, write_parquet
 
     victim = tmp_path / "victim"
     victim.write_text("the user's own")

@@ -30,7 +30,7 @@ def build_and_audit(root: Path) -> str:
     return f"""
 import pyarrow
 from datagen.config import load_config, override_config
-from datagen.pipeline.run import build_dataset
+from datagen.pipeline.build import build_dataset
 from datagen.dataset.reader import open_dataset
 from datagen.analysis.audit import audit
 cfg = override_config(load_config("wingcam55"), {{"dataset.frames": 12, "dataset.shard_size": 4}})

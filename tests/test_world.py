@@ -15,9 +15,9 @@ from datagen.analysis.audit import audit
 from datagen.analysis.evaluate import evaluate
 from datagen.config import load_config, override_config
 from datagen.config.schema import WORLD_RANDOMIZERS, world_off
+from datagen.dataset.columns import APPEARANCE, MEASURED_COLUMNS
 from datagen.dataset.reader import load_dataset
-from datagen.dataset.schema import APPEARANCE, MEASURED_COLUMNS
-from datagen.pipeline.run import build_dataset
+from datagen.pipeline.build import build_dataset
 from datagen.scene.approach import FrameStates
 from datagen.scene.look import FrameLook, frame_look
 
@@ -185,6 +185,7 @@ def test_looks_drawn_with_a_shared_approach_dict_equal_looks_drawn_alone() -> No
 
 
 # --- light through the cloud layers ---------------------------------------------------------
+@pytest.mark.render
 def test_sunlight_through_cloud_edges_makes_no_fireflies() -> None:
     """Three wingcam55 frames over a broken cloud deck (every randomizer on, sensor and
     denoiser off, 512x270, 128 spp): with shadow rays that stop at a cloud's mask (Mitsuba's
@@ -213,6 +214,7 @@ def test_sunlight_through_cloud_edges_makes_no_fireflies() -> None:
     assert cloudless.world.integrator == "path"  # no null surfaces: the scene renders as before
 
 
+@pytest.mark.render
 def test_the_seas_waves_bring_no_fireflies_back() -> None:
     """Three wingcam55 frames over a sea with wave normals (the randomizers on, clouds,
     camera model and denoiser off, 512x270, 64 spp, suns 15-70 degrees high): at most a

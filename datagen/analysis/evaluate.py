@@ -31,12 +31,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.analysis.predictions import Predictions
+from datagen.console import NullProgress, Progress
 from datagen.core.camera import Intrinsics
 from datagen.core.conventions import evaluation_rng
 from datagen.core.errors import DatagenError
 from datagen.core.transforms import invert_rigid
 from datagen.dataset.reader import DatasetIndex, DatasetMeta, DatasetSource, DatasetView
-from datagen.parallel import NullProgress, map_in_order
+from datagen.parallel import map_in_order
 
 __all__ = [
     "PnPSettings",
@@ -418,7 +419,7 @@ def _blocks(index: DatasetIndex | DatasetView, attempted: NDArray[np.int64], n: 
 
 def evaluate_runs(dataset: DatasetView | DatasetSource, runs: list[Run], *, seed: int | None = None,
                   settings: PnPSettings = PnPSettings(), split: str | None = None, workers: int = 1,
-                  progress=None, index: DatasetIndex | None = None) -> list[dict]:
+                  progress: Progress | None = None, index: DatasetIndex | None = None) -> list[dict]:
     """PtD vectors of every frame (frame order) for each run's 2D points, in one pass over
     the dataset: a loaded view, or an opened source read shard by shard as the frames in
     frame order reach them (one shard per split held at a time). With ``workers`` > 1 the

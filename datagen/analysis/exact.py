@@ -28,7 +28,7 @@ from typing import BinaryIO, Final, Self
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.files import scratch_file
+from datagen.atomic import scratch_file
 
 __all__ = [
     "PAIRWISE_BLOCK",

@@ -20,14 +20,14 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from datagen.assets.files import BUILTIN_DIR, FEATURE_FORMAT, Feature, ObjectMesh, builtin_paths
+from datagen.assets.loader import BUILTIN_DIR, FEATURE_FORMAT, Feature, ObjectMesh, builtin_paths
 from datagen.assets.models import FeatureAnchor, Model
 from datagen.assets.models.drogue import build_drogue
 from datagen.assets.models.receiver import build_receiver
 from datagen.assets.models.tanker import build_tanker
+from datagen.atomic import write_bytes
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.features import SIZE_SCALE, STORED_VARIANTS
-from datagen.files import write_bytes
 
 __all__ = [
     "RING_POINTS",

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from datagen.assets.files import (
+from datagen.assets.loader import (
     Feature,
     ObjectMesh,
     builtin_paths,

@@ -22,8 +22,8 @@ def assets_build(
                                              help="Assets folder (default: the built-in one).")] = None,
 ) -> None:
     """Regenerate every built-in mesh and feature file, byte for byte."""
-    from datagen.assets.files import BUILTIN_DIR
     from datagen.assets.generate import write_assets
+    from datagen.assets.loader import BUILTIN_DIR
 
     for path, size in write_assets(output_path(out, "--out") if out else BUILTIN_DIR).items():
         typer.echo(f"wrote {path} ({size:,} bytes)")
@@ -51,7 +51,7 @@ def assets_show(
                                        "(as features.random_per_object).")] = 40,
 ) -> None:
     """Print the feature table of an object."""
-    from datagen.assets.files import builtin_paths
+    from datagen.assets.loader import builtin_paths
     from datagen.assets.table import describe_features, load_object_features, object_paths
 
     name = _object_name(name)
@@ -81,7 +81,7 @@ def assets_preview(
                                                 help="Use this config's mesh and feature files.")] = None,
 ) -> None:
     """Render a contact sheet of each object from six views, feature centres marked."""
-    from datagen.assets.files import builtin_paths, load_features, load_mesh
+    from datagen.assets.loader import builtin_paths, load_features, load_mesh
     from datagen.assets.table import object_paths
     from datagen.report.contact_sheets import write_contact_sheet
 

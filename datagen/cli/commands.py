@@ -143,8 +143,8 @@ def build(
 
     Rerunning the same command after an interruption finishes the missing shards."""
     from datagen.config import override_config
-    from datagen.pipeline.progress import BuildProgress
-    from datagen.pipeline.run import build_dataset
+    from datagen.console import ConsoleProgress
+    from datagen.pipeline.build import build_dataset
 
     if executor not in ("local", "ray"):
         raise DatagenError(f"--executor: unknown executor {executor!r} (choose local or ray)")
@@ -158,7 +158,7 @@ def build(
     cfg = override_config(cfg, {k: v for k, v in updates.items() if v is not None})
     out = out if out is not None else output_path(Path("datasets") / cfg.name, "--out")
     report = build_dataset(cfg, out, workers=workers, executor=executor, overwrite=overwrite,
-                           render=not no_render, progress=BuildProgress(cfg.name), threads=threads)
+                           render=not no_render, progress=ConsoleProgress(cfg.name), threads=threads)
     for line in report.lines():
         typer.echo(line)
     if report.interrupted:
@@ -182,9 +182,9 @@ def audit(
     report.json, plots and report.html. Exit 1 when a check fails."""
     from datagen.analysis.audit import audit as run_audit
     from datagen.analysis.audit.frames import frames_to_draw
+    from datagen.console import ConsoleProgress
     from datagen.dataset.reader import open_dataset
     from datagen.paths import report_folder
-    from datagen.pipeline.progress import BuildProgress
     from datagen.report.audit_report import write_report
 
     folder = report_folder(output_path(out if out is not None else Path(dataset) / "audit", "--out"), dataset,
@@ -192,7 +192,7 @@ def audit(
     source = open_dataset(dataset)
     index = source.index()
     result = run_audit(source, min_learnable=min_learnable, workers=workers, index=index,
-                       progress=BuildProgress(source.root.name, verb="audit", announce=False))
+                       progress=ConsoleProgress(source.root.name, verb="audit", announce=False))
     written = write_report(result, source, folder, frames=frames_to_draw(source, overlays, index))
     for check in result.checks:
         status = "n/a " if not check.applicable else ("pass" if check.passed else "FAIL")
@@ -282,9 +282,9 @@ def evaluate(
         summarize,
     )
     from datagen.analysis.predictions import parse_predictions
+    from datagen.console import ConsoleProgress
     from datagen.dataset.reader import open_dataset
     from datagen.paths import report_folder
-    from datagen.pipeline.progress import BuildProgress
     from datagen.report.evaluation_report import write_evaluation
 
     if split not in (None, "all", "train", "val"):
@@ -294,7 +294,7 @@ def evaluate(
     source = open_dataset(dataset)
     index = source.index(allow_duplicates=False)
     require_plan(index, partial, split if split in ("train", "val") else None)
-    progress = BuildProgress(source.root.name, verb="evaluate", announce=False)
+    progress = ConsoleProgress(source.root.name, verb="evaluate", announce=False)
     if predictions is not None:
         k = source.intrinsics
         pose = source.pose_layout if source.pose_yaml is not None else None

@@ -36,8 +36,8 @@ from datagen.core.camera import (
 from datagen.core.conventions import CAMERA_MOUNTS, RIGID_OBJECTS
 from datagen.core.features import FEATURE_VARIANTS
 from datagen.core.keypoints import TruncatedObjects
-from datagen.core.labelling import RULE_BOUNDS, LabelFormat, LabelRules
-from datagen.core.labels import SmallBoxes
+from datagen.core.label_boxes import SmallBoxes
+from datagen.core.labelling_context import RULE_BOUNDS, LabelFormat, LabelRules
 
 __all__ = [
     "WORLD_RANDOMIZERS",
@@ -429,11 +429,11 @@ class SeaConfig(_Section):
 
     ``cox_munk`` (default) draws a wind speed and derives the microfacet roughness from
     Cox and Munk's (1954) sun-glint measurements of the open sea: the mean square wave
-    slope is 0.003 + 5.12e-3 W for a wind of W m/s (:func:`datagen.assets.textures.cox_munk_roughness`).
+    slope is 0.003 + 5.12e-3 W for a wind of W m/s (:func:`datagen.assets.sea.cox_munk_roughness`).
     ``uniform`` draws the roughness itself from ``roughness``; its default (0.05-0.25, a
-    mirror-calm sea no wind gives) is what datagen drew before: a glossy sea reflects the
-    sun onto the aircraft as a caustic the path tracer samples as fireflies that no spp
-    count removes (measured in ``bench/bench_quality.py``)."""
+    mirror-calm sea no wind gives) is glossier than any wind leaves the sea: it reflects
+    the sun onto the aircraft as a caustic the path tracer samples as fireflies that no
+    spp count removes (``bench/bench_quality.py`` counts them)."""
 
     model: Literal["cox_munk", "uniform"] = "cox_munk"
     """How the roughness is drawn: from a wind speed (Cox-Munk) or uniformly."""
@@ -461,7 +461,7 @@ class SeaConfig(_Section):
     """Draw the sea's body colour (deep blue to blue-green); off: one dark blue."""
 
 
-#: Livery schemes :mod:`datagen.assets.textures` paints.
+#: Livery schemes :mod:`datagen.assets.liveries` paints.
 LiveryScheme = Literal["grey_camouflage", "two_tone", "high_visibility", "bare_metal"]
 
 
@@ -662,7 +662,7 @@ class RenderConfig(_Section):
 
 # --- labels --------------------------------------------------------------------
 def _rule(default: float, key: str):
-    """A label rule's field, bounded as :data:`datagen.core.labelling.RULE_BOUNDS` says."""
+    """A label rule's field, bounded as :data:`datagen.core.labelling_context.RULE_BOUNDS` says."""
     lo, hi = RULE_BOUNDS[key]
     return Field(default, ge=lo, le=hi)
 
@@ -722,7 +722,7 @@ class LabelsConfig(_Section):
         return self
 
     def rules(self) -> LabelRules:
-        """This section as the labelling reads it (:class:`datagen.core.labelling.LabelRules`)."""
+        """This section as the labelling reads it (:class:`datagen.core.labelling_context.LabelRules`)."""
         return LabelRules(**self.model_dump())
 
 

@@ -76,7 +76,12 @@ class Intrinsics:
 
     @classmethod
     def from_hfov(cls, width: int, height: int, hfov_rad: float) -> Intrinsics:
-        """Table 1's camera: square pixels, principal point at the image centre."""
+        """Table 1's camera: square pixels, principal point at the image centre.
+
+        >>> k = Intrinsics.from_hfov(2048, 1080, math.pi / 2)
+        >>> k.cx, k.cy, round(k.fx, 9), round(math.degrees(k.vfov_rad), 3)
+        (1024.0, 540.0, 1024.0, 55.609)
+        """
         if width <= 0 or height <= 0:
             raise ValueError(f"image size must be positive, got {width}x{height}")
         if not 0.0 < hfov_rad < math.pi:
@@ -159,6 +164,13 @@ def project_points(points_cam: ArrayLike, intrinsics: Intrinsics) -> FloatArray:
     Points at or behind the camera plane (``z <= NEAR_PLANE_M``) project to NaN:
     callers that need them flagged use :func:`in_front`; NaN can never pass a
     box-inside-image test, so such points can never produce a label.
+
+    On the optical axis, 1 m right of it and 0.5 m above it (OpenCV camera: x right, y
+    down, z forward) at 10 m, and behind the camera, with a 90-degree lens:
+
+    >>> k = Intrinsics.from_hfov_deg(2048, 1080, 90.0)
+    >>> project_points([[0.0, 0.0, 10.0], [1.0, -0.5, 10.0], [0.0, 0.0, -1.0]], k).round(6).tolist()
+    [[1024.0, 540.0], [1126.4, 488.8], [nan, nan]]
     """
     points_cam = np.asarray(points_cam, dtype=np.float64)
     u, v = project_xyz(points_cam[..., 0], points_cam[..., 1], points_cam[..., 2], intrinsics)

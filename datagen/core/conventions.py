@@ -168,7 +168,11 @@ def index_px(uv_px):
     """Continuous pixel coordinates ``uv_px`` (``(..., 2)``, or any array of u or v values)
     in the pixel-index convention, where integer coordinates are pixel centres: half a
     pixel up and left. OpenCV's drawing grid, COCO keypoints and the camera matrices of the
-    BOP format use it."""
+    BOP format use it.
+
+    >>> index_px([0.5, 2047.5]).tolist()  # the first and last pixel centres of a 2048-pixel row
+    [0.0, 2047.0]
+    """
     return np.asarray(uv_px, dtype=np.float64) - 0.5
 
 
@@ -179,7 +183,12 @@ def drawing_px(uv_px):
 
 def pixel_centre(index):
     """The continuous coordinate of the centre of pixel ``index`` (any array of column or
-    row indices, its dtype kept): ``index + 0.5``."""
+    row indices, its dtype kept): ``index + 0.5``. The image's centre ``W / 2`` is the
+    corner shared by its middle pixels.
+
+    >>> pixel_centre(0), pixel_centre(np.arange(1023, 1025)).tolist()
+    (0.5, [1023.5, 1024.5])
+    """
     return index + 0.5
 
 

@@ -41,7 +41,7 @@ class FeatureTable:
         class_id: ``(F,)`` int64, the YOLO class of each feature.
         name: ``F`` feature names.
         objects: the distinct objects the features belong to; the columns of
-            the ``cam_from_objects`` argument of :func:`datagen.core.labels.compute_labels`.
+            the ``cam_from_objects`` argument of :func:`datagen.core.label_boxes.compute_labels`.
         object_index: ``(F,)`` index into ``objects`` of each feature's object.
         points_model: ``(F, P, 3)`` point sets in their object's frame, padded
             to ``P = max(n_points)`` by repeating each set's first point.
@@ -124,7 +124,7 @@ class FeatureTable:
     def points_and_center_by_axis(self) -> tuple[NDArray[np.float64], ...]:
         """x, y, z arrays ``(F, P + 1)``: each feature's points, then its centre.
 
-        The layout :func:`datagen.core.labels.compute_labels` transforms in one pass.
+        The layout :func:`datagen.core.label_boxes.compute_labels` transforms in one pass.
         """
         both = np.concatenate([self.points_model, self.center_model[:, None, :]], axis=1)
         axes = tuple(np.ascontiguousarray(both[..., i]) for i in range(3))

@@ -8,7 +8,7 @@ A pose instance is one *object* (its class is the object's index in
   perspective projection maps the hull onto the hull of its projected vertices, so their
   min/max is exactly the box of the whole projected mesh (through a lens distortion, the box
   of the distorted hull vertices). The box then follows the feature boxes' rules
-  (:mod:`datagen.core.labels`, uncorrected: its centre is the box's own), widened to
+  (:mod:`datagen.core.label_boxes`, uncorrected: its centre is the box's own), widened to
   ``labels.min_box_px`` at the training size, and the object is excluded when a hull vertex is
   behind the camera or the box fails the edge rule (``off_frame``, ``edge_margin``). With
   ``labels.truncated_objects: clip`` such an object is kept when part of it is in view: its
@@ -47,7 +47,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from datagen.core.camera import Intrinsics, project_xyz
 from datagen.core.features import FeatureTable
-from datagen.core.labels import Exclusion, FrameLabels, compute_labels
+from datagen.core.label_boxes import Exclusion, FrameLabels, compute_labels
 
 __all__ = [
     "CLIP_DEPTH_M",
@@ -208,7 +208,7 @@ def keypoint_flags(exclusion: ArrayLike, center_visible: ArrayLike | None = None
 
 def object_table(objects: tuple[str, ...], hulls: dict[str, NDArray[np.float64]]) -> FeatureTable:
     """The objects' convex-hull vertices as a :class:`FeatureTable` (one 'feature' per object,
-    in the order of ``objects``), so that :func:`datagen.core.labels.compute_labels` with
+    in the order of ``objects``), so that :func:`datagen.core.label_boxes.compute_labels` with
     ``corrected=False`` gives each object's box, size rule and exclusion."""
     return FeatureTable.from_point_sets([hulls[o] for o in objects], objects=list(objects),
                                         names=list(objects), sizes=["object"] * len(objects))
@@ -241,7 +241,7 @@ def pose_rows(objects: FrameLabels, keypoints_px: ArrayLike, flags: ArrayLike, l
 def object_boxes(table: FeatureTable, cam_from_objects: ArrayLike, intrinsics: Intrinsics, *, options: dict,
                  distortion: ArrayLike | None = None, truncated: TruncatedObjects = "exclude") -> FrameLabels:
     """Each object's pose box over any batch of frames (:func:`object_table` rows; ``options``:
-    the keyword arguments of :func:`~datagen.core.labels.compute_labels`, whose ``corrected``
+    the keyword arguments of :func:`~datagen.core.label_boxes.compute_labels`, whose ``corrected``
     is ignored). ``truncated="clip"`` keeps an object cut by the image border or the camera
     plane with the box of its in-view part (module docstring)."""
     cam_from_objects = np.asarray(cam_from_objects, dtype=np.float64)

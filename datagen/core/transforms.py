@@ -52,7 +52,19 @@ def invert_rigid(b_from_a: ArrayLike) -> FloatArray:
 
 
 def apply_transform(b_from_a: ArrayLike, points_a: ArrayLike) -> FloatArray:
-    """Points ``(..., N, 3)`` in frame ``a`` mapped to frame ``b`` by ``(..., 4, 4)``."""
+    """Points ``(..., N, 3)`` in frame ``a`` mapped to frame ``b`` by ``(..., 4, 4)``.
+
+    A drogue 20 m ahead of the receiver (body x forward), the receiver 100 m along the
+    world's x axis and yawed 90 degrees to its left (z up: its nose along the world's y);
+    :func:`invert_rigid` maps back:
+
+    >>> world_from_receiver = make_transform(rotation_from_ypr(np.pi / 2, 0.0, 0.0), [100.0, 0.0, 0.0])
+    >>> drogue_world = apply_transform(world_from_receiver, [[20.0, 0.0, 0.0]])
+    >>> drogue_world.round(9).tolist()
+    [[100.0, 20.0, 0.0]]
+    >>> apply_transform(invert_rigid(world_from_receiver), drogue_world).round(9).tolist()
+    [[20.0, 0.0, 0.0]]
+    """
     b_from_a = np.asarray(b_from_a, dtype=np.float64)
     points_a = np.asarray(points_a, dtype=np.float64)
     rot = b_from_a[..., :3, :3]

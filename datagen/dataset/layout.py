@@ -11,7 +11,7 @@ the last ``/images/`` replaced by ``/labels/`` and the extension by ``.txt``)::
     pose/images -> ../images                       with labels.format 'both': the pose set beside
     pose/labels/{split}/{shard:05d}/{frame:08d}.txt  the detect set (a relative link to the images)
     exr/{split}/{shard:05d}/{frame:08d}.exr        linear R, G, B, Z, object_id (with --exr)
-    manifests/{split}-{shard:05d}.parquet          one row per frame (datagen.dataset.schema)
+    manifests/{split}-{shard:05d}.parquet          one row per frame (datagen.dataset.columns)
     .datagen.lock                                  held by the build that writes the folder
 
 Each split's frames, in frame order, are cut into shards (the build's plan:

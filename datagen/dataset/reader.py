@@ -26,10 +26,9 @@ from datagen.core.camera import FOCAL_BOUNDS_PX, MAX_IMAGE_PX, Intrinsics
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import DatagenError
 from datagen.core.features import FeatureTable
-from datagen.core.labelling import Labelled, LabellingContext, LabelRules
-from datagen.core.labels import FrameLabels
-from datagen.dataset.layout import MANIFEST_NAME, SPLITS
-from datagen.dataset.schema import (
+from datagen.core.label_boxes import FrameLabels
+from datagen.core.labelling_context import Labelled, LabellingContext, LabelRules
+from datagen.dataset.columns import (
     APPEARANCE,
     FILE_COLUMNS,
     READABLE_MANIFEST_VERSIONS,
@@ -38,6 +37,7 @@ from datagen.dataset.schema import (
     read_objects,
     stored_schema,
 )
+from datagen.dataset.layout import MANIFEST_NAME, SPLITS
 from datagen.paths import NOT_INSIDE, DatasetFolder, named_inside
 
 __all__ = ["DatasetIndex", "DatasetMeta", "DatasetSource", "DatasetView", "image_size", "load_dataset", "open_dataset",
@@ -46,16 +46,15 @@ __all__ = ["DatasetIndex", "DatasetMeta", "DatasetSource", "DatasetView", "image
 
 @dataclass(frozen=True, eq=False)
 class DatasetMeta(Labelled):
-    """What every frame of a dataset shares: dataset.json, the data.yaml files, the feature
-    table, the intrinsics and the object hulls."""
+    """What every frame of a dataset shares: dataset.json, the data.yaml files, and what
+    labelled its frames (the feature table, the intrinsics, the object hulls and the label
+    rules, read by name through :class:`~datagen.core.labelling_context.Labelled`)."""
 
     root: Path
     doc: dict  # dataset.json
     data_yaml: dict  # the root's data.yaml: the detect set's, or the pose set's in a pose-only dataset
     pose_yaml: dict | None  # the pose set's data.yaml (pose/data.yaml with labels.format 'both')
-    features: FeatureTable
-    intrinsics: Intrinsics
-    hulls: dict[str, NDArray[np.float64]]  # objects.parquet: labeled object -> hull vertices (H, 3)
+    labelling: LabellingContext  # the build's own context, rebuilt from features.parquet, objects.parquet, dataset.json
 
     @property
     def corrected(self) -> bool:
@@ -70,13 +69,6 @@ class DatasetMeta(Labelled):
     @property
     def edge_margin_px(self) -> float:
         return float(self.doc["edge_margin_px"])
-
-    @functools.cached_property
-    def labelling(self) -> LabellingContext:
-        """What labelled the dataset's frames: its features, camera, hulls and the ``labels``
-        section of the config it was built with (the build's own context, rebuilt)."""
-        return LabellingContext(self.features, self.intrinsics, self.hulls,
-                                LabelRules.from_mapping(self.doc["config"]["labels"]))
 
     @property
     def label_format(self) -> str:
@@ -380,8 +372,9 @@ def open_dataset(root: str | Path) -> DatasetSource:
     k = doc["intrinsics"]
     intrinsics = Intrinsics(doc["image_width"], doc["image_height"], float(k["fx"]), float(k["fy"]),
                             float(k["cx"]), float(k["cy"]))
-    return DatasetSource(root=root, doc=doc, data_yaml=data_yaml, pose_yaml=pose_yaml, features=features,
-                         intrinsics=intrinsics, hulls=hulls, manifests=_manifest_names(folder))
+    return DatasetSource(root=root, doc=doc, data_yaml=data_yaml, pose_yaml=pose_yaml,
+                         labelling=LabellingContext(features, intrinsics, hulls, rules),
+                         manifests=_manifest_names(folder))
 
 
 def _read_tables(root: Path) -> tuple[FeatureTable, dict[str, NDArray[np.float64]]]:
@@ -421,7 +414,7 @@ def _manifest_names(folder: DatasetFolder) -> tuple[str, ...]:
 
 
 def _read_manifest(path: Path, columns: tuple[str, ...] | None = None) -> pa.Table:
-    """A manifest checked against :func:`datagen.dataset.schema.manifest_schema` (its
+    """A manifest checked against :func:`datagen.dataset.columns.manifest_schema` (its
     ``columns``, or all)."""
     expected = manifest_schema()
     if columns is not None:
@@ -489,9 +482,7 @@ def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, al
         doc=meta.doc,
         data_yaml=meta.data_yaml,
         pose_yaml=meta.pose_yaml,
-        features=features,
-        intrinsics=meta.intrinsics,
-        hulls=meta.hulls,
+        labelling=meta.labelling,
         manifest_file=names,
         frame_id=np.asarray(table.column("frame_id"), dtype=np.int64),
         split=table.column("split").to_pylist(),

@@ -17,7 +17,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import ArrayLike
 
-from datagen.core.labels import FrameLabels
+from datagen.core.label_boxes import FrameLabels
 
 __all__ = ["YOLO_DECIMALS", "parse_line", "pose_lines", "yolo_lines"]
 

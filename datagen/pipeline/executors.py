@@ -1,9 +1,10 @@
 """Executors: shards in parallel in local processes or as Ray tasks, and each worker's
 process setup.
 
-``local`` runs shards in spawned processes (one scene and one Mitsuba thread pool
-of ``cores / workers`` threads each; one worker runs in the build's own process);
-``ray`` runs them as Ray tasks on the cluster at ``RAY_ADDRESS``, else a local one.
+Each executor is a row of :data:`EXECUTORS` (:class:`ExecutorKind`): ``local`` runs shards
+in spawned processes (one scene and one Mitsuba thread pool of ``cores / workers`` threads
+each; one worker runs in the build's own process); ``ray`` runs them as Ray tasks on the
+cluster at ``RAY_ADDRESS``, else a local one.
 A worker process is set up in one place, :func:`_bootstrap`: signals, dying with
 its parent, Mitsuba's thread count, and its :class:`~datagen.pipeline.writer.ShardWriter`
 (one scene per process, reused by every shard it runs). Labels and manifest rows
@@ -17,20 +18,22 @@ import os
 import signal
 import time
 from collections.abc import Callable
-from pathlib import Path
-from typing import Final, Literal
+from contextlib import AbstractContextManager
+from dataclasses import dataclass
+from typing import Final, Literal, Protocol
 
 from datagen.core.errors import DatagenError
-from datagen.dataset.layout import ShardJob
+from datagen.dataset.layout import Layout, ShardJob
 from datagen.parallel import cpu_count
+from datagen.pipeline.estimate import auto_workers
 from datagen.pipeline.progress import ShardSummary
-from datagen.pipeline.writer import ShardWriter, shard_groups
+from datagen.pipeline.writer import FramesDone, ShardWriter, shard_groups
 from datagen.scene.resolved import Scene
 
-__all__ = ["Executor", "ctrl_c_flag", "local_threads", "ray_cluster", "run_local", "run_ray"]
+__all__ = ["EXECUTORS", "Executor", "ExecutorKind", "ShardRunner", "ctrl_c_flag", "local_threads", "ray_cluster",
+           "run_local", "run_ray"]
 
 Executor = Literal["local", "ray"]
-Progress = Callable[[int], None]
 
 
 
@@ -44,11 +47,11 @@ class _Worker:
     args: tuple = ()
 
 
-def _writer(scene: Scene, root: str, threads: int, render: bool) -> ShardWriter:
-    """This process's writer for (scene, root): built once, reused by every shard."""
-    key = (id(scene), scene.config.model_dump_json(), root, render)
+def _writer(scene: Scene, layout: Layout, threads: int, render: bool) -> ShardWriter:
+    """This process's writer for (scene, layout): built once, reused by every shard."""
+    key = (id(scene), scene.config.model_dump_json(), layout, render)
     if _Worker.writer is None or _Worker.key != key:
-        _Worker.writer, _Worker.key = ShardWriter(scene, Path(root), render=render), key
+        _Worker.writer, _Worker.key = ShardWriter(scene, layout, render=render), key
     if render:
         from datagen.render.runtime import set_threads
 
@@ -66,12 +69,12 @@ def _die_with_parent() -> None:
         libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
 
 
-def _bootstrap(scene: Scene, root: str, threads: int, render: bool, queue) -> None:
+def _bootstrap(scene: Scene, layout: Layout, threads: int, render: bool, queue) -> None:
     """The entry point of a local worker process: everything process-wide is set here."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and terminates us
     _die_with_parent()
     _Worker.queue = queue
-    _Worker.args = (scene, root, threads, render)
+    _Worker.args = (scene, layout, threads, render)
 
 
 #: A worker sends its frame count to the parent at most this often (and after each shard).
@@ -80,28 +83,30 @@ PROGRESS_EVERY_S: Final = 0.25
 
 class _Counts:
     """A worker's progress callback: frames added up and sent on by ``send`` at most every
-    :data:`PROGRESS_EVERY_S` (a message per frame cost the parent of a labels-only build
-    a core's share of time, 100,000 queue reads)."""
+    :data:`PROGRESS_EVERY_S` of ``clock`` (a message per frame would take the parent of a
+    labels-only build a core's share of time in queue reads)."""
 
-    def __init__(self, send: Callable[[int], None]) -> None:
-        self.send, self.frames, self.last = send, 0, time.monotonic()
+    def __init__(self, send: Callable[[int], None], clock: Callable[[], float] = time.monotonic) -> None:
+        self.send, self.clock, self.frames = send, clock, 0
+        self.last = clock()
 
     def __call__(self, n: int) -> None:
         self.frames += n
-        if time.monotonic() - self.last >= PROGRESS_EVERY_S:
+        if self.clock() - self.last >= PROGRESS_EVERY_S:
             self.flush()
 
     def flush(self) -> None:
         if self.frames:
             self.send(self.frames)
             self.frames = 0
-        self.last = time.monotonic()
+        self.last = self.clock()
 
 
-def _run_group(writer: ShardWriter, group: list[ShardJob], send: Callable[[int], None]) -> list[ShardSummary]:
+def _run_group(writer: ShardWriter, group: list[ShardJob], send: Callable[[int], None],
+               clock: Callable[[], float] = time.monotonic) -> list[ShardSummary]:
     """A task of :func:`shard_groups` in a worker: its shards' summaries, the frames done
-    sent on as they go."""
-    counts = _Counts(send)
+    sent on as they go (:class:`_Counts`, on ``clock``)."""
+    counts = _Counts(send, clock)
     summaries = []
     try:
         for summary in writer.run_group(group, counts):
@@ -144,8 +149,8 @@ def local_threads(workers: int, threads: int | None) -> int:
     return threads or max(1, cpu_count() // workers)
 
 
-def run_local(scene: Scene, root: Path, jobs: list[ShardJob], workers: int, render: bool,
-              progress: Progress, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
+def run_local(scene: Scene, layout: Layout, jobs: list[ShardJob], workers: int, render: bool,
+              progress: FramesDone, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
     """Run ``jobs`` in ``workers`` processes (one: in this process), ``threads`` Mitsuba
     threads each, as the tasks of :func:`shard_groups`; report frames to ``progress`` and
     finished shards to ``done``."""
@@ -153,7 +158,7 @@ def run_local(scene: Scene, root: Path, jobs: list[ShardJob], workers: int, rend
     threads = local_threads(workers, threads)
     groups = shard_groups(jobs, workers, together=not render)
     if workers == 1:
-        writer = _writer(scene, str(root), threads, render)
+        writer = _writer(scene, layout, threads, render)
         with ctrl_c_flag() as stop:
             for group in groups:
                 for summary in writer.run_group(group, progress, stop):
@@ -173,7 +178,7 @@ def run_local(scene: Scene, root: Path, jobs: list[ShardJob], workers: int, rend
                 progress(queue.get_nowait())
 
     executor = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_bootstrap,
-                                   initargs=(scene, str(root), threads, render, queue))
+                                   initargs=(scene, layout, threads, render, queue))
     try:
         pending = {executor.submit(_pool_run, group): group for group in groups}
         while pending:
@@ -201,11 +206,11 @@ def run_local(scene: Scene, root: Path, jobs: list[ShardJob], workers: int, rend
     executor.shutdown(wait=True)
 
 
-def _ray_run(scene: Scene, root: str, group: list[ShardJob], threads: int, render: bool,
+def _ray_run(scene: Scene, layout: Layout, group: list[ShardJob], threads: int, render: bool,
              queue) -> list[ShardSummary]:
     """A Ray task (the entry point of its worker process for this dataset): a task of
     :func:`shard_groups`."""
-    return _run_group(_writer(scene, root, threads, render), group, queue.put_nowait)
+    return _run_group(_writer(scene, layout, threads, render), group, queue.put_nowait)
 
 
 @contextlib.contextmanager
@@ -236,8 +241,8 @@ def ray_cluster(workers: int | None):
             ray.shutdown()
 
 
-def run_ray(scene: Scene, root: Path, jobs: list[ShardJob], workers: int | None, render: bool,
-            progress: Progress, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
+def run_ray(scene: Scene, layout: Layout, jobs: list[ShardJob], workers: int | None, render: bool,
+            progress: FramesDone, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
     """Shards as Ray tasks on the cluster :func:`ray_cluster` connected to."""
     import ray
     from ray.util.queue import Queue
@@ -251,7 +256,7 @@ def run_ray(scene: Scene, root: Path, jobs: list[ShardJob], workers: int | None,
     task = ray.remote(num_cpus=per_task, max_retries=0)(_ray_run)
     queue = Queue()
     groups = shard_groups(jobs, workers, together=not render)
-    refs = {task.remote(scene, str(root), group, threads or per_task, render, queue): group for group in groups}
+    refs = {task.remote(scene, layout, group, threads or per_task, render, queue): group for group in groups}
     pending = list(refs)
     try:
         while pending:
@@ -271,3 +276,48 @@ def run_ray(scene: Scene, root: Path, jobs: list[ShardJob], workers: int | None,
     finally:
         with contextlib.suppress(Exception):
             queue.shutdown()
+
+
+class ShardRunner(Protocol):
+    """An executor's way to run a build's shards: ``jobs`` into ``layout``, ``workers`` at a
+    time, each with ``threads`` Mitsuba threads; frames done go to ``progress`` and each
+    finished shard's summary to ``done``."""
+
+    def __call__(self, scene: Scene, layout: Layout, jobs: list[ShardJob], workers: int | None, render: bool,
+                 progress: FramesDone, done: Callable[[ShardSummary], None], threads: int | None = None) -> None: ...
+
+
+@dataclass(frozen=True)
+class ExecutorKind:
+    """What a build needs of an executor: its ``workers`` for ``--workers`` (``"auto"``, a
+    number or None) on a variant, the ``cluster`` to connect to before any work (and leave
+    after it), the cores its workers use (the build's estimate), and how it ``run``s shards."""
+
+    workers: Callable[[int | str | None, str, bool], int | None]
+    cluster: Callable[[int | None], AbstractContextManager]
+    cores: Callable[[int | None, int, int | None], int]  # (workers, shards to do, threads)
+    run: ShardRunner
+
+
+def _local_workers(workers: int | str | None, variant: str, render: bool) -> int:
+    """``--workers`` for local processes: ``auto`` suits the device, the default is one, and
+    no more than the cores this process may use."""
+    if workers == "auto":
+        return auto_workers(variant, cpu_count(), render=render)
+    if workers is not None and int(workers) > cpu_count():
+        raise DatagenError(f"--workers: {workers} is more than the {cpu_count()} cores this process may use "
+                           f"(at most {cpu_count()}; --executor ray for a cluster)")
+    return int(workers or 1)
+
+
+def _local_cores(workers: int | None, shards: int, threads: int | None) -> int:
+    busy = max(1, min(workers or 1, shards))
+    return min(busy * local_threads(busy, threads), cpu_count())
+
+
+#: The executors ``datagen build --executor`` names.
+EXECUTORS: Final[dict[str, ExecutorKind]] = {
+    "local": ExecutorKind(_local_workers, lambda workers: contextlib.nullcontext(), _local_cores, run_local),
+    "ray": ExecutorKind(lambda workers, variant, render: None if workers == "auto" else workers, ray_cluster,
+                        lambda workers, shards, threads: cpu_count(), run_ray),
+}

@@ -18,11 +18,11 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Final
 
+from datagen.atomic import is_temporary
 from datagen.config.schema import Config
 from datagen.core.errors import DatagenError
+from datagen.dataset.columns import FILE_COLUMNS
 from datagen.dataset.layout import LOCK_NAME, MANIFEST_NAME, POSE_IMAGES_LINK, Layout
-from datagen.dataset.schema import FILE_COLUMNS
-from datagen.files import is_temporary
 from datagen.paths import DatasetFolder, regular_file
 from datagen.pipeline.metadata import is_dataset_card
 from datagen.pipeline.plan import dataset_layout, plan_shards
@@ -277,7 +277,7 @@ def remove_owned(layout: Layout, doc: dict) -> int:
 
 
 def sweep_temporaries(paths: list[Path]) -> int:
-    """Remove datagen's own temporaries (:func:`datagen.files.is_temporary`) an interrupted
+    """Remove datagen's own temporaries (:func:`datagen.atomic.is_temporary`) an interrupted
     writer left in these folders (not recursive); returns how many."""
     removed = 0
     for folder in paths:

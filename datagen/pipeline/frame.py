@@ -4,7 +4,7 @@ rendering, the image and the feature visibility.
 ::
 
     frame index -> approach state (poses) + look (sky, sun, materials)      [datagen.scene]
-                -> labels: true centres, tight, corrected and label boxes   [datagen.core.labels]
+                -> labels: true centres, tight, corrected and label boxes   [datagen.core.label_boxes]
                 -> render (Mitsuba) -> linear RGB (+ depth, ids)            [datagen.render]
                 -> feature visibility (ray casts) -> occlusion rule
 
@@ -20,7 +20,7 @@ from typing import Final
 import numpy as np
 
 from datagen.core.conventions import render_seed
-from datagen.core.labels import FrameLabels
+from datagen.core.label_boxes import FrameLabels
 from datagen.scene.approach import FrameState, FrameStates
 from datagen.scene.look import FrameLook, frame_look
 from datagen.scene.resolved import Scene
@@ -88,7 +88,7 @@ def object_labels(scene: Scene, draws: FrameDraws) -> FrameLabels:
 def training_image(result, look: FrameLook) -> tuple[np.ndarray, dict]:
     """The 8-bit sRGB training image of a :class:`~datagen.render.renderer.RenderResult`
     (through the sensor's JPEG round trip when the look has one) and what the render
-    measured, the image statistics included (:data:`datagen.dataset.schema.MEASURED_COLUMNS`)."""
+    measured, the image statistics included (:data:`datagen.dataset.columns.MEASURED_COLUMNS`)."""
     from datagen.render.sensor import jpeg_round_trip
     from datagen.render.tonemap import image_statistics, to_srgb8
 

@@ -19,13 +19,13 @@ from typing import Final
 
 import yaml
 
+from datagen.atomic import link_or_copy, symlink_folder, write_image, write_text
 from datagen.core.conventions import OBJECT_NAMES, PIXEL_CONVENTION
 from datagen.core.errors import DatagenError
 from datagen.core.keypoints import PoseLayout
 from datagen.core.training import TRAIN_BATCH
+from datagen.dataset.columns import MANIFEST_VERSION, write_features, write_objects
 from datagen.dataset.layout import POSE_IMAGES_LINK, SPLITS, Layout, ShardJob
-from datagen.dataset.schema import MANIFEST_VERSION, write_features, write_objects
-from datagen.files import link_or_copy, symlink_folder, write_image, write_text
 from datagen.paths import regular_file
 from datagen.scene.resolved import Scene
 

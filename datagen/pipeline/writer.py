@@ -2,7 +2,7 @@
 files, a shard's manifest last.
 
 A shard is done exactly when its manifest exists. Every file goes through
-:mod:`datagen.files`, so an interrupted build leaves only complete files
+:mod:`datagen.atomic`, so an interrupted build leaves only complete files
 and hidden temporaries, which the next run removes before it finishes the
 missing shards. Frames whose image an interrupted run already wrote are not
 rendered again (their labels and rows are recomputed, which is cheap).
@@ -22,13 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-from datagen.core.content import blank_boxes
+from datagen.atomic import write_exr, write_image, write_text
+from datagen.core.box_content import blank_boxes
 from datagen.core.keypoints import pose_rows
-from datagen.core.labels import FrameLabels
-from datagen.dataset.layout import ShardJob
-from datagen.dataset.schema import feature_records, object_records, write_manifest
+from datagen.core.label_boxes import FrameLabels
+from datagen.dataset.columns import feature_records, object_records, write_manifest
+from datagen.dataset.layout import Layout, ShardJob
 from datagen.dataset.yolo import pose_lines, yolo_lines
-from datagen.files import write_exr, write_image, write_text
 from datagen.pipeline.frame import (
     TRAINING_IMAGE_STAGE,
     FrameDraws,
@@ -37,16 +37,16 @@ from datagen.pipeline.frame import (
     shard_labels,
     training_image,
 )
-from datagen.pipeline.manifest import manifest_row
-from datagen.pipeline.plan import dataset_layout
+from datagen.pipeline.manifest_row import manifest_row
 from datagen.pipeline.progress import ShardSummary
 from datagen.render.timing import StageClock
 from datagen.scene.approach import FrameStates
 from datagen.scene.resolved import Scene
 
-__all__ = ["MAX_GROUP_SHARDS", "MAX_PENDING_WRITES", "ShardWriter", "shard_groups", "timed_frame"]
+__all__ = ["MAX_GROUP_SHARDS", "MAX_PENDING_WRITES", "FramesDone", "ShardWriter", "shard_groups", "timed_frame"]
 
-Progress = Callable[[int], None]
+#: Told the number of frames just done (a worker's messages to the build's progress).
+FramesDone = Callable[[int], None]
 
 def _rss_mib() -> float:
     """Resident set size of this process now, MiB (Linux; NaN elsewhere)."""
@@ -96,10 +96,10 @@ def shard_groups(jobs: list[ShardJob], workers: int, together: bool = True) -> l
 class ShardWriter:
     """Renders and labels whole shards in one process: one scene, one feature table."""
 
-    def __init__(self, scene: Scene, root: Path, *, render: bool = True) -> None:
+    def __init__(self, scene: Scene, layout: Layout, *, render: bool = True) -> None:
         self.scene = scene
         self.states = FrameStates(scene.config)  # each approach chain simulated once per process
-        self.layout = dataset_layout(root, scene.config)
+        self.layout = layout  # the build's (datagen.pipeline.plan.dataset_layout)
         self.renderer = None
         self._stop: Callable[[], bool] = lambda: False
         # Images are encoded and written by one background thread while the next frame
@@ -117,7 +117,7 @@ class ShardWriter:
             self.renderer = Renderer(scene)
             self._census = KernelCensus()
 
-    def run_group(self, jobs: list[ShardJob], progress: Progress | None = None,
+    def run_group(self, jobs: list[ShardJob], progress: FramesDone | None = None,
                   stop: Callable[[], bool] | None = None) -> Iterator[ShardSummary]:
         """:meth:`run` each of ``jobs`` (a task of :func:`shard_groups`), yielding each
         shard's summary once its manifest is written; the approach chains of all of them
@@ -127,7 +127,7 @@ class ShardWriter:
         for job in jobs:
             yield self.run(job, progress, stop, approaches)
 
-    def run(self, job: ShardJob, progress: Progress | None = None,
+    def run(self, job: ShardJob, progress: FramesDone | None = None,
             stop: Callable[[], bool] | None = None, approaches: dict | None = None) -> ShardSummary:
         """Write every frame of ``job``, then its manifest; return its summary.
 
@@ -222,7 +222,7 @@ class ShardWriter:
                 ) -> tuple[float | None, float | None, dict, np.ndarray]:
         """Render and write the frame's image (and EXR). Returns seconds in mi.render and
         in the denoiser (None when not denoised), what the render measured
-        (:data:`datagen.dataset.schema.MEASURED_COLUMNS`) and the 8-bit sRGB training image.
+        (:data:`datagen.dataset.columns.MEASURED_COLUMNS`) and the 8-bit sRGB training image.
         A frame whose files an earlier, interrupted run left is rendered again: its
         measurements live only in the manifest that run did not write, and a shard holds
         few frames."""

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.assets.files import load_mesh
+from datagen.assets.loader import load_mesh
 from datagen.assets.models import material_class
 from datagen.assets.models.drogue import hose_faces, hose_placeholder, hose_vertices
 from datagen.core.camera import Intrinsics, distortion_margin_px
@@ -168,7 +168,7 @@ class Renderer:
             "type": "scene",
             "integrator": integrator,
             "sensor": sensor_dict(self.intrinsics, np.eye(4), self.spp),
-            # Mitsuba 3.9's sunsky is z-up, like our world frame (measured: black below z = 0).
+            # Mitsuba 3.9's sunsky is z-up, like our world frame (it is black below z = 0).
             "sky": self.sky,
             "sea": {"type": "rectangle", "bsdf": sea_bsdf},
             **self.world.cloud_shapes(),
@@ -234,11 +234,10 @@ class Renderer:
         """Set every per-frame parameter of the scene from a frame's state and look.
 
         The first update after a scene is loaded leaves Mitsuba in another state than
-        every later one: a frame rendered first in its process differed from the same
-        frame rendered after any other (measured: 33 of 138,240 pixels at 512x270,
-        one thread), so that images of a resumed build differed from an uninterrupted
-        one's. A freshly loaded scene is therefore posed twice; after that, a frame's
-        image does not depend on what its process rendered before."""
+        every later one (a few pixels of a frame rendered first in its process differ
+        from the same frame rendered after another), so a freshly loaded scene is posed
+        twice: a frame's image does not depend on what its process rendered before, and a
+        resumed build's images are an uninterrupted one's."""
         fresh = self.scene is None or len(state.hose_points_world) != self._hose_points
         if fresh:
             self._build(len(state.hose_points_world))

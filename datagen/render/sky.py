@@ -7,8 +7,8 @@ Python emitter that multiplies what it emits by the frame's scale, the sun's ins
 sun's disk and the sky's outside it, both held as opaque values. Radiance is linear in
 each scale and the two terms are apart on the sphere, except for the sky inside the
 disk, which the sun outshines some 10^5 times: the sky's share there takes the sun's scale
-instead of its own (measured: the images of both ways agree within their sampling noise
-for scales 0 to 1.2). Sampling is ``sunsky``'s own; a sample's weight takes its
+instead of its own (the images of both ways agree within their sampling noise for
+scales 0 to 1.2: CHANGELOG.md). Sampling is ``sunsky``'s own; a sample's weight takes its
 direction's scale. Turbidity and the sun's direction go to the wrapped ``sunsky`` through
 ``mi.traverse`` (kernel inputs already).
 """

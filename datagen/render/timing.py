@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Final
 
 __all__ = ["DENOISE", "PATH_TRACING", "StageClock", "rest_of_frame"]
@@ -20,18 +20,19 @@ class StageClock:
     """Wall seconds per named stage, in the order the stages first ended; a stage
     timed twice adds up, and a stage timed inside another counts for the inner one only."""
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Callable[[], float] = time.perf_counter) -> None:
         self.seconds: dict[str, float] = {}
+        self._clock = clock  # seconds, monotonic
         self._inner: list[float] = []  # per open stage: seconds its nested stages took
 
     @contextlib.contextmanager
     def stage(self, name: str) -> Iterator[None]:
-        start = time.perf_counter()
+        start = self._clock()
         self._inner.append(0.0)
         try:
             yield
         finally:
-            elapsed = time.perf_counter() - start
+            elapsed = self._clock() - start
             self.add(name, elapsed - self._inner.pop())
             if self._inner:
                 self._inner[-1] += elapsed

@@ -13,7 +13,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.assets.files import ObjectMesh
+from datagen.assets.loader import ObjectMesh
 from datagen.assets.models import material_class
 from datagen.core.camera import Intrinsics
 from datagen.render.mitsuba import mitsuba_mesh, sensor_dict, visible, world_from_micam

@@ -7,17 +7,17 @@ holds nothing of it (no mesh, texture or kernel). Texture contents change per fr
 (data updates and opaque kernel inputs: no new kernel).
 
 - Clouds: two horizontal sheets of cells (deck and scattered layer) whose ``mask`` opacity
-  is a :class:`datagen.assets.textures.CloudLayer`, procedural noise evaluated at each
+  is a :class:`datagen.assets.clouds.CloudLayer`, procedural noise evaluated at each
   shading point and filtered to the pixel there (:mod:`datagen.render.procedural`), each
   emitting the light its tops or bases send back (:meth:`World.cloud_shapes`).
-- Sea: the principled BSDF under a ``normalmap`` of :class:`~datagen.assets.textures.SeaWaves`,
+- Sea: the principled BSDF under a ``normalmap`` of :class:`~datagen.assets.sea.SeaWaves`,
   wave trains summed at each shading point as far as the pixel there resolves them, the
   rest of the sea's slope variance its roughness there; its albedo is a
-  :class:`~datagen.assets.textures.SeaSurface`: the drawn body colour,
+  :class:`~datagen.assets.sea.SeaSurface`: the drawn body colour,
   tinted over kilometres, with whitecaps shaped where a pixel resolves them and their mean
   where it does not.
 - Liveries: the painted parts of the receiver and the tanker get texture coordinates
-  (:func:`~datagen.assets.textures.triplanar_uv`) and a base-colour texture per object.
+  (:func:`~datagen.assets.liveries.triplanar_uv`) and a base-colour texture per object.
 """
 
 from __future__ import annotations
@@ -29,7 +29,9 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.assets import textures
+from datagen.assets.clouds import CloudLayer
+from datagen.assets.liveries import LIVERY_TEXELS, livery, triplanar_uv
+from datagen.assets.sea import SeaSurface, SeaWaves
 from datagen.core.conventions import texture_rng
 from datagen.render.mitsuba import jit_array
 from datagen.scene.look import FrameLook
@@ -81,7 +83,7 @@ class World:
         self.any = self.clouds or self.waves or self.whitecaps or self.sea_colour or self.livery
         self._livery_bbox: dict[str, tuple[NDArray, NDArray]] = {}
         self.pixel_rad = pixel_rad  # the angle one pixel subtends (1 / fx): procedural textures filter to it
-        self._cloud_layers: dict[str, textures.CloudLayer] = {}
+        self._cloud_layers: dict[str, CloudLayer] = {}
         self._cloud_textures: dict = {}  # layer name -> (opacity, radiance) procedural textures
         self._cloudy: dict[str, NDArray[np.bool_]] = {}
         self._cloud_key: tuple | None = None
@@ -90,7 +92,7 @@ class World:
         self._sea_key: tuple | None = None
         self._sea_texture = None  # the sea's procedural albedo (whitecaps, colour), where either is on
         self._wave_textures = None  # the sea's procedural (normals, roughness), where waves are on
-        self._waves: textures.SeaWaves | None = None
+        self._waves: SeaWaves | None = None
         self.cloud_meshes: dict = {}
         self._cloud_down: dict[str, bool] = {}
         self._cloud_height: dict[str, float] = {}  # layer name -> its mi.Mesh (the geometry pass tells them apart)
@@ -141,9 +143,9 @@ class World:
         the part a cloud of its opacity transmits (bases), premultiplied by the opacity
         texture, over a black BSDF behind the same opacity ``mask``. A path that meets a
         cloud thus takes its light and ends there, or passes a thin edge, and the sun's
-        shadow rays carry its transmission (:attr:`integrator`); path tracing the layers as white diffuse surfaces made
-        paths bounce between cloud bases and the sea to the maximum depth and doubled
-        the render time (measured)."""
+        shadow rays carry its transmission (:attr:`integrator`); path traced as white
+        diffuse surfaces, the layers would make paths bounce between cloud bases and the
+        sea to the maximum depth, at about twice the render time."""
         if not self.clouds:
             return {}
         import mitsuba as mi
@@ -184,13 +186,13 @@ class World:
             vertices = np.concatenate([np.asarray(p.vertices) for p in mesh.parts.values()])
             self._livery_bbox[obj] = (vertices.min(axis=0), vertices.max(axis=0))
         lo, hi = self._livery_bbox[obj]
-        return textures.triplanar_uv(tm.vertices, tm.faces, lo, hi)
+        return triplanar_uv(tm.vertices, tm.faces, lo, hi)
 
     @staticmethod
     def livery_base_color() -> dict:
         import mitsuba as mi
 
-        return {"type": "bitmap", "data": jit_array(mi.TensorXf, np.full((textures.LIVERY_TEXELS,) * 2 + (3,), 0.5)),
+        return {"type": "bitmap", "data": jit_array(mi.TensorXf, np.full((LIVERY_TEXELS,) * 2 + (3,), 0.5)),
                 "raw": True, "wrap_mode": "clamp", "filter_type": "bilinear"}
 
     # -- per frame -----------------------------------------------------------------------
@@ -209,7 +211,7 @@ class World:
         for obj in LIVERY_OBJECTS:
             lo, hi = self._livery_bbox.get(obj, (np.zeros(3), np.ones(3)))
             scheme = getattr(look, f"{obj}_livery")
-            out[obj] = jit_array(mi.TensorXf, textures.livery(rng, scheme, look.livery_weathering, hi - lo,
+            out[obj] = jit_array(mi.TensorXf, livery(rng, scheme, look.livery_weathering, hi - lo,
                                                               panel_lines=lv.panel_lines, markings=lv.markings))
         self._livery_key, self._liveries = key, out
         return out
@@ -232,7 +234,7 @@ class World:
             for name, (coverage_key, altitude_key) in CLOUD_LAYERS.items():
                 if fresh:  # an approach's weather, drawn once
                     coverage = getattr(look, coverage_key) if drawn else 0.0
-                    layer = textures.CloudLayer.drawn(rng, coverage, look.cloud_opacity or 0.0, CLOUD_SIZE_M)
+                    layer = CloudLayer.drawn(rng, coverage, look.cloud_opacity or 0.0, CLOUD_SIZE_M)
                     self._cloud_layers[name] = layer
                     self._cloudy[name] = _cloudy_cells(layer)
                 layer = self._cloud_layers[name]
@@ -265,10 +267,10 @@ class World:
             rng = texture_rng(look.sea_seed)
             wind = look.sea_wind_speed_mps if look.sea_wind_speed_mps is not None else 7.0
             if self.waves:
-                self._waves = textures.SeaWaves.drawn(rng, wind, look.sea_wind_direction_deg or 0.0)
+                self._waves = SeaWaves.drawn(rng, wind, look.sea_wind_direction_deg or 0.0)
                 self._wave_textures[0].shade = functools.partial(_wave_normal, self._waves)
             if self._sea_texture is not None:
-                sea = textures.SeaSurface.drawn(rng, look.sea_colour if look.sea_colour is not None else SEA_COLOUR,
+                sea = SeaSurface.drawn(rng, look.sea_colour if look.sea_colour is not None else SEA_COLOUR,
                                                 look.sea_whitecap_fraction or 0.0, look.sea_wind_direction_deg or 0.0,
                                                 tint=self.sea_colour)
                 self._sea_texture.shade = functools.partial(_sea_albedo, sea)
@@ -290,12 +292,12 @@ class World:
         if self.livery and ids is not None:
             from datagen.core.conventions import object_id
 
-            worst = [float(np.max(hi - lo)) / textures.LIVERY_TEXELS * fx / float(depth[ids == object_id(obj)].min())
+            worst = [float(np.max(hi - lo)) / LIVERY_TEXELS * fx / float(depth[ids == object_id(obj)].min())
                      for obj, (lo, hi) in self._livery_bbox.items() if (ids == object_id(obj)).any()]
             out["livery_texel_px"] = max(worst) if worst else None
         return out
 
-    def cloud_layer(self, name: str) -> textures.CloudLayer | None:
+    def cloud_layer(self, name: str) -> CloudLayer | None:
         """Cloud layer ``name`` as this frame draws it (None without clouds)."""
         return self._cloud_layers.get(name)
 
@@ -335,7 +337,7 @@ def _flat_normal(x, y, footprint_m, ops):
     return mi.Color3f(x * ops.f32(0.0) + ops.f32(0.5), ops.f32(0.5), ops.f32(1.0))
 
 
-def _wave_normal(waves: textures.SeaWaves, x, y, footprint_m, ops):
+def _wave_normal(waves: SeaWaves, x, y, footprint_m, ops):
     """The waves' normal at a footprint, encoded as a normal map's colour (n / 2 + 1/2)."""
     import mitsuba as mi
 
@@ -343,11 +345,11 @@ def _wave_normal(waves: textures.SeaWaves, x, y, footprint_m, ops):
     return mi.Color3f(*(c * half + half for c in waves.normal(x, y, footprint_m, ops)))
 
 
-def _wave_roughness(waves: textures.SeaWaves, roughness: float, x, y, footprint_m, ops):
+def _wave_roughness(waves: SeaWaves, roughness: float, x, y, footprint_m, ops):
     return waves.roughness(footprint_m, roughness, ops) + x * ops.f32(0.0)
 
 
-def _sea_albedo(sea: textures.SeaSurface, x, y, footprint_m, ops):
+def _sea_albedo(sea: SeaSurface, x, y, footprint_m, ops):
     """The sea's albedo, filtered to the long axis of a pixel's footprint (whitecaps seen
     edge-on fade to their mean rather than flicker)."""
     import mitsuba as mi
@@ -355,7 +357,7 @@ def _sea_albedo(sea: textures.SeaSurface, x, y, footprint_m, ops):
     return mi.Color3f(*sea.albedo(x, y, footprint_m.longest(ops), ops))
 
 
-def _layer_radiance(layer: textures.CloudLayer, light: tuple[float, float, float], above: bool,
+def _layer_radiance(layer: CloudLayer, light: tuple[float, float, float], above: bool,
                     x, y, footprint_m, ops):
     """What a layer's side facing the camera emits, premultiplied by its opacity: the tops
     ``light`` (albedo / pi times the sky's irradiance) from their thick cores, a little over
@@ -396,7 +398,7 @@ def _cloud_faces(facing_down: bool) -> NDArray[np.uint32]:
     return faces[:, ::-1].copy() if facing_down else faces
 
 
-def _cloudy_cells(layer: textures.CloudLayer) -> NDArray[np.bool_]:
+def _cloudy_cells(layer: CloudLayer) -> NDArray[np.bool_]:
     """Which cells of the layer (rows along y) may hold cloud: the field's first
     :data:`CULL_OCTAVES` octaves at the centres of a :data:`CULL_SAMPLES`-square grid per
     cell, whose largest value per cell, plus how far those octaves can rise within half a

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from datagen.analysis.audit import AuditResult
-from datagen.core.labels import FrameLabels
+from datagen.atomic import write_text
+from datagen.core.label_boxes import FrameLabels
 from datagen.dataset.reader import DatasetMeta, DatasetView
-from datagen.files import write_text
 from datagen.paths import real_folder, report_folder
 
 __all__ = ["report_document", "write_report"]

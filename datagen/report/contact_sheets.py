@@ -17,12 +17,12 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.assets.files import Feature, ObjectMesh
+from datagen.assets.loader import Feature, ObjectMesh
 from datagen.assets.rig import body_from_cam_looking
+from datagen.atomic import write_image
 from datagen.core.camera import Intrinsics, project_points
 from datagen.core.conventions import drawing_px
 from datagen.core.transforms import apply_transform, invert_rigid
-from datagen.files import write_image
 from datagen.render.views import render_views
 
 __all__ = ["VIEWS", "contact_sheet", "write_contact_sheet"]

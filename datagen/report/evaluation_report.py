@@ -18,8 +18,8 @@ import pyarrow as pa
 
 from datagen.analysis.detections import DetectionScores, summarize_detections
 from datagen.analysis.evaluate import DISTANCE_EDGES, REASONS, PnPSettings, summarize
+from datagen.atomic import write_parquet, write_text
 from datagen.dataset.reader import DatasetIndex, DatasetView
-from datagen.files import write_parquet, write_text
 from datagen.paths import real_folder, report_folder
 
 __all__ = ["write_evaluation"]

@@ -38,11 +38,11 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from datagen.atomic import link_or_copy, write_image, write_text
 from datagen.core.conventions import index_px, object_id
 from datagen.core.errors import DatagenError
-from datagen.core.labels import FrameLabels
+from datagen.core.label_boxes import FrameLabels
 from datagen.dataset.reader import DatasetView
-from datagen.files import link_or_copy, write_image, write_text
 from datagen.paths import regular_file
 
 __all__ = ["EXPORT_FORMATS", "export_bop", "export_coco", "export_dataset"]
@@ -174,7 +174,7 @@ def _ply(vertices_mm: NDArray[np.float64], normals: NDArray[np.float64], faces: 
 
 def _models(view: DatasetView, out: Path) -> dict[str, tuple[NDArray, NDArray]]:
     """Write ``models/`` (PLY in mm, models_info.json); return each object's mesh in metres."""
-    from datagen.assets.files import load_mesh
+    from datagen.assets.loader import load_mesh
 
     (out / "models").mkdir()
     info, meshes = {}, {}
@@ -200,7 +200,7 @@ def _recorded_mesh(view: DatasetView, name: str) -> Path:
     ``assets.NAME.mesh``), once its bytes are those of ``assets.NAME.mesh_sha256``: a
     dataset names a file outside itself here, so nothing but its digest is read before it
     is known to be that mesh."""
-    from datagen.assets.files import MAX_MESH_BYTES
+    from datagen.assets.loader import MAX_MESH_BYTES
 
     where = f"{view.root / 'dataset.json'}: assets.{name}"
     assets = view.doc.get("assets")
@@ -246,7 +246,7 @@ def _bbox_of_box(xyxy: NDArray[np.float64]) -> list[int]:
 
 
 def read_object_ids(path: Path, shape: tuple[int, int]) -> NDArray[np.uint32]:
-    """The ``object_id`` channel of a datagen EXR (:func:`datagen.files.write_exr`), which
+    """The ``object_id`` channel of a datagen EXR (:func:`datagen.atomic.write_exr`), which
     must be a regular file of the image's ``(height, width)``."""
     import OpenEXR
 

@@ -10,10 +10,10 @@ from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
+from datagen.atomic import write_exr, write_image
 from datagen.config import override_config
 from datagen.config.schema import WORLD_RANDOMIZERS, world_off
 from datagen.core.conventions import render_seed
-from datagen.files import write_exr, write_image
 from datagen.pipeline.frame import training_image
 from datagen.render.renderer import Renderer
 from datagen.scene.approach import FrameStates

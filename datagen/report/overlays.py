@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.core.conventions import drawing_px
-from datagen.core.labels import Exclusion, FrameLabels
+from datagen.core.label_boxes import Exclusion, FrameLabels
 from datagen.dataset.reader import DatasetView
 
 __all__ = ["COLOURS", "PANELS", "Sheet", "draw_crosshair", "draw_sheet", "draw_text", "write_previews"]
@@ -120,7 +120,7 @@ class Sheet:
 def _frame_image(view: DatasetView, b: int) -> NDArray[np.uint8]:
     """The frame's image (a black canvas when it has none, it leads outside the dataset or it
     does not match the camera)."""
-    from datagen.analysis.audit.files import decode_image, quiet_stderr
+    from datagen.analysis.audit.dataset_files import decode_image, quiet_stderr
 
     k = view.intrinsics
     image = None
@@ -376,8 +376,8 @@ def write_previews(view: DatasetView, frames: list[int] | None, out: Path, label
     """Write ``out/{frame:08d}.jpg`` sheets for the given frame ids (default: the first ``limit``)."""
     import json
 
+    from datagen.atomic import write_image, write_text
     from datagen.core.errors import DatagenError
-    from datagen.files import write_image, write_text
     from datagen.paths import regular_file, report_folder
 
     labels = labels if labels is not None else view.recompute()

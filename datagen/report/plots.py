@@ -3,7 +3,7 @@
 Figures are made with ``matplotlib.figure.Figure`` directly, never through
 pyplot: no backend is selected and no figure is kept in a global registry (no
 process-wide state), and a figure is rendered to PNG bytes that
-:mod:`datagen.files` writes.
+:mod:`datagen.atomic` writes.
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from pathlib import Path
 from matplotlib.figure import Figure
 
 from datagen.analysis.audit.check import DriftPlot
+from datagen.atomic import write_figure
 from datagen.config.schema import Config
-from datagen.files import write_figure
 from datagen.scene.chains import trace_approach
 
 __all__ = ["plot_approaches", "plot_audit", "plot_detector", "plot_evaluation"]

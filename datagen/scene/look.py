@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.assets.models import MATERIAL_CLASSES
-from datagen.assets.textures import cox_munk_roughness
+from datagen.assets.sea import cox_munk_roughness
 from datagen.core.conventions import OBJECT_NAMES
 
 if TYPE_CHECKING:
@@ -241,7 +241,7 @@ def draw_world(config: Config, look: FrameLook, seed: int, state: FrameState,
 def _approach_world(config: Config, seed: int, approach_index: int, base: float) -> dict:
     """An approach chain's clouds (their altitudes about the tanker's, ``base``), sea state
     and liveries, each where its randomizer is on (:func:`draw_world`)."""
-    from datagen.assets.textures import wave_slope_variance
+    from datagen.assets.sea import wave_slope_variance
     from datagen.core.conventions import world_rng
 
     r = config.randomization

@@ -11,20 +11,15 @@ object; none derives any of it again.
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-from numpy.typing import NDArray
-
-from datagen.assets.files import mesh_hull
+from datagen.assets.loader import mesh_hull
 from datagen.assets.table import check_assets, object_paths
 from datagen.config.schema import Config
 from datagen.core.camera import Intrinsics
 from datagen.core.conventions import RIGID_OBJECTS
-from datagen.core.features import FeatureTable
-from datagen.core.labelling import Labelled, LabellingContext
+from datagen.core.labelling_context import Labelled, LabellingContext
 
 __all__ = ["Scene"]
 
@@ -60,18 +55,6 @@ class Scene(Labelled):
         labelling = LabellingContext(features, Intrinsics.from_hfov_deg(cam.width, cam.height, cam.hfov_deg), hulls,
                                      config.labels.rules())
         return cls(config=config, labelling=labelling, assets=assets)
-
-    @property
-    def features(self) -> FeatureTable:
-        return self.labelling.features
-
-    @property
-    def intrinsics(self) -> Intrinsics:
-        return self.labelling.intrinsics
-
-    @property
-    def hulls(self) -> Mapping[str, NDArray[np.float64]]:
-        return self.labelling.hulls
 
     @property
     def name(self) -> str:

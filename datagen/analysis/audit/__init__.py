@@ -12,9 +12,9 @@ One module per group of checks (:mod:`.manifest`, :mod:`.label_lines`, :mod:`.po
 by shard (:mod:`.run`).
 """
 
+from datagen.analysis.audit.box_geometry import feature_normals, obliqueness_deg, tight_centre_drift_px
 from datagen.analysis.audit.check import DRIFT_LIMIT_PX, AuditResult, Check
-from datagen.analysis.audit.geometry import feature_normals, obliqueness_deg, tight_centre_drift_px
-from datagen.analysis.audit.run import audit
+from datagen.analysis.audit.driver import audit
 
 __all__ = [
     "DRIFT_LIMIT_PX",

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.analysis.exact import Spill
-from datagen.core.labels import Exclusion, FrameLabels
+from datagen.core.label_boxes import Exclusion, FrameLabels
 from datagen.dataset.reader import DatasetMeta, DatasetView
 from datagen.dataset.yolo import YOLO_DECIMALS
 
@@ -27,7 +27,7 @@ MANIFEST_TOLERANCE_PX: Final = 1e-6
 
 
 #: A label line's values may differ from the manifest box by the rounding of
-#: :data:`datagen.core.labels.YOLO_DECIMALS` decimals (normalized units).
+#: :data:`datagen.core.label_boxes.YOLO_DECIMALS` decimals (normalized units).
 LINE_TOLERANCE: Final = 0.5 * 10.0 ** -YOLO_DECIMALS + 1e-12
 
 

@@ -7,7 +7,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from datagen.core.labels import FrameLabels
+from datagen.core.label_boxes import FrameLabels
 from datagen.dataset.reader import DatasetIndex, DatasetSource, DatasetView
 
 __all__ = ["frames_to_draw"]

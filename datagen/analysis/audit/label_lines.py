@@ -24,7 +24,7 @@ from datagen.analysis.audit.check import (
 )
 from datagen.analysis.audit.statistics import bin_of
 from datagen.analysis.exact import Spill, median, median_positions, order_statistics
-from datagen.core.labels import Exclusion, FrameLabels
+from datagen.core.label_boxes import Exclusion, FrameLabels
 from datagen.core.training import ASSIGNABLE_SIDE_PX
 from datagen.dataset.reader import DatasetMeta, DatasetView
 from datagen.dataset.yolo import parse_line
@@ -186,7 +186,7 @@ def learnable_part(view: DatasetView, lines: NDArray[np.float64]) -> dict[str, N
     cx, cy, bw, bh = lines[:, 2] * k.width, lines[:, 3] * k.height, lines[:, 4] * k.width, lines[:, 5] * k.height
     xyxy = np.stack([cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2], axis=-1)
     # A box short of the assigner's size because it reached the edge margin (labels grow only
-    # that far: datagen.core.labels) is as large as its feature's line can be.
+    # that far: datagen.core.label_boxes) is as large as its feature's line can be.
     m = view.label_rules.edge_margin_px
     on = np.isclose(xyxy, [m, m, k.width - m, k.height - m], rtol=0.0, atol=_ON_MARGIN_PX)
     short = train.short_sides(xyxy)

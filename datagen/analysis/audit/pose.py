@@ -18,7 +18,7 @@ from datagen.analysis.audit.check import (
     label_files,
 )
 from datagen.core.keypoints import KEYPOINT_RANGE, keypoint_flags, mirror_name
-from datagen.core.labels import Exclusion, FrameLabels
+from datagen.core.label_boxes import Exclusion, FrameLabels
 from datagen.dataset.reader import DatasetMeta, DatasetView
 from datagen.dataset.yolo import parse_line
 

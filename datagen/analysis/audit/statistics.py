@@ -14,8 +14,8 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from datagen.analysis.audit.box_geometry import feature_normals, obliqueness_deg, tight_centre_drift_px
 from datagen.analysis.audit.check import DriftPlot
-from datagen.analysis.audit.geometry import feature_normals, obliqueness_deg, tight_centre_drift_px
 from datagen.analysis.exact import (
     OrderedSum,
     Spill,
@@ -25,9 +25,9 @@ from datagen.analysis.exact import (
     percentile,
     percentile_positions,
 )
-from datagen.core.labels import Exclusion, FrameLabels
+from datagen.core.label_boxes import Exclusion, FrameLabels
+from datagen.dataset.columns import APPEARANCE
 from datagen.dataset.reader import DatasetMeta, DatasetView
-from datagen.dataset.schema import APPEARANCE
 
 #: PnP needs at least this many labeled features of an object in a frame.
 PNP_MIN_FEATURES: Final = 3
@@ -311,7 +311,7 @@ def _appearance_part(columns: dict[str, list], rank: NDArray[np.int64]) -> dict[
 
 
 def appearance_finish(spill: Spill, columns: dict[str, dict]) -> dict:
-    """The appearance section: per dimension (:data:`datagen.dataset.schema.APPEARANCE`) and
+    """The appearance section: per dimension (:data:`datagen.dataset.columns.APPEARANCE`) and
     column, how many frames drew it and the distribution of the draws (a histogram of
     :data:`APPEARANCE_BINS` bins for numbers, counts per value for names and flags). A
     column no frame drew (its randomizer off) has ``frames`` 0. ``columns``: the counts

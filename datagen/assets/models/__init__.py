@@ -2,7 +2,7 @@
 
 Each builder returns a :class:`Model`: meshes by part name in the object's body
 frame (:mod:`datagen.core.conventions`), and the feature anchors from which
-:mod:`datagen.assets.files` derives the feature point sets. The models are built
+:mod:`datagen.assets.loader` derives the feature point sets. The models are built
 around the mounts and hose port of :mod:`datagen.assets.rig`.
 """
 
@@ -73,6 +73,19 @@ class FeatureAnchor:
     @staticmethod
     def at(name: str, point, size: Size = "small") -> FeatureAnchor:
         return FeatureAnchor(name, tuple(float(v) for v in np.asarray(point, dtype=np.float64)), size)
+
+    @staticmethod
+    def on_both_sides(right: dict[str, object], y0: float = 0.0,
+                      sizes: dict[str, Size] | None = None) -> list[FeatureAnchor]:
+        """Anchors given by their points on the right of the centre plane y = ``y0``, and the
+        same mirrored to the left (:func:`datagen.assets.models.loft.on_side`): every right
+        one in the order given, then every left one; ``{side}`` in a name becomes ``right``
+        or ``left``, and ``sizes`` gives the size of those not small."""
+        from datagen.assets.models.loft import on_side
+
+        sizes = sizes or {}
+        return [FeatureAnchor.at(name.format(side=label), on_side(point, side, y0), sizes.get(name, "small"))
+                for side, label in ((-1, "right"), (1, "left")) for name, point in right.items()]
 
 
 @dataclass(frozen=True)

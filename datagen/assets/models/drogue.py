@@ -21,7 +21,7 @@ import trimesh
 from numpy.typing import ArrayLike, NDArray
 
 from datagen.assets.models import FeatureAnchor, InternalFeature, Model
-from datagen.assets.models.geometry import Parts, box, loft, tube, tube_rings
+from datagen.assets.models.loft import Parts, box, loft, tube, tube_rings
 from datagen.assets.rig import HOSE_ATTACH_DROGUE_M
 
 __all__ = [

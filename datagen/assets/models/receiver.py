@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from datagen.assets.models import FeatureAnchor, Model
-from datagen.assets.models.geometry import (
+from datagen.assets.models.loft import (
     Panel,
     Parts,
     box,
@@ -20,7 +20,6 @@ from datagen.assets.models.geometry import (
     ellipsoid,
     loft,
     mirror_y,
-    on_side,
     superellipse_ring,
     tube,
     wing,
@@ -175,22 +174,18 @@ def build_receiver() -> Model:
             FeatureAnchor.at(f"intake_{label}_lower", (intake_front, y_out, intake_z - intake_h / 2)),
             FeatureAnchor.at(f"intake_{label}_upper", (intake_front, y_out, intake_z + intake_h / 2)),
         ]
-    for side, label in ((-1, "right"), (1, "left")):
-        def m(p, side=side):
-            return on_side(p, side, Y0)
-
-        anchors += [
-            FeatureAnchor.at(f"lex_{label}_edge", m(lex.le(0.55))),
-            FeatureAnchor.at(f"wing_{label}_le_inboard", m(wing_r.le(0.2))),
-            FeatureAnchor.at(f"wing_{label}_tip_le", m(wing_r.le(1.0))),
-            FeatureAnchor.at(f"wing_{label}_tip_te", m(wing_r.te(1.0))),
-            FeatureAnchor.at(f"wing_{label}_te_inboard", m(wing_r.te(0.25))),
-            FeatureAnchor.at(f"missile_{label}_nose", m((-11.0, Y0 - missile_y, Z0 - 0.07))),
-            FeatureAnchor.at(f"pod_{label}_nose", m((pod_nose - 0.04, cam[1], cam[2] + 0.07))),
-            FeatureAnchor.at(f"tail_{label}_tip_le", m(tail_r.le(1.0))),
-            FeatureAnchor.at(f"tail_{label}_tip_te", m(tail_r.te(1.0))),
-            FeatureAnchor.at(f"stab_{label}_tip_le", m(stab_r.le(1.0))),
-            FeatureAnchor.at(f"nozzle_{label}", m((x_tail - 0.8, Y0 - 0.48, Z0 + 0.3))),
-            FeatureAnchor.at(f"insignia_{label}_wing", m(wing_r.at(0.72, 0.45) + np.array([0, 0, 0.3])), "medium"),
-        ]
+    anchors += FeatureAnchor.on_both_sides({
+        "lex_{side}_edge": lex.le(0.55),
+        "wing_{side}_le_inboard": wing_r.le(0.2),
+        "wing_{side}_tip_le": wing_r.le(1.0),
+        "wing_{side}_tip_te": wing_r.te(1.0),
+        "wing_{side}_te_inboard": wing_r.te(0.25),
+        "missile_{side}_nose": (-11.0, Y0 - missile_y, Z0 - 0.07),
+        "pod_{side}_nose": (pod_nose - 0.04, cam[1], cam[2] + 0.07),
+        "tail_{side}_tip_le": tail_r.le(1.0),
+        "tail_{side}_tip_te": tail_r.te(1.0),
+        "stab_{side}_tip_le": stab_r.le(1.0),
+        "nozzle_{side}": (x_tail - 0.8, Y0 - 0.48, Z0 + 0.3),
+        "insignia_{side}_wing": wing_r.at(0.72, 0.45) + np.array([0, 0, 0.3]),
+    }, Y0, sizes={"insignia_{side}_wing": "medium"})
     return Model("receiver", meshes, tuple(anchors), small_radius_m=0.06)

@@ -11,13 +11,12 @@ from __future__ import annotations
 import numpy as np
 
 from datagen.assets.models import FeatureAnchor, Model
-from datagen.assets.models.geometry import (
+from datagen.assets.models.loft import (
     Panel,
     Parts,
     decal,
     ellipsoid,
     loft,
-    on_side,
     superellipse_ring,
     tube,
 )
@@ -137,27 +136,22 @@ def build_tanker() -> Model:
         FeatureAnchor.at("director_lights", (54.0, 0.0, 6.0), "medium"),
         FeatureAnchor.at("radome_tip", (X_NOSE, 0.0, 8.0)),
     ]
-    for side, label in ((-1, "right"), (1, "left")):
-        def m(p, side=side):
-            return on_side(p, side)
-
-        anchors += [
-            FeatureAnchor.at(f"stab_{label}_tip_le", m(stab_r.le(1.0))),
-            FeatureAnchor.at(f"stab_{label}_tip_te", m(stab_r.te(1.0))),
-            FeatureAnchor.at(f"stab_{label}_root_te", m(stab_r.te(0.12))),
-            FeatureAnchor.at(f"wing_{label}_tip_le", m(wing_r.le(1.0))),
-            FeatureAnchor.at(f"wing_{label}_tip_te", m(wing_r.te(1.0))),
-            FeatureAnchor.at(f"wing_{label}_root_te", m(wing_r.te(0.08))),
-            FeatureAnchor.at(f"wing_{label}_mid_te", m(wing_r.te(0.6))),
-            FeatureAnchor.at(f"engine_{label}_exhaust_plug", m((40.4, -engine_y, engine_z)), "medium"),
-            FeatureAnchor.at(f"engine_{label}_inlet_lip", m((47.6, -engine_y, engine_z - 1.25))),
-            FeatureAnchor.at(f"pylon_{label}_aft", m(pylon.te(0.0))),
-            FeatureAnchor.at(f"flap_track_{label}_inboard", m((wing_r.te(0.2)[0] - 1.3, wing_r.te(0.2)[1],
-                                                               wing_r.le(0.2)[2] - 0.1))),
-            FeatureAnchor.at(f"flap_track_{label}_outboard", m((wing_r.te(0.85)[0] - 1.3, wing_r.te(0.85)[1],
-                                                                wing_r.le(0.85)[2] - 0.1))),
-            FeatureAnchor.at(f"wing_pod_{label}_nose", m((warp_x[0], -17.0, pod_z))),
-            FeatureAnchor.at(f"wing_pod_{label}_tail", m((warp_x[-1], -17.0, pod_z)), "medium"),
-            FeatureAnchor.at(f"insignia_{label}_wing", m(insignia), "medium"),
-        ]
+    anchors += FeatureAnchor.on_both_sides({
+        "stab_{side}_tip_le": stab_r.le(1.0),
+        "stab_{side}_tip_te": stab_r.te(1.0),
+        "stab_{side}_root_te": stab_r.te(0.12),
+        "wing_{side}_tip_le": wing_r.le(1.0),
+        "wing_{side}_tip_te": wing_r.te(1.0),
+        "wing_{side}_root_te": wing_r.te(0.08),
+        "wing_{side}_mid_te": wing_r.te(0.6),
+        "engine_{side}_exhaust_plug": (40.4, -engine_y, engine_z),
+        "engine_{side}_inlet_lip": (47.6, -engine_y, engine_z - 1.25),
+        "pylon_{side}_aft": pylon.te(0.0),
+        "flap_track_{side}_inboard": (wing_r.te(0.2)[0] - 1.3, wing_r.te(0.2)[1], wing_r.le(0.2)[2] - 0.1),
+        "flap_track_{side}_outboard": (wing_r.te(0.85)[0] - 1.3, wing_r.te(0.85)[1], wing_r.le(0.85)[2] - 0.1),
+        "wing_pod_{side}_nose": (warp_x[0], -17.0, pod_z),
+        "wing_pod_{side}_tail": (warp_x[-1], -17.0, pod_z),
+        "insignia_{side}_wing": insignia,
+    }, sizes={"engine_{side}_exhaust_plug": "medium", "wing_pod_{side}_tail": "medium",
+              "insignia_{side}_wing": "medium"})
     return Model("tanker", meshes, tuple(anchors), small_radius_m=0.25)

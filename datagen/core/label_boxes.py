@@ -155,6 +155,27 @@ def boxes_from_uv(
         corrected: label with the corrected box (else the tight box).
         min_size_px: smallest label box side, pixels (one value, or width and height).
         small_boxes: ``"grow"`` a smaller box about its centre, or ``"exclude"`` the feature.
+
+    One feature whose points span 100-110 px across and 100-120 px down, its true centre
+    projected at (103, 105): the tight box is centred on (105, 110), the perceived centre;
+    the corrected box on (103, 105), the true one, and it contains the tight box:
+
+    >>> labels = boxes_from_uv([[[100, 100], [110, 100], [100, 120]]], [[103, 105]], [True],
+    ...                        width=640, height=480, edge_margin_px=10)
+    >>> labels.tight_xyxy.tolist(), labels.corrected_xyxy.tolist()
+    ([[100.0, 100.0, 110.0, 120.0]], [[96.0, 90.0, 110.0, 120.0]])
+    >>> labels.label_center_px.tolist(), Exclusion(int(labels.exclusion[0])).name
+    ([[103.0, 105.0]], 'NONE')
+
+    Moved left so that its corrected box starts 8 px from the border (inside the image but
+    within the 10 px margin), and then past the border:
+
+    >>> for left in (12, 0):
+    ...     labels = boxes_from_uv([[[left, 100], [left + 10, 100], [left, 120]]], [[left + 3, 105]], [True],
+    ...                            width=640, height=480, edge_margin_px=10)
+    ...     print(labels.corrected_xyxy[0, 0], Exclusion(int(labels.exclusion[0])).name)
+    8.0 EDGE_MARGIN
+    -4.0 OFF_FRAME
     """
     uv_points = np.asarray(uv_points, dtype=np.float64)
     center = np.asarray(uv_center, dtype=np.float64)

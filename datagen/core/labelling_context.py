@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 from datagen.core.camera import Intrinsics
 from datagen.core.features import FeatureTable
 from datagen.core.keypoints import PoseLayout, TruncatedObjects, object_boxes, object_table
-from datagen.core.labels import FrameLabels, SmallBoxes, compute_labels
+from datagen.core.label_boxes import FrameLabels, SmallBoxes, compute_labels
 from datagen.core.training import TrainView
 
 __all__ = ["RULE_BOUNDS", "LabelFormat", "LabelRules", "Labelled", "LabellingContext"]
@@ -145,6 +145,21 @@ class Labelled:
     :class:`~datagen.dataset.reader.DatasetMeta`) reads from it by name."""
 
     labelling: LabellingContext
+
+    @property
+    def features(self) -> FeatureTable:
+        """The feature table: every labeled feature's points and true centre, per object."""
+        return self.labelling.features
+
+    @property
+    def intrinsics(self) -> Intrinsics:
+        """The camera that labels (and renders) the frames."""
+        return self.labelling.intrinsics
+
+    @property
+    def hulls(self) -> Mapping[str, NDArray[np.float64]]:
+        """Each labeled object's convex hull vertices (its pose box)."""
+        return self.labelling.hulls
 
     @property
     def label_rules(self) -> LabelRules:

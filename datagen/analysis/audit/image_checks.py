@@ -1,7 +1,7 @@
 """The images, each decoded once: every image a manifest names decodes to the dataset's size
 (``images``), no frame shows nothing in all its label boxes (``image_content``), and nearly
 every label box shows something (``label_content``): a label whose box is saturated, black
-or flat in its frame's image teaches a detector nothing (:func:`datagen.core.content.blank_boxes`)."""
+or flat in its frame's image teaches a detector nothing (:func:`datagen.core.box_content.blank_boxes`)."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ from typing import Final
 import numpy as np
 
 from datagen.analysis.audit.check import Check, Finish, GroupPart, Recomputed
-from datagen.analysis.audit.files import decode_image, quiet_stderr
-from datagen.core.content import BLANK_REASONS, blank_boxes
+from datagen.analysis.audit.dataset_files import decode_image, quiet_stderr
+from datagen.core.box_content import BLANK_REASONS, blank_boxes
 from datagen.dataset.reader import DatasetMeta, DatasetView
 
 #: The image_content check passes while at least this share of the label boxes shows something.

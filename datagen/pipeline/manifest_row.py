@@ -1,6 +1,6 @@
 """A frame's manifest row, made from what the build knows of the frame (its state, look,
 labels and render); the columns and their types are the dataset's contract
-(:mod:`datagen.dataset.schema`)."""
+(:mod:`datagen.dataset.columns`)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 
 from datagen.core.camera import Intrinsics
-from datagen.dataset.schema import MEASURED_COLUMNS, FeatureColumns, matrix_field
+from datagen.dataset.columns import MEASURED_COLUMNS, FeatureColumns, matrix_field
 from datagen.scene.approach import FrameState
 from datagen.scene.look import FrameLook, sun_direction_world
 
@@ -22,10 +22,10 @@ def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, 
                  features: FeatureColumns, objects: list[dict], n_labeled: int, render_s: float | None,
                  denoise_s: float | None, frame_s: float, worker: str, worker_rss_mib: float,
                  rendered: dict | None = None) -> dict:
-    """One frame's manifest row, column by column (:func:`datagen.dataset.schema.manifest_schema`): the frame,
+    """One frame's manifest row, column by column (:func:`datagen.dataset.columns.manifest_schema`): the frame,
     its files, the camera, the poses, the approach, every appearance draw, the features,
-    what the render measured (:data:`~datagen.dataset.schema.MEASURED_COLUMNS`, from ``rendered``) and the run
-    columns (:data:`~datagen.dataset.schema.RUN_COLUMNS`)."""
+    what the render measured (:data:`~datagen.dataset.columns.MEASURED_COLUMNS`, from ``rendered``) and the run
+    columns (:data:`~datagen.dataset.columns.RUN_COLUMNS`)."""
     rendered = rendered or {}
     k = intrinsics
     return {

@@ -24,10 +24,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
+from datagen.atomic import write_parquet
 from datagen.core.features import FeatureTable
 from datagen.core.keypoints import keypoint_flags
-from datagen.core.labels import Exclusion
-from datagen.files import write_parquet
+from datagen.core.label_boxes import Exclusion
 
 __all__ = [
     "APPEARANCE",
@@ -351,7 +351,7 @@ class FeatureColumns:
 
 
 def feature_records(labels, class_ids, visible_fraction=None, center_visible=None) -> FeatureColumns:
-    """The ``features`` column of one frame from its :class:`~datagen.core.labels.FrameLabels`."""
+    """The ``features`` column of one frame from its :class:`~datagen.core.label_boxes.FrameLabels`."""
     return FeatureColumns(
         class_id=np.asarray(class_ids, dtype=np.int64),
         center_px=np.asarray(labels.center_px, dtype=np.float64),

@@ -11,15 +11,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.analysis.audit.check import AuditResult, Check, CheckGroup, Finish, GroupPart, Recomputed
-from datagen.analysis.audit.content import ImageChecks
-from datagen.analysis.audit.files import check_files, check_recipe, check_texels
+from datagen.analysis.audit.dataset_files import check_files, check_recipe, check_texels
+from datagen.analysis.audit.image_checks import ImageChecks
 from datagen.analysis.audit.label_lines import MIN_LEARNABLE_SHARE, LabelLineChecks
-from datagen.analysis.audit.manifest import ManifestChecks
+from datagen.analysis.audit.manifest_checks import ManifestChecks
 from datagen.analysis.audit.pose import PoseChecks
 from datagen.analysis.audit.statistics import Totals, appearance_finish, statistics, statistics_part
 from datagen.analysis.exact import Spill
+from datagen.console import NullProgress, Progress
 from datagen.dataset.reader import DatasetIndex, DatasetSource, DatasetView
-from datagen.parallel import NullProgress, map_in_order
+from datagen.parallel import map_in_order
 
 #: The groups of per-frame checks, in report order (the dataset's files and images follow).
 GROUPS: Final[tuple[CheckGroup, ...]] = (ManifestChecks(), LabelLineChecks(), PoseChecks(), ImageChecks())
@@ -66,7 +67,7 @@ def _parts(dataset: DatasetView | DatasetSource, index: DatasetIndex | DatasetVi
 
 
 def audit(dataset: DatasetView | DatasetSource, *, min_learnable: float = MIN_LEARNABLE_SHARE, workers: int = 1,
-          progress=None, index: DatasetIndex | None = None) -> AuditResult:
+          progress: Progress | None = None, index: DatasetIndex | None = None) -> AuditResult:
     """Run every check and compute every statistic of a dataset.
 
     ``dataset``: a loaded view (all in memory), or an opened source, which is read and
@@ -75,7 +76,7 @@ def audit(dataset: DatasetView | DatasetSource, *, min_learnable: float = MIN_LE
     ``min_learnable``: the share of label lines that must be learnable by Ultralytics'
     trainer at ``labels.train_imgsz`` (:mod:`datagen.core.training`).
     ``progress``: an object with ``start(total, done)``, ``advance(n)`` and ``close()``
-    (:class:`datagen.pipeline.progress.BuildProgress`). ``index``: the source's, where the
+    (:class:`datagen.console.Progress`). ``index``: the source's, where the
     caller has read it."""
     progress = progress or NullProgress()
     index = dataset if isinstance(dataset, DatasetView) else index or dataset.index()

@@ -13,12 +13,13 @@ import time
 from pathlib import Path
 
 from datagen.config.schema import Config
+from datagen.console import NullProgress, Progress
 from datagen.core.errors import DatagenError
+from datagen.dataset.columns import read_manifest_summary
 from datagen.dataset.layout import LOCK_NAME, Layout
-from datagen.dataset.schema import read_manifest_summary
 from datagen.parallel import cpu_count
-from datagen.pipeline.estimate import auto_workers, frame_cost
-from datagen.pipeline.executors import Executor, local_threads, ray_cluster, run_local, run_ray
+from datagen.pipeline.estimate import frame_cost
+from datagen.pipeline.executors import EXECUTORS, Executor
 from datagen.pipeline.folder import DatasetLock, check_folder, prepare_folder, remove_owned, sweep_temporaries
 from datagen.pipeline.metadata import (
     config_fingerprint,
@@ -34,7 +35,7 @@ from datagen.scene.resolved import Scene
 __all__ = ["build_dataset"]
 
 def build_dataset(config: Config, out: Path, *, workers: int | str | None = None, executor: Executor = "local",
-                  overwrite: bool = False, render: bool = True, progress=None,
+                  overwrite: bool = False, render: bool = True, progress: Progress | None = None,
                   threads: int | None = None) -> BuildReport:
     """Build (or resume) the dataset of ``config`` in ``out``.
 
@@ -47,8 +48,7 @@ def build_dataset(config: Config, out: Path, *, workers: int | str | None = None
         executor: ``local`` or ``ray``.
         overwrite: replace a dataset of another config in ``out``.
         render: render images (False writes labels and manifests only).
-        progress: a :class:`BuildProgress`-like object (``start``, ``advance``,
-            ``shard_done``, ``close``), or None.
+        progress: where the build reports (:class:`datagen.console.Progress`); None: nowhere.
         threads: Mitsuba threads per worker (default: the cores divided among the
             workers). With 1, a seed gives the same image bytes on any machine, for
             any worker count and across resumptions.
@@ -61,11 +61,9 @@ def build_dataset(config: Config, out: Path, *, workers: int | str | None = None
     if threads is not None and not 1 <= threads <= cpu_count():
         raise DatagenError(f"--threads: {threads} is not between 1 and the {cpu_count()} cores this process may use")
     variant = resolve_variant(config.render.variant) if render else "labels only"
-    if workers == "auto":
-        workers = auto_workers(variant, cpu_count(), render=render) if executor == "local" else None
-    if executor == "local" and workers is not None and workers > cpu_count():
-        raise DatagenError(f"--workers: {workers} is more than the {cpu_count()} cores this process may use "
-                           f"(at most {cpu_count()}; --executor ray for a cluster)")
+    kind = EXECUTORS[executor]
+    workers = kind.workers(workers, variant, render)
+    progress = progress or NullProgress()
     scene = Scene.resolve(config)
     root = Path(out).resolve()
     layout = dataset_layout(root, scene.config)
@@ -73,10 +71,9 @@ def build_dataset(config: Config, out: Path, *, workers: int | str | None = None
     jobs = plan_shards(config)
     fingerprint = config_fingerprint(scene, render=render)
     report = BuildReport(config.name, root, jobs)
-    cluster = ray_cluster(workers) if executor == "ray" else contextlib.nullcontext()
     created = not root.exists()
     try:
-        with cluster, DatasetLock(root):
+        with kind.cluster(workers), DatasetLock(root):
             resumed = prepare_folder(layout, fingerprint, scene, render=render, overwrite=overwrite)
             write_dataset_files(layout, scene, jobs, fingerprint, describe=not resumed, render=render)
             todo = []
@@ -100,21 +97,14 @@ def build_dataset(config: Config, out: Path, *, workers: int | str | None = None
 
             def shard_done(summary: ShardSummary) -> None:
                 report.shards[summary.name] = summary
-                if progress is not None:
-                    progress.shard_done(summary)
+                progress.shard_done(summary)
 
-            if progress is not None:
-                busy = max(1, min(workers or 1, len(todo)))  # run_local's workers
-                cores = busy * local_threads(busy, threads) if executor == "local" else cpu_count()
-                progress.start(report.frames, report.frames - sum(len(j.frames) for j in todo),
-                               frame_cost(scene.config, min(cores, cpu_count()), render=render, variant=variant))
+            progress.start(report.frames, report.frames - sum(len(j.frames) for j in todo),
+                           frame_cost(scene.config, kind.cores(workers, len(todo), threads), render=render,
+                                      variant=variant))
             try:
                 if todo:
-                    run = run_ray if executor == "ray" else run_local
-                    if executor == "local":
-                        workers = workers or 1
-                    run(scene, root, todo, workers, render, progress.advance if progress else (lambda n: None),
-                        shard_done, threads)
+                    kind.run(scene, layout, todo, workers, render, progress.advance, shard_done, threads)
                 if len(report.shards) == len(jobs):  # finished: what describes the whole dataset
                     if render:
                         write_image_lists(layout, jobs)
@@ -128,8 +118,7 @@ def build_dataset(config: Config, out: Path, *, workers: int | str | None = None
                 raise DatagenError(f"{exc.filename or root}: {exc.strerror or exc}; the finished shards are kept, "
                                    "rerun the same command to finish the others") from None
             finally:
-                if progress is not None:
-                    progress.close()
+                progress.close()
     except (DatagenError, OSError):
         if created and not any(layout.manifest(job).is_file() for job in jobs):
             _discard_new(layout, config)  # a folder this build made and finished nothing in: leave no trace

@@ -12,12 +12,12 @@ from typing import Final
 import numpy as np
 
 from datagen.analysis.audit.check import MAX_OFFENDERS, Check
+from datagen.atomic import is_temporary
 from datagen.config.inputs import parse_yaml, read_text
 from datagen.core.camera import Intrinsics
 from datagen.core.errors import DatagenError
 from datagen.dataset.layout import DATA_YAML_KEYS, HYP_PATH_KEYS, MANIFEST_NAME
 from datagen.dataset.reader import DatasetIndex, DatasetMeta, DatasetView, image_size, plan_gaps
-from datagen.files import is_temporary
 
 #: Files Ultralytics writes into a dataset it trains on: label caches beside the label
 #: folders (``labels/train/00000.cache``, and ``.cache.npy`` while it writes one) and

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from datagen.analysis.audit.check import MANIFEST_TOLERANCE_PX, REASONS, Check, Finish, GroupPart, Recomputed, nan_error
-from datagen.core.labels import Exclusion, FrameLabels
+from datagen.core.label_boxes import Exclusion, FrameLabels
 from datagen.dataset.reader import DatasetMeta, DatasetView
 
 
