@@ -48,7 +48,7 @@ from matplotlib.figure import Figure
 from datagen.atomic import link_or_copy, write_figure
 from datagen.config import find_config, load_config, override_config
 from datagen.pipeline.build import build_dataset
-from datagen.pipeline.metadata import write_image_lists
+from datagen.pipeline.image_lists import write_image_lists
 from datagen.pipeline.plan import dataset_layout, plan_shards
 from datagen.report.plots import plot_evaluation
 

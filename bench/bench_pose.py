@@ -37,7 +37,7 @@ from datagen.config.schema import Config
 from datagen.core.training import TrainView
 from datagen.dataset.reader import load_dataset
 from datagen.pipeline.build import build_dataset
-from datagen.pipeline.metadata import write_placeholder_images
+from datagen.pipeline.image_lists import write_placeholder_images
 from datagen.pipeline.plan import dataset_layout, plan_shards
 
 ROOT = Path(__file__).resolve().parents[1]

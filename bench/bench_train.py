@@ -99,7 +99,7 @@ def contested(view) -> tuple[int, int]:
 def blank_images(root: Path, config) -> None:
     """Grey placeholder images and the image lists: Ultralytics' dataloader needs images to
     exist, not rendered ones (labels do not depend on pixels)."""
-    from datagen.pipeline.metadata import write_placeholder_images
+    from datagen.pipeline.image_lists import write_placeholder_images
     from datagen.pipeline.plan import dataset_layout, plan_shards
 
     write_placeholder_images(dataset_layout(root, config), plan_shards(config), config.camera.width,

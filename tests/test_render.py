@@ -25,7 +25,8 @@ from datagen.core.camera import Intrinsics, project_points, project_xyz
 from datagen.core.conventions import frame_rng, object_id, render_seed
 from datagen.core.errors import DatagenError
 from datagen.core.transforms import apply_transform, invert_rigid, make_transform, rotation_from_ypr
-from datagen.render.renderer import Renderer, visibility_tolerance_m
+from datagen.render.raycast import visibility_tolerance_m
+from datagen.render.renderer import Renderer
 from datagen.render.tonemap import haze, to_srgb8
 from datagen.render.world import SURFACES
 from datagen.scene.approach import FrameStates, frame_state

@@ -23,7 +23,7 @@ from datagen.config import load_config, override_config
 from datagen.dataset.layout import Layout
 from datagen.dataset.reader import load_dataset
 from datagen.pipeline.build import build_dataset
-from datagen.pipeline.metadata import write_placeholder_images
+from datagen.pipeline.image_lists import write_placeholder_images
 from datagen.pipeline.plan import dataset_layout, plan_shards
 
 pytestmark = pytest.mark.train

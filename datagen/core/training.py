@@ -3,7 +3,7 @@
 A label teaches a detector only if it survives the trainer's own transforms, the
 detection head can assign it to an anchor, and that assignment gives it a target
 that is not zero. Ultralytics 8.4 with the recipe of
-:func:`datagen.pipeline.metadata.hyp_yaml` (mosaic, scale, translate, rotation, shear and
+:func:`datagen.pipeline.training_yaml.hyp_yaml` (mosaic, scale, translate, rotation, shear and
 perspective all off) does this to a ``W x H`` image at ``imgsz``:
 
 1. **resize** (``BaseDataset.load_image``): the long side becomes ``imgsz``,

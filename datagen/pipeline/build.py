@@ -18,15 +18,13 @@ from datagen.core.errors import DatagenError
 from datagen.dataset.columns import read_manifest_summary
 from datagen.dataset.layout import LOCK_NAME, Layout
 from datagen.parallel import cpu_count
+from datagen.pipeline.dataset_card import write_dataset_card
+from datagen.pipeline.dataset_document import config_fingerprint
 from datagen.pipeline.estimate import frame_cost
 from datagen.pipeline.executors import EXECUTORS, Executor
 from datagen.pipeline.folder import DatasetLock, check_folder, prepare_folder, remove_owned, sweep_temporaries
-from datagen.pipeline.metadata import (
-    config_fingerprint,
-    write_dataset_card,
-    write_dataset_files,
-    write_image_lists,
-)
+from datagen.pipeline.image_lists import write_image_lists
+from datagen.pipeline.metadata import write_dataset_files
 from datagen.pipeline.plan import dataset_layout, plan_shards
 from datagen.pipeline.progress import BuildReport, ShardSummary
 from datagen.render.runtime import resolve_variant

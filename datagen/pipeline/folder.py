@@ -24,7 +24,7 @@ from datagen.core.errors import DatagenError
 from datagen.dataset.columns import FILE_COLUMNS
 from datagen.dataset.layout import LOCK_NAME, MANIFEST_NAME, POSE_IMAGES_LINK, Layout
 from datagen.paths import DatasetFolder, regular_file
-from datagen.pipeline.metadata import is_dataset_card
+from datagen.pipeline.dataset_card import is_dataset_card
 from datagen.pipeline.plan import dataset_layout, plan_shards
 from datagen.scene.resolved import Scene
 

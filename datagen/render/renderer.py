@@ -12,19 +12,12 @@ reach kilometres and Mitsuba computes in float32. A renderer builds its Mitsuba
 objects when first posed and holds the process's only scene while it does
 (:func:`datagen.render.runtime.hold_scene`).
 
-Besides the image, a geometry pass casts one ray through each pixel centre
-(continuous convention: pixel (i, j) has its centre at (i + 0.5, j + 0.5)), on the
-variant's device, for the camera z-depth ``Z`` and the
-:func:`~datagen.core.conventions.object_id` of each object (0 where the ray hits the
-sea or nothing). Feature visibility is a
-ray cast from the camera to each feature point: a point is visible when it is in
-front of the camera and nothing is hit before it, up to
-:func:`visibility_tolerance_m`.
+Besides the image, the geometry pass and feature visibility cast rays in the posed scene
+(:class:`~datagen.render.raycast.RayCasting`).
 """
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final
 
@@ -35,51 +28,34 @@ from datagen.assets.loader import load_mesh
 from datagen.assets.models import material_class
 from datagen.assets.models.drogue import hose_faces, hose_placeholder, hose_vertices
 from datagen.core.camera import Intrinsics, distortion_margin_px
-from datagen.core.conventions import OBJECT_NAMES, RIGID_OBJECTS, object_id, pixel_centres
+from datagen.core.conventions import RIGID_OBJECTS, object_id
 from datagen.core.transforms import make_transform
 from datagen.render.mitsuba import (
     jit_array,
-    jit_vectors,
     mitsuba_mesh,
     sensor_dict,
     set_buffer,
-    visible,
     world_from_micam,
 )
-from datagen.render.procedural import drjit_ops
+from datagen.render.raycast import RayCasting
 from datagen.render.runtime import hold_scene, use_variant
 from datagen.render.sky import sky_class
 from datagen.render.timing import DENOISE, PATH_TRACING, StageClock
 from datagen.render.tonemap import exposure_scale, haze
-from datagen.render.world import CLOUD_LAYERS, SEA_COLOUR, SURFACES, World
+from datagen.render.world import CLOUD_LAYERS, SEA_COLOUR, World
 from datagen.scene.look import FrameLook, Material, neutral_look, sun_direction_world
 
 if TYPE_CHECKING:
-    from datagen.core.features import FeatureTable
     from datagen.scene.approach import FrameState
     from datagen.scene.resolved import Scene
 
-__all__ = ["RenderResult", "Renderer", "visibility_tolerance_m"]
+__all__ = ["RenderResult", "Renderer"]
 
 #: Sea level is world z = 0; the sea plane is a square this many metres across (its edge
 #: then lies under 0.04 degrees below the horizon, where sunsky is black, seen from 8 km).
 SEA_SIZE_M: Final = 2.0e7
-#: A ray cast by the geometry pass passes a cloud layer where the layer's opacity is below this.
-CLOUD_PASS_OPACITY: Final = 0.5
 #: With clouds, the render frame's origin is at a multiple of this altitude (see Renderer._render_origin).
 CLOUD_REFERENCE_STEP_M: Final = 50.0
-
-
-def visibility_tolerance_m(distance_m: NDArray[np.float64]) -> NDArray[np.float64]:
-    """How far before a feature point a hit still counts as the point itself: 1 cm
-    plus 1e-4 of the distance (float32 intersection error and mesh rounding)."""
-    return 0.01 + 1e-4 * np.asarray(distance_m)
-
-
-def _past(t, maximum):
-    """How far a ray that passes a cloud layer at distance ``t`` goes on before it is cast
-    again: just past the layer (``maximum``: numpy's or Dr.Jit's)."""
-    return t + 1e-3 * maximum(t, 1.0)
 
 
 @dataclass(frozen=True)
@@ -106,7 +82,7 @@ def _principled(m: Material) -> dict:
     }
 
 
-class Renderer:
+class Renderer(RayCasting):
     """A scene loaded once; :meth:`render` poses and re-dresses it per frame."""
 
     def __init__(self, scene: Scene, *, spp: int | None = None, variant: str | None = None,
@@ -393,194 +369,3 @@ class Renderer:
 
         out = denoise_render(image, guides=self.guides, quality=self.config.render.denoise_quality)
         return np.maximum(np.array(out, dtype=np.float32), np.float32(0.0))
-
-    @functools.cache  # noqa: B019 (one renderer per process; two strides at most)
-    def _pixel_rays(self, stride: int = 1) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-        """Unit directions (camera frame) through every pixel centre (``stride`` 1) or
-        through the centre of every ``stride`` x ``stride`` block, and their z components
-        (z-depth per unit of ray length); computed once."""
-        k = self.intrinsics
-        uu, vv = pixel_centres(k.width, k.height, stride)
-        d_cam = np.stack([(uu - k.cx) / k.fx, (vv - k.cy) / k.fy, np.ones_like(uu)], axis=-1).reshape(-1, 3)
-        norm = np.linalg.norm(d_cam, axis=1)
-        return (d_cam / norm[:, None]).astype(np.float32), (1.0 / norm).astype(np.float32)
-
-    def cast(self, origin_render: NDArray, directions_render: NDArray):
-        """Intersect rays (render frame); returns (t, object id, surface) as numpy arrays,
-        ``surface`` indexing :data:`datagen.render.world.SURFACES`. A ray passes through a
-        cloud layer where the layer's opacity is below :data:`CLOUD_PASS_OPACITY` (Mitsuba's
-        intersection sees the layer's cells; the mask is a texture). Vectorized variants
-        cast on their device (:meth:`_cast_on_device`, from the posed camera), a scalar one
-        here, one ray at a time."""
-        n = len(directions_render)
-        directions = np.asarray(directions_render, dtype=np.float32)
-        if not self.variant.startswith("scalar"):  # on the variant's device
-            mi = self._mi
-            d = jit_vectors(mi.Vector3f, np.resize(directions, (max(n, 2), 3)))  # one ray is cast as two
-            t, ids, surface = self._cast_on_device(d)
-            return tuple(np.asarray(a)[:n] for a in (t, ids, surface))
-        origins = np.broadcast_to(np.asarray(origin_render, dtype=np.float32), (n, 3)).copy()
-        t = np.full(n, np.inf)
-        ids = np.zeros(n, dtype=np.uint32)
-        surface = np.zeros(n, dtype=np.uint8)
-        travelled = np.zeros(n)
-        todo = np.arange(n)
-        backgrounds = ("sea", *CLOUD_LAYERS)
-        for _ in range(len(CLOUD_LAYERS) + 1):
-            valid, hit_t, hit_ids, background = self._intersect(origins[todo], directions[todo])
-            surface_now = np.where(valid, SURFACES.index("object"), SURFACES.index("sky")).astype(np.uint8)
-            surface_now[background == 0] = SURFACES.index("sea")
-            passing = np.zeros(len(todo), dtype=bool)
-            for code, name in enumerate(backgrounds[1:], start=1):
-                on = background == code
-                if on.any():
-                    surface_now[on] = SURFACES.index("cloud")
-                    at = origins[todo[on]] + directions[todo[on]] * hit_t[on, None].astype(np.float32)
-                    opacity = self.world.cloud_opacity_at(name, at[:, :2], travelled[todo[on]] + hit_t[on])
-                    passing[np.flatnonzero(on)[opacity < CLOUD_PASS_OPACITY]] = True
-            done = ~passing
-            idx = todo[done]
-            t[idx] = travelled[idx] + hit_t[done]
-            ids[idx] = hit_ids[done]
-            surface[idx] = surface_now[done]
-            if not passing.any():
-                break
-            go = todo[passing]
-            step = _past(hit_t[passing], np.maximum)
-            travelled[go] += step
-            origins[go] += directions[go] * step[:, None].astype(np.float32)
-            todo = go
-        return t, ids, surface
-
-    def _intersect(self, origins: NDArray[np.float32], directions: NDArray[np.float32]):
-        """First hits of rays under a scalar variant, one ray at a time (slow; shapes go by
-        their names): (valid, t (inf on a miss), object id, background code (index into
-        ``("sea", *CLOUD_LAYERS)``, -1 for none))."""
-        mi = self._mi
-        n = len(origins)
-        valid, hit_t = np.zeros(n, dtype=bool), np.full(n, np.inf)
-        ids, background = np.zeros(n, np.uint32), np.full(n, -1)
-        codes = {name: c for c, name in enumerate(("sea", *CLOUD_LAYERS))}
-        for i in range(n):
-            ray = mi.Ray3f(mi.Point3f(*(float(v) for v in origins[i])), mi.Vector3f(*(float(v) for v in directions[i])))
-            si = self.scene.ray_intersect(ray)
-            if si.is_valid():
-                valid[i], hit_t[i] = True, si.t
-                shape = str(si.shape.id())
-                name = shape.split("_")[0]  # shape ids are object_pN or hose
-                ids[i] = object_id(name) if name in OBJECT_NAMES else 0
-                background[i] = codes.get(shape, -1)
-        return valid, hit_t, ids, background
-
-    def geometry_pass(self, stride: int = 1) -> tuple[NDArray[np.float32], NDArray[np.uint32], NDArray[np.uint8]]:
-        """Camera z-depth, object id and surface (:data:`~datagen.render.world.SURFACES`)
-        at every pixel centre; with ``stride`` 2, one ray per 2 x 2 block (at its centre),
-        repeated over the block (what the camera model and the image statistics need)."""
-        k = self.intrinsics
-        d_cam, z_per_t = self._pixel_rays(stride)
-        w, h = -(-k.width // stride), -(-k.height // stride)
-        r = self._world_from_cam[:3, :3].astype(np.float32)  # the render frame shares the world's axes
-        if self.variant.startswith("scalar"):
-            t, ids, surface = self.cast(self._camera_render, d_cam @ r.T)
-            depth = t * z_per_t
-        else:  # the rays made and rotated on the device
-            mi, dr = self._mi, self._dr
-            d_dev, z_dev = self._device_rays(stride)
-            m = [[dr.opaque(mi.Float, float(r[i, j])) for j in range(3)] for i in range(3)]
-            d = mi.Vector3f(*(m[i][0] * d_dev.x + m[i][1] * d_dev.y + m[i][2] * d_dev.z for i in range(3)))
-            t, ids, surface = self._cast_on_device(d)
-            depth = t * z_dev
-            dr.eval(depth)
-            depth, ids, surface = (np.asarray(a) for a in (depth, ids, surface))
-        out = (depth.reshape(h, w).astype(np.float32), ids.reshape(h, w).astype(np.uint32),
-               surface.reshape(h, w).astype(np.uint8))
-        if stride == 1:
-            return out
-        return tuple(np.repeat(np.repeat(a, stride, axis=0), stride, axis=1)[:k.height, :k.width] for a in out)
-
-    @functools.cache  # noqa: B019 (one renderer per process; two strides at most)
-    def _device_rays(self, stride: int):
-        """:meth:`_pixel_rays` as Dr.Jit arrays on the variant's device (made once, opaque)."""
-        mi, dr = self._mi, self._dr
-        d_cam, z_per_t = self._pixel_rays(stride)
-        rays = jit_vectors(mi.Vector3f, d_cam), jit_array(mi.Float, z_per_t)
-        dr.make_opaque(*rays)
-        return rays
-
-    def _cast_on_device(self, d):
-        """:meth:`cast` of rays ``d`` (``mi.Vector3f``, render frame) from the posed camera, as
-        Dr.Jit work on the variant's device: (t, object id, surface), evaluated there. The
-        same as the scalar loop but for float32 rounding of the distance travelled through
-        cloud layers (a pixel or two of 2 million at a cloud's edge)."""
-        mi, dr = self._mi, self._dr
-        n = dr.width(d)
-        o = mi.Point3f(*(dr.zeros(mi.Float, n) + dr.opaque(mi.Float, float(c)) for c in self._camera_render))
-        id_table, codes = self._id_table, self._background_codes
-        travelled = dr.opaque(mi.Float, 0.0, n)
-        t_out = dr.opaque(mi.Float, dr.inf, n)
-        ids_out = dr.opaque(mi.UInt32, 0, n)
-        surface_out = dr.opaque(mi.UInt32, 0, n)
-        active = dr.opaque(mi.Bool, True, n)
-        dr.make_opaque(d, o)
-        # Each step is evaluated on its own, so that every kernel is the same whichever
-        # layers a frame's rays meet, and how many passes they take.
-        layers = ("sea", *CLOUD_LAYERS)
-        ops = drjit_ops()
-        for _ in range(len(CLOUD_LAYERS) + 1):
-            si = self.scene.ray_intersect(mi.Ray3f(o, d), ray_flags=mi.RayFlags.Minimal, coherent=True,
-                                          active=active)
-            shape = dr.reinterpret_array(mi.UInt32, si.shape)
-            valid = active & si.is_valid()
-            known = valid & (shape + 1 < dr.width(codes))
-            ids = dr.gather(mi.UInt32, id_table, shape, valid & (shape < dr.width(id_table)))
-            code = dr.select(known, dr.gather(mi.Int32, codes, shape + 1, known), -1)
-            surface = mi.UInt32(dr.select(valid, SURFACES.index("object"), SURFACES.index("sky")))
-            surface = dr.select(code == 0, SURFACES.index("sea"), surface)
-            surface = dr.select(code > 0, SURFACES.index("cloud"), surface)
-            hit_t = si.t
-            dr.eval(hit_t, ids, code, surface)
-            passing = dr.opaque(mi.Bool, False, n)
-            for c, name in enumerate(layers[1:], start=1):
-                layer = self.world.cloud_layer(name)
-                if layer is None:
-                    continue
-                at = dr.compress(active & (code == c))  # the rays that met this layer
-                met = dr.width(at)
-                if met < 2:  # the same kernels whether 0, 1 or many rays met the layer: two lanes in memory
-                    at = jit_array(mi.UInt32, np.resize(np.asarray(at, dtype=np.uint32), 2) if met else [0, 0])
-                real = dr.arange(mi.UInt32, dr.width(at)) < dr.opaque(mi.UInt32, met)
-                t = dr.gather(mi.Float, hit_t, at)
-                p = dr.gather(mi.Point3f, o, at) + dr.gather(mi.Vector3f, d, at) * t
-                opacity = layer(p.x, p.y, (dr.gather(mi.Float, travelled, at) + t) * self.world.pixel_rad, ops)
-                dr.scatter(passing, opacity < CLOUD_PASS_OPACITY, at, real)
-                dr.eval(passing)
-            done = active & ~passing
-            t_out = dr.select(done, travelled + hit_t, t_out)
-            ids_out = dr.select(done, ids, ids_out)
-            surface_out = dr.select(done, surface, surface_out)
-            active = passing
-            step = _past(hit_t, dr.maximum)
-            travelled = dr.select(passing, travelled + step, travelled)
-            o = dr.select(passing, o + d * step, o)
-            dr.eval(t_out, ids_out, surface_out, active, travelled, o)
-            if not dr.any(active)[0]:
-                break
-        return t_out, ids_out, surface_out
-
-    def feature_visibility(self, state: FrameState, features: FeatureTable
-                           ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-        """Per feature: the fraction of its points visible from the camera and whether
-        its centre is. Call after :meth:`pose` (or :meth:`render`) for the same state."""
-        cam_pos = state.world_from_cam[:3, 3]
-        world_from_obj = np.stack([state.world_from(o) for o in features.objects])[features.object_index]
-        pts = np.concatenate([features.points_model, features.center_model[:, None]], axis=1)  # (F, P+1, 3)
-        world = np.einsum("fij,fpj->fpi", world_from_obj[:, :3, :3], pts) + world_from_obj[:, None, :3, 3]
-        rel = world.reshape(-1, 3) - cam_pos  # from the camera
-        tolerance = visibility_tolerance_m(np.linalg.norm(rel, axis=1))
-        in_front = rel @ state.world_from_cam[:3, 2] > 0
-        origin = self._camera_render  # the camera in the render frame
-        seen = (visible(self.scene, origin, rel + origin, tolerance) & in_front).reshape(world.shape[:2])
-        p = features.points_model.shape[1]
-        mask = np.arange(p)[None, :] < features.n_points[:, None]
-        fraction = (seen[:, :p] & mask).sum(axis=1) / features.n_points
-        return fraction, seen[:, p]

@@ -3,10 +3,12 @@
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import re
 from collections import Counter
+from dataclasses import dataclass
 from typing import Final
 
 import numpy as np
@@ -62,15 +64,61 @@ def _parse_lines(rows: list[str], nc: int, columns: int) -> tuple[NDArray[np.flo
     return values, problems
 
 
+@dataclass
+class _LabelLines:
+    """Every line of every readable label file of a view, in (frame, line) order: its text,
+    frame row and line number, its values (NaN where it is not well formed) and problem,
+    and per file (by frame row) its path, first line and line count."""
+
+    view: DatasetView
+    texts: list[str]
+    row: NDArray[np.int64]
+    number: NDArray[np.int64]
+    values: NDArray[np.float64]
+    problems: list[str | None]
+    files: dict[int, tuple[str, int, int]]
+
+    @classmethod
+    def read(cls, view: DatasetView, lines: Check) -> _LabelLines:
+        """The view's label files, read and parsed (an unreadable file fails ``lines``)."""
+        texts: list[str] = []
+        frame_rows: list[int] = []
+        numbers: list[int] = []
+        files: dict[int, tuple[str, int, int]] = {}
+        values_parts, problems = [], []
+        for b, rel, rows in label_files(view, view.label_path, lines):
+            files[b] = (rel, len(texts), len(rows))
+            values, why = _parse_lines(rows, len(view.features), 5)
+            values_parts.append(values)
+            problems += why
+            texts += rows
+            frame_rows += [b] * len(rows)
+            numbers += range(1, len(rows) + 1)
+        values = np.concatenate(values_parts) if values_parts else np.zeros((0, 5))
+        return cls(view, texts, np.asarray(frame_rows, dtype=np.int64), np.asarray(numbers, dtype=np.int64), values,
+                   problems, files)
+
+    def where(self, i: int) -> str:
+        """Line ``i``'s file and line number."""
+        return f"{self.view.label_path[self.row[i]]}:{self.number[i]}"
+
+    def seq(self, i: int, sub: int) -> int:
+        """Line ``i``'s ``sub``-th failure, in the order the rules run on one line."""
+        return int(self.number[i]) * 8 + sub
+
+    @functools.cached_property
+    def well(self) -> NDArray[np.int64]:
+        """The indices of the well-formed lines."""
+        return np.flatnonzero(np.array([p is None for p in self.problems], dtype=bool))
+
+
 def check_label_files(view: DatasetView, labels: FrameLabels) -> tuple[list[Check], NDArray[np.float64]]:
     """The per-line checks, and every well-formed line as a row ``(frame row, class, cx, cy, w, h)``.
 
     Vectorized over the view's lines; the failures, their order (frame, line, then the
     order the rules are listed in below) and their scores are those of checking one line
     at a time."""
-    k = view.intrinsics
-    w, h, m = k.width, k.height, view.edge_margin_px
-    nc = len(view.features)
+    m = view.edge_margin_px
     lines = Check("label_lines", "every label line equals its manifest box (class, centre, size; to the "
                   "file's rounding) and every labeled feature has exactly one line")
     drift = Check("centre_drift", f"label-file box centres lie within {DRIFT_LIMIT_PX:g} px of the projection "
@@ -79,65 +127,61 @@ def check_label_files(view: DatasetView, labels: FrameLabels) -> tuple[list[Chec
                    "border and no labeled feature has a point at or behind the camera plane")
     rules = Check("ultralytics_rules", "label files follow Ultralytics' rules: 5 columns, integer class < nc, "
                   "values in [0, 1], positive size, no duplicate rows")
-    # Every line of every readable file, in (frame, line) order.
-    texts: list[str] = []
-    frame_rows: list[int] = []
-    numbers: list[int] = []
-    files: dict[int, tuple[str, int, int]] = {}  # row -> (path, first line index, line count)
-    values_parts, problems = [], []
-    for b, rel, rows in label_files(view, view.label_path, lines):
-        files[b] = (rel, len(texts), len(rows))
-        values, why = _parse_lines(rows, nc, 5)
-        values_parts.append(values)
-        problems += why
-        texts += rows
-        frame_rows += [b] * len(rows)
-        numbers += range(1, len(rows) + 1)
-    n_lines = len(texts)
-    rules.checked = lines.checked = n_lines
-    values = np.concatenate(values_parts) if values_parts else np.zeros((0, 5))
-    row = np.asarray(frame_rows, dtype=np.int64)
-    number = np.asarray(numbers, dtype=np.int64)
+    read = _LabelLines.read(view, lines)
+    rules.checked = lines.checked = len(read.texts)
+    drift.checked = margin.checked = len(read.well)
+    _ultralytics_rules(read, rules)
+    _label_lines(read, labels, lines)
+    _centre_drift(read, labels, drift)
+    _edge_margin_and_front(read, labels, margin)
+    idx = read.well
+    parsed = np.column_stack([read.row[idx].astype(np.float64), read.values[idx]]) if len(idx) else np.zeros((0, 6))
+    return [lines, drift, margin, rules], parsed
 
-    def where(i: int) -> str:
-        return f"{view.label_path[row[i]]}:{number[i]}"
 
-    def seq(i: int, sub: int) -> int:  # a line's failures in the order the rules run
-        return int(number[i]) * 8 + sub
-
-    well = np.array([p is None for p in problems], dtype=bool)
-    for i in np.flatnonzero(~well):
-        rules.fail(where(i), problems[i], row=row[i], seq=seq(i, 0))
-    idx = np.flatnonzero(well)
-    v, b, f = values[idx], row[idx], values[idx, 0].astype(np.int64)
+def _ultralytics_rules(read: _LabelLines, rules: Check) -> None:
+    """Lines that are not 5 numbers with an integer class under nc, values outside [0, 1] or
+    a size not positive, and a file's duplicate rows (on their second occurrence)."""
+    for i, problem in enumerate(read.problems):
+        if problem is not None:
+            rules.fail(read.where(i), problem, row=read.row[i], seq=read.seq(i, 0))
+    idx = read.well
+    v = read.values[idx]
     outside = (v[:, 1:].min(axis=1) < 0) | (v[:, 1:].max(axis=1) > 1) | (v[:, 3] <= 0) | (v[:, 4] <= 0)
     for i in idx[outside]:
-        rules.fail(where(i), f"values {texts[i].split()[1:]} outside [0, 1] or a size not positive", row=row[i],
-                   seq=seq(i, 1))
-    # Duplicate rows (same tokens) and second lines of a class, per file: flagged on the second occurrence.
-    for b_file, (_rel, start, count) in files.items():
+        rules.fail(read.where(i), f"values {read.texts[i].split()[1:]} outside [0, 1] or a size not positive",
+                   row=read.row[i], seq=read.seq(i, 1))
+    for b_file, (_rel, start, count) in read.files.items():
         mine = idx[np.searchsorted(idx, start):np.searchsorted(idx, start + count)]  # the file's well-formed lines
-        keys = [tuple(texts[i].split()) for i in mine]
-        classes = values[mine, 0].astype(np.int64)
+        keys = [tuple(read.texts[i].split()) for i in mine]
         if len(set(keys)) < len(keys):
             seen: Counter = Counter()
             for i, key in zip(mine, keys, strict=True):
                 seen[key] += 1
                 if seen[key] == 2:
-                    rules.fail(where(i), "duplicate row", row=b_file, seq=seq(i, 2))
+                    rules.fail(read.where(i), "duplicate row", row=b_file, seq=read.seq(i, 2))
+
+
+def _label_lines(read: _LabelLines, labels: FrameLabels, lines: Check) -> None:
+    """A file's second line of a class, a line of an excluded feature, a line that differs
+    from its manifest box, and (after the file's lines) a labeled feature without a line."""
+    view, idx = read.view, read.well
+    w, h = view.intrinsics.width, view.intrinsics.height
+    v, b, f = read.values[idx], read.row[idx], read.values[idx, 0].astype(np.int64)
+    for b_file, (_rel, start, count) in read.files.items():
+        mine = idx[np.searchsorted(idx, start):np.searchsorted(idx, start + count)]
+        classes = read.values[mine, 0].astype(np.int64)
         if len(set(classes.tolist())) < len(classes):
             per_class: Counter = Counter()
             for i, c in zip(mine, classes.tolist(), strict=True):
                 per_class[c] += 1
                 if per_class[c] == 2:
-                    lines.fail(where(i), f"class {c} has more than one line", row=b_file, seq=seq(i, 0))
+                    lines.fail(read.where(i), f"class {c} has more than one line", row=b_file, seq=read.seq(i, 0))
     labeled = labels.labeled[b, f]
     exclusion = labels.exclusion[b, f].astype(np.int64)
     for i, c, e in zip(idx[~labeled], f[~labeled], exclusion[~labeled], strict=True):
-        lines.fail(where(i), f"class {c} has a line but the feature is excluded ({REASONS[e]})", row=row[i],
-                   seq=seq(i, 1))
-        if e == Exclusion.BEHIND_CAMERA:
-            margin.fail(where(i), f"class {c} is behind the camera", row=row[i], seq=seq(i, 0))
+        lines.fail(read.where(i), f"class {c} has a line but the feature is excluded ({REASONS[e]})",
+                   row=read.row[i], seq=read.seq(i, 1))
     centre, box = labels.label_center_px[b, f], labels.label_xyxy[b, f]
     expected = np.stack([centre[:, 0] / w, centre[:, 1] / h, (box[:, 2] - box[:, 0]) / w, (box[:, 3] - box[:, 1]) / h],
                         axis=-1)
@@ -147,32 +191,53 @@ def check_label_files(view: DatasetView, labels: FrameLabels) -> tuple[list[Chec
     lines.worst = float(err_px[finite].max(initial=0.0))
     off = labeled & ~np.all(err <= LINE_TOLERANCE, axis=1)
     for i, c, e in zip(idx[off], f[off], err_px[off], strict=True):
-        lines.fail(where(i), f"class {c} differs from the manifest box by {e:.3g} px", float(e), row=row[i],
-                   seq=seq(i, 1))
-    cx, cy, bw, bh = v[:, 1] * w, v[:, 2] * h, v[:, 3] * w, v[:, 4] * h
-    drift.checked = margin.checked = len(idx)
-    true_centre = labels.center_px[b, f]
-    d = np.hypot(cx - true_centre[:, 0], cy - true_centre[:, 1])
-    drift.worst = float(d[np.isfinite(d)].max(initial=0.0))
-    if view.corrected:
-        far = ~(d <= DRIFT_LIMIT_PX)
-        for i, c, e in zip(idx[far], f[far], d[far], strict=True):
-            drift.fail(where(i), f"class {c} centre is {e:.3g} px from the true centre projection", float(e),
-                       row=row[i], seq=seq(i, 0))
-    inside = np.min([cx - bw / 2, cy - bh / 2, w - (cx + bw / 2), h - (cy + bh / 2)], axis=0)
-    near = inside < m - 1e-3
-    for i, c, e in zip(idx[near], f[near], inside[near], strict=True):
-        margin.fail(where(i), f"class {c} box is {e:.2f} px from the border, margin {m:g} px", float(m - e),
-                    row=row[i], seq=seq(i, 1))
-    # Labeled features without a line: after the file's lines.
+        lines.fail(read.where(i), f"class {c} differs from the manifest box by {e:.3g} px", float(e),
+                   row=read.row[i], seq=read.seq(i, 1))
     have = np.zeros(labels.labeled.shape, dtype=bool)
     have[b, f] = True
-    for b_file, (rel, _, count) in files.items():
+    for b_file, (rel, _, count) in read.files.items():
         for c in np.flatnonzero(labels.labeled[b_file] & ~have[b_file]):
             lines.fail(rel, f"class {c} is labeled in the manifest but has no line", row=b_file,
                        seq=(count + 1) * 8 + int(c))
-    parsed = np.column_stack([b.astype(np.float64), v]) if len(idx) else np.zeros((0, 6))
-    return [lines, drift, margin, rules], parsed
+
+
+def _line_boxes(read: _LabelLines) -> tuple[NDArray[np.float64], ...]:
+    """The well-formed lines' boxes in pixels: centre x and y, width and height."""
+    k, v = read.view.intrinsics, read.values[read.well]
+    return v[:, 1] * k.width, v[:, 2] * k.height, v[:, 3] * k.width, v[:, 4] * k.height
+
+
+def _centre_drift(read: _LabelLines, labels: FrameLabels, drift: Check) -> None:
+    """In a corrected dataset, a line whose centre lies farther than DRIFT_LIMIT_PX from the
+    projection of its feature's true centre."""
+    idx = read.well
+    b, f = read.row[idx], read.values[idx, 0].astype(np.int64)
+    cx, cy, _, _ = _line_boxes(read)
+    true_centre = labels.center_px[b, f]
+    d = np.hypot(cx - true_centre[:, 0], cy - true_centre[:, 1])
+    drift.worst = float(d[np.isfinite(d)].max(initial=0.0))
+    if read.view.corrected:
+        far = ~(d <= DRIFT_LIMIT_PX)
+        for i, c, e in zip(idx[far], f[far], d[far], strict=True):
+            drift.fail(read.where(i), f"class {c} centre is {e:.3g} px from the true centre projection", float(e),
+                       row=read.row[i], seq=read.seq(i, 0))
+
+
+def _edge_margin_and_front(read: _LabelLines, labels: FrameLabels, margin: Check) -> None:
+    """A line of a feature behind the camera, and a line whose box lies closer than the edge
+    margin to a border."""
+    view, idx = read.view, read.well
+    k, m = view.intrinsics, view.edge_margin_px
+    b, f = read.row[idx], read.values[idx, 0].astype(np.int64)
+    behind = labels.exclusion[b, f].astype(np.int64) == Exclusion.BEHIND_CAMERA
+    for i, c in zip(idx[behind], f[behind], strict=True):
+        margin.fail(read.where(i), f"class {c} is behind the camera", row=read.row[i], seq=read.seq(i, 0))
+    cx, cy, bw, bh = _line_boxes(read)
+    inside = np.min([cx - bw / 2, cy - bh / 2, k.width - (cx + bw / 2), k.height - (cy + bh / 2)], axis=0)
+    near = inside < m - 1e-3
+    for i, c, e in zip(idx[near], f[near], inside[near], strict=True):
+        margin.fail(read.where(i), f"class {c} box is {e:.2f} px from the border, margin {m:g} px", float(m - e),
+                    row=read.row[i], seq=read.seq(i, 1))
 
 
 def learnable_part(view: DatasetView, lines: NDArray[np.float64]) -> dict[str, NDArray]:
