@@ -21,7 +21,7 @@ from datagen.parallel import cpu_count
 from datagen.pipeline.dataset_card import write_dataset_card
 from datagen.pipeline.dataset_document import config_fingerprint
 from datagen.pipeline.estimate import frame_cost
-from datagen.pipeline.executors import EXECUTORS, Executor
+from datagen.pipeline.executors import EXECUTORS, ExecutorName
 from datagen.pipeline.folder import DatasetLock, check_folder, prepare_folder, remove_owned, sweep_temporaries
 from datagen.pipeline.image_lists import write_image_lists
 from datagen.pipeline.metadata import write_dataset_files
@@ -32,7 +32,7 @@ from datagen.scene.resolved import Scene
 
 __all__ = ["build_dataset"]
 
-def build_dataset(config: Config, out: Path, *, workers: int | str | None = None, executor: Executor = "local",
+def build_dataset(config: Config, out: Path, *, workers: int | str | None = None, executor: ExecutorName = "local",
                   overwrite: bool = False, render: bool = True, progress: Progress | None = None,
                   threads: int | None = None) -> BuildReport:
     """Build (or resume) the dataset of ``config`` in ``out``.

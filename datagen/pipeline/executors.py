@@ -1,7 +1,7 @@
 """Executors: shards in parallel in local processes or as Ray tasks, and each worker's
 process setup.
 
-Each executor is a row of :data:`EXECUTORS` (:class:`ExecutorKind`): ``local`` runs shards
+Each executor is a row of :data:`EXECUTORS` (an :class:`Executor`): ``local`` runs shards
 in spawned processes (one scene and one Mitsuba thread pool of ``cores / workers`` threads
 each; one worker runs in the build's own process); ``ray`` runs them as Ray tasks on the
 cluster at ``RAY_ADDRESS``, else a local one.
@@ -19,7 +19,6 @@ import signal
 import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager
-from dataclasses import dataclass
 from typing import Final, Literal, Protocol
 
 from datagen.core.errors import DatagenError
@@ -30,10 +29,10 @@ from datagen.pipeline.progress import ShardSummary
 from datagen.pipeline.writer import FramesDone, ShardWriter, shard_groups
 from datagen.scene.resolved import Scene
 
-__all__ = ["EXECUTORS", "Executor", "ExecutorKind", "ShardRunner", "ctrl_c_flag", "local_threads", "ray_cluster",
-           "run_local", "run_ray"]
+__all__ = ["EXECUTORS", "Executor", "ExecutorName", "LocalExecutor", "RayExecutor", "ctrl_c_flag", "local_threads",
+           "ray_cluster", "run_local", "run_ray"]
 
-Executor = Literal["local", "ray"]
+ExecutorName = Literal["local", "ray"]
 
 
 
@@ -278,46 +277,68 @@ def run_ray(scene: Scene, layout: Layout, jobs: list[ShardJob], workers: int | N
             queue.shutdown()
 
 
-class ShardRunner(Protocol):
-    """An executor's way to run a build's shards: ``jobs`` into ``layout``, ``workers`` at a
-    time, each with ``threads`` Mitsuba threads; frames done go to ``progress`` and each
-    finished shard's summary to ``done``."""
+class Executor(Protocol):
+    """What a build needs of an executor (a row of :data:`EXECUTORS`)."""
 
-    def __call__(self, scene: Scene, layout: Layout, jobs: list[ShardJob], workers: int | None, render: bool,
-                 progress: FramesDone, done: Callable[[ShardSummary], None], threads: int | None = None) -> None: ...
+    def workers(self, requested: int | str | None, variant: str, render: bool) -> int | None:
+        """The workers for ``--workers`` (``"auto"``, a number or None) on a Mitsuba variant
+        (one line, :class:`~datagen.core.errors.DatagenError`, for a count it cannot run)."""
 
+    def cluster(self, workers: int | None) -> AbstractContextManager:
+        """What to connect to before any work (and leave after it)."""
 
-@dataclass(frozen=True)
-class ExecutorKind:
-    """What a build needs of an executor: its ``workers`` for ``--workers`` (``"auto"``, a
-    number or None) on a variant, the ``cluster`` to connect to before any work (and leave
-    after it), the cores its workers use (the build's estimate), and how it ``run``s shards."""
+    def cores(self, workers: int | None, shards: int, threads: int | None) -> int:
+        """The cores its workers use for ``shards`` shards (the build's estimate)."""
 
-    workers: Callable[[int | str | None, str, bool], int | None]
-    cluster: Callable[[int | None], AbstractContextManager]
-    cores: Callable[[int | None, int, int | None], int]  # (workers, shards to do, threads)
-    run: ShardRunner
+    def run(self, scene: Scene, layout: Layout, jobs: list[ShardJob], workers: int | None, render: bool,
+            progress: FramesDone, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
+        """Run ``jobs`` into ``layout``, ``workers`` at a time, each with ``threads`` Mitsuba
+        threads; frames done go to ``progress`` and each finished shard's summary to ``done``."""
 
 
-def _local_workers(workers: int | str | None, variant: str, render: bool) -> int:
-    """``--workers`` for local processes: ``auto`` suits the device, the default is one, and
-    no more than the cores this process may use."""
-    if workers == "auto":
-        return auto_workers(variant, cpu_count(), render=render)
-    if workers is not None and int(workers) > cpu_count():
-        raise DatagenError(f"--workers: {workers} is more than the {cpu_count()} cores this process may use "
-                           f"(at most {cpu_count()}; --executor ray for a cluster)")
-    return int(workers or 1)
+class LocalExecutor:
+    """Shards in spawned processes on this machine (:func:`run_local`)."""
+
+    def workers(self, requested: int | str | None, variant: str, render: bool) -> int:
+        """``auto`` suits the device, the default is one, and no more than the cores this
+        process may use."""
+        if requested == "auto":
+            return auto_workers(variant, cpu_count(), render=render)
+        if requested is not None and int(requested) > cpu_count():
+            raise DatagenError(f"--workers: {requested} is more than the {cpu_count()} cores this process may use "
+                               f"(at most {cpu_count()}; --executor ray for a cluster)")
+        return int(requested or 1)
+
+    def cluster(self, workers: int | None) -> AbstractContextManager:
+        return contextlib.nullcontext()
+
+    def cores(self, workers: int | None, shards: int, threads: int | None) -> int:
+        busy = max(1, min(workers or 1, shards))
+        return min(busy * local_threads(busy, threads), cpu_count())
+
+    def run(self, scene: Scene, layout: Layout, jobs: list[ShardJob], workers: int | None, render: bool,
+            progress: FramesDone, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
+        run_local(scene, layout, jobs, workers or 1, render, progress, done, threads)
 
 
-def _local_cores(workers: int | None, shards: int, threads: int | None) -> int:
-    busy = max(1, min(workers or 1, shards))
-    return min(busy * local_threads(busy, threads), cpu_count())
+class RayExecutor:
+    """Shards as Ray tasks on the cluster at ``RAY_ADDRESS``, else a local one (:func:`run_ray`)."""
+
+    def workers(self, requested: int | str | None, variant: str, render: bool) -> int | None:
+        """``auto`` and the default: one per node (:func:`run_ray`); a count is checked
+        against the cluster's CPUs when it connects."""
+        return None if requested == "auto" else (int(requested) if requested is not None else None)
+
+    def cluster(self, workers: int | None) -> AbstractContextManager:
+        return ray_cluster(workers)
+
+    def cores(self, workers: int | None, shards: int, threads: int | None) -> int:
+        return cpu_count()
+
+    def run(self, scene: Scene, layout: Layout, jobs: list[ShardJob], workers: int | None, render: bool,
+            progress: FramesDone, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
+        run_ray(scene, layout, jobs, workers, render, progress, done, threads)
 
 
 #: The executors ``datagen build --executor`` names.
-EXECUTORS: Final[dict[str, ExecutorKind]] = {
-    "local": ExecutorKind(_local_workers, lambda workers: contextlib.nullcontext(), _local_cores, run_local),
-    "ray": ExecutorKind(lambda workers, variant, render: None if workers == "auto" else workers, ray_cluster,
-                        lambda workers, shards, threads: cpu_count(), run_ray),
-}
+EXECUTORS: Final[dict[ExecutorName, Executor]] = {"local": LocalExecutor(), "ray": RayExecutor()}

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
@@ -24,6 +24,9 @@ from datagen.core.label_boxes import FrameLabels
 from datagen.scene.approach import FrameState, FrameStates
 from datagen.scene.look import FrameLook, frame_look
 from datagen.scene.resolved import Scene
+
+if TYPE_CHECKING:
+    from datagen.render.renderer import RenderResult
 
 __all__ = ["TRAINING_IMAGE_STAGE", "FrameDraws", "draw_frame", "frame_labels", "object_labels", "shard_labels",
            "training_image"]
@@ -85,7 +88,7 @@ def object_labels(scene: Scene, draws: FrameDraws) -> FrameLabels:
     return shard_labels(scene, [draws])[1].frame(0)
 
 
-def training_image(result, look: FrameLook) -> tuple[np.ndarray, dict]:
+def training_image(result: RenderResult, look: FrameLook) -> tuple[np.ndarray, dict]:
     """The 8-bit sRGB training image of a :class:`~datagen.render.renderer.RenderResult`
     (through the sensor's JPEG round trip when the look has one) and what the render
     measured, the image statistics included (:data:`datagen.dataset.columns.MEASURED_COLUMNS`)."""

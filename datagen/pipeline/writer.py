@@ -19,6 +19,7 @@ from collections import Counter, deque
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -42,6 +43,9 @@ from datagen.pipeline.progress import ShardSummary
 from datagen.render.timing import StageClock
 from datagen.scene.approach import FrameStates
 from datagen.scene.resolved import Scene
+
+if TYPE_CHECKING:
+    from datagen.render.renderer import Renderer
 
 __all__ = ["MAX_GROUP_SHARDS", "MAX_PENDING_WRITES", "FramesDone", "ShardWriter", "shard_groups", "timed_frame"]
 
@@ -100,7 +104,7 @@ class ShardWriter:
         self.scene = scene
         self.states = FrameStates(scene.config)  # each approach chain simulated once per process
         self.layout = layout  # the build's (datagen.pipeline.plan.dataset_layout)
-        self.renderer = None
+        self.renderer: Renderer | None = None
         self._stop: Callable[[], bool] = lambda: False
         # Images are encoded and written by one background thread while the next frame
         # renders; at most MAX_PENDING_WRITES frames wait, so memory stays bounded.
@@ -252,7 +256,8 @@ class ShardWriter:
             self._writes.popleft().result()
 
 
-def timed_frame(scene: Scene, renderer, states: FrameStates, i: int, image: Path) -> tuple[float, dict[str, float]]:
+def timed_frame(scene: Scene, renderer: Renderer, states: FrameStates, i: int, image: Path
+                ) -> tuple[float, dict[str, float]]:
     """Frame ``i`` made as a build makes it (draws, labels, render, feature visibility, the
     training image), its image written to ``image`` (PNG, or JPEG by the suffix) in this
     thread; its wall seconds, whole and per stage (the render's stages included, ``other``
