@@ -45,7 +45,7 @@ from datagen.scene.approach import FrameStates
 from datagen.scene.resolved import Scene
 
 if TYPE_CHECKING:
-    from datagen.render.renderer import Renderer
+    from datagen.render.renderer import FrameRenderer
 
 __all__ = ["MAX_GROUP_SHARDS", "MAX_PENDING_WRITES", "FramesDone", "ShardWriter", "shard_groups", "timed_frame"]
 
@@ -104,7 +104,7 @@ class ShardWriter:
         self.scene = scene
         self.states = FrameStates(scene.config)  # each approach chain simulated once per process
         self.layout = layout  # the build's (datagen.pipeline.plan.dataset_layout)
-        self.renderer: Renderer | None = None
+        self.renderer: FrameRenderer | None = None
         self._stop: Callable[[], bool] = lambda: False
         # Images are encoded and written by one background thread while the next frame
         # renders; at most MAX_PENDING_WRITES frames wait, so memory stays bounded.
@@ -256,7 +256,7 @@ class ShardWriter:
             self._writes.popleft().result()
 
 
-def timed_frame(scene: Scene, renderer: Renderer, states: FrameStates, i: int, image: Path
+def timed_frame(scene: Scene, renderer: FrameRenderer, states: FrameStates, i: int, image: Path
                 ) -> tuple[float, dict[str, float]]:
     """Frame ``i`` made as a build makes it (draws, labels, render, feature visibility, the
     training image), its image written to ``image`` (PNG, or JPEG by the suffix) in this

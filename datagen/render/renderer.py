@@ -19,7 +19,7 @@ Besides the image, the geometry pass and feature visibility cast rays in the pos
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING, Final, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,10 +46,11 @@ from datagen.render.world import CLOUD_LAYERS, SEA_COLOUR, World
 from datagen.scene.look import FrameLook, Material, neutral_look, sun_direction_world
 
 if TYPE_CHECKING:
+    from datagen.core.features import FeatureTable
     from datagen.scene.approach import FrameState
     from datagen.scene.resolved import Scene
 
-__all__ = ["RenderResult", "Renderer"]
+__all__ = ["FrameRenderer", "RenderResult", "Renderer"]
 
 #: Sea level is world z = 0; the sea plane is a square this many metres across (its edge
 #: then lies under 0.04 degrees below the horizon, where sunsky is black, seen from 8 km).
@@ -70,6 +71,18 @@ class RenderResult:
     surface: NDArray[np.uint8] | None = None  # (H, W) datagen.render.world.SURFACES codes (geometry pass)
     measured: dict | None = None  # what the camera model measured (datagen.render.sensor.apply_sensor)
     stages: dict[str, float] | None = None  # wall seconds per stage (datagen.render.timing.StageClock)
+
+
+class FrameRenderer(Protocol):
+    """What the build asks of a renderer (:class:`Renderer` is the one there is): a frame's
+    image and geometry from its state and look, and its features' visibility after it."""
+
+    def render(self, state: FrameState, look: FrameLook, seed: int, *, geometry: bool = False) -> RenderResult:
+        """The frame, posed and rendered with Mitsuba's sampler seed ``seed``."""
+
+    def feature_visibility(self, state: FrameState, features: FeatureTable
+                           ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """Per feature: the share of its points the camera sees, and whether it sees the centre."""
 
 
 def _principled(m: Material) -> dict:
