@@ -1,3 +1,5 @@
+"""``python -m datagen``: the command line (:mod:`datagen.cli`)."""
+
 from datagen.cli import main
 
 main()
