@@ -352,3 +352,13 @@ def test_files_ultralytics_writes_are_not_orphans(copy) -> None:
     assert checks(copy)["files"].passed
     (shard / "stray.txt").write_text("")
     assert not checks(copy)["files"].passed
+
+
+def test_the_reports_colour_key_names_the_colours_the_sheets_draw() -> None:
+    from datagen.report.audit_report import colour_key_html
+    from datagen.report.overlays import COLOURS, REGION
+
+    key = colour_key_html()
+    for name, (b, g, r) in [*COLOURS.items(), ("object region", REGION)]:
+        assert f"background:rgb({r},{g},{b})" in key and name in key
+    assert "magenta" not in key.lower() and "amber" not in key.lower()

@@ -617,3 +617,33 @@ def test_the_manifest_readme_recompute_example_runs_and_matches(tmp_path: Path) 
     np.testing.assert_array_equal(labels.labeled, labeled)
     np.testing.assert_allclose(labels.label_xyxy[labeled], np.array([f["label_xyxy"] for f in stored if f["labeled"]]),
                                atol=1e-6)
+
+
+def test_the_summary_explains_each_exclusion_and_names_the_classes_no_frame_labels(tmp_path: Path) -> None:
+    """The summary's classes never labeled are those with no label line in any label file,
+    for a new build and for a resumed one (from the manifests' metadata), and each reason
+    with features excluded is explained."""
+    from datagen.core.label_boxes import Exclusion
+
+    config = override_config(load_config("wingcam55"), {"dataset.frames": 40, "dataset.shard_size": 20})
+    root = tmp_path / "ds"
+    report = build_dataset(config, root, render=False)
+    lines_per_class = Counter(int(line.split()[0]) for path in root.glob("labels/**/*.txt")
+                              for line in path.read_text().splitlines())
+    unseen = [c for c in range(len(report.classes)) if not lines_per_class[c]]
+    assert report.never_labeled == unseen and 0 < len(unseen) < len(report.classes)
+    summary = "\n".join(report.lines())
+    assert f"never labeled in this build: {len(unseen)} of {len(report.classes)} classes" in summary
+    assert report.classes[unseen[0]] in summary
+    for reason in Exclusion:
+        if reason.reason and report.excluded[reason.reason]:
+            assert f"    {reason.reason}: {reason.meaning}" in summary
+    resumed = build_dataset(config, root, render=False)
+    assert resumed.resumed and resumed.never_labeled == unseen
+
+
+def test_every_exclusion_reason_has_a_meaning_of_its_own() -> None:
+    from datagen.core.label_boxes import Exclusion
+
+    meanings = [reason.meaning for reason in Exclusion]
+    assert all(meanings) and len(set(meanings)) == len(meanings)

@@ -104,3 +104,15 @@ def test_validate_names_a_bad_feature_file(tmp_path: Path) -> None:
     out = run("validate", str(config))
     assert out.returncode == 2 and "Traceback" not in out.stderr
     assert out.stderr.strip() == f"{features}: variants.baseline[3].class_id: value 2: duplicate class id (also at [2])"
+
+
+@pytest.mark.render
+def test_assets_preview_without_out_writes_previews_in_the_working_folder_and_no_tracked_file(tmp_path: Path) -> None:
+    from .support import ROOT, run_cli
+
+    tracked = ROOT / "assets" / "previews" / "drogue.png"
+    before = tracked.stat().st_mtime_ns
+    done = run_cli("assets", "preview", "--object", "drogue", "--spp", "1", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (tmp_path / "previews" / "drogue.png").stat().st_size > 0
+    assert tracked.stat().st_mtime_ns == before

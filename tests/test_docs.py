@@ -86,3 +86,25 @@ def test_headless_chromium_renders_the_home_quick_start_and_configuration_pages(
     dom = subprocess.run([*common, "--dump-dom", url], capture_output=True, text=True, timeout=120).stdout
     expected = {"": "corrected", "quickstart/": "scripts/install.sh", "reference/config/": "randomization.sea.waves"}
     assert expected[page] in dom and "md-header" in dom
+
+
+def test_the_configuration_reference_writes_every_default_as_yaml_a_config_could_hold() -> None:
+    import yaml
+    from pydantic import BaseModel
+    from pydantic_core import PydanticUndefined, to_jsonable_python
+
+    from datagen.config.key_reference import _sections, yaml_text
+
+    checked = 0
+    for _prefix, model in _sections():
+        for info in model.model_fields.values():
+            if info.default is PydanticUndefined and info.default_factory is None:
+                continue
+            value = info.default if info.default_factory is None else info.default_factory()
+            if isinstance(value, BaseModel):  # a section
+                continue
+            text = yaml_text(value)
+            assert "\n" not in text and not text.startswith("(") and text not in ("None", "True", "False")
+            assert yaml.safe_load(text) == to_jsonable_python(getattr(value, "value", value)), text
+            checked += 1
+    assert checked > 100

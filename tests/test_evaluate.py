@@ -241,3 +241,16 @@ def test_failure_texts_state_the_settings_they_were_judged_by() -> None:
     assert failure_text("too_few_matches", settings, 0.25) == "with fewer than 5 matched features of an object"
     assert failure_text("below_conf", settings, 0.4) == "with all detections below --conf 0.4"
     assert all(failure_text(r, settings, 0.25) != r for r in REASONS if r != "ok")
+
+
+def test_the_evaluate_lines_say_why_a_figure_is_missing_instead_of_a_dash() -> None:
+    from datagen.cli.commands import _at_contact, _mean_error
+
+    none = {"attempts": 0, "successes": 0, "mean_m": None, "plus_2sigma_m": None}
+    failed = {"attempts": 3, "successes": 0, "mean_m": None, "plus_2sigma_m": None}
+    solved = {"attempts": 3, "successes": 2, "mean_m": 0.021, "plus_2sigma_m": 0.034}
+    assert _at_contact(none, 0.5) == "at contact: no figure (no frame within 0.5 m of contact)"
+    assert _at_contact(failed, 0.5) == "at contact: no figure (none of the 3 frames within 0.5 m solved)"
+    assert _at_contact(solved, 0.5) == "at contact 2.10 cm (+2 sigma 3.40 cm, 2 frames)"
+    assert _mean_error({"mean_m": None}) == "mean error: no figure (no frame solved)"
+    assert _mean_error({"mean_m": 0.05}) == "mean error 5.00 cm"

@@ -14,6 +14,10 @@ from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import DatagenError
 from datagen.core.features import FEATURE_VARIANTS
 
+#: Where ``datagen assets preview`` writes without ``--out``: a working folder in the current
+#: one (never the repository's tracked ``assets/previews``).
+PREVIEWS_FOLDER = "previews"
+
 
 @assets_app.command("build")
 @user_errors
@@ -73,8 +77,8 @@ def assets_show(
 @user_errors
 def assets_preview(
     out: Annotated[Path | None, typer.Option("--out", parser=path_value,
-                                             help="Folder for the PNGs (default: assets/previews, the "
-                                             "repository's documentation).")] = None,
+                                             help="Folder for the PNGs (default: previews/ in the current "
+                                             "folder; the documentation's are in assets/previews).")] = None,
     objects: Annotated[list[str] | None, typer.Option("--object", help="Only this object (repeatable).")] = None,
     spp: Annotated[int, typer.Option("--spp", min=1, max=MAX_SPP, help="Samples per pixel.")] = 64,
     config: Annotated[Path | None, typer.Option("--config", parser=path_value,
@@ -86,7 +90,7 @@ def assets_preview(
     from datagen.report.contact_sheets import write_contact_sheet
 
     cfg = load_config(config) if config is not None else None
-    folder = output_path(out, "--out") if out else Path("assets") / "previews"
+    folder = output_path(out, "--out") if out else Path(PREVIEWS_FOLDER)
     for name in objects or RIGID_OBJECTS:
         name = _object_name(name)
         mesh_path, features_path = object_paths(cfg, name) if cfg else builtin_paths(name)

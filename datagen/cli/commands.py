@@ -342,15 +342,15 @@ def evaluate(
         d = summarize_detections(detector, DISTANCE_EDGES)["overall"]
         typer.echo(f"detector: {d['matched']} of {d['labeled']} labeled features found within {match_px:g} px "
                    f"of the true centre ({100 * (d['recall'] or 0):.1f}%), {d['mislocated']} further away, "
-                   f"{d['missed']} missed, {d['spurious']} spurious detections; centre error median "
-                   f"{_px(d['error_median_px'])}, 95th percentile {_px(d['error_p95_px'])}")
+                   f"{d['missed']} missed, {d['spurious']} spurious detections; "
+                   + (f"centre error median {d['error_median_px']:.2f} px, 95th percentile {d['error_p95_px']:.2f} px"
+                      if d['error_median_px'] is not None else "no centre error (no feature found)"))
     for source, result in runs:
         s = summarize(result, settings)
         what = f"noise {source['noise_px']:g} px" if source["source"] == "truth" else "predictions"
         contact = s["at"]["contact"]
         typer.echo(f"{what}: reliability {100 * (s['overall']['reliability'] or 0):.1f}% of {len(result['frame_id'])}, "
-                   f"mean error {_m(s['overall']['mean_m'])}, at contact {_m(contact['mean_m'])} "
-                   f"(+2 sigma {_m(contact['plus_2sigma_m'])}, {contact['successes']} frames), "
+                   f"{_mean_error(s['overall'])}, {_at_contact(contact, settings.contact_m)}, "
                    f"target {s['target']}")
         failures = [(r, n) for r, n in s["reasons"].items() if r != "ok" and n]
         if failures:
@@ -381,12 +381,26 @@ def export(
     typer.echo(f"wrote {format.upper()} export of {len(view)} frames: {written}")
 
 
-def _m(value: float | None) -> str:
-    return "-" if value is None else f"{value * 100:.2f} cm"
+def _at_contact(contact: dict, contact_m: float) -> str:
+    """The error at contact, or why there is no figure: no frame within ``contact_m`` of
+    contact, or none of them solved."""
+    if not contact["attempts"]:
+        return f"at contact: no figure (no frame within {contact_m:g} m of contact)"
+    if not contact["successes"]:
+        return f"at contact: no figure (none of the {contact['attempts']} frames within {contact_m:g} m solved)"
+    return (f"at contact {_m(contact['mean_m'])} (+2 sigma {_m(contact['plus_2sigma_m'])}, "
+            f"{contact['successes']} frames)")
 
 
-def _px(value: float | None) -> str:
-    return "-" if value is None else f"{value:.2f} px"
+def _mean_error(overall: dict) -> str:
+    """The mean PtD error, or why there is none (no frame solved)."""
+    if overall["mean_m"] is None:
+        return "mean error: no figure (no frame solved)"
+    return f"mean error {_m(overall['mean_m'])}"
+
+
+def _m(value: float) -> str:
+    return f"{value * 100:.2f} cm"
 
 
 @app.command()

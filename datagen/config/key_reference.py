@@ -82,11 +82,19 @@ def _default(info) -> str:
     value = info.default if info.default_factory is None else info.default_factory()
     if isinstance(value, BaseModel):
         return "(section)"
+    return f"`{text}`" if len((text := yaml_text(value))) < 60 else f"`{text[:57]}...`"
+
+
+def yaml_text(value: Any) -> str:
+    """A default as it is written in a YAML config, on one line (flow style: ``[receiver,
+    tanker]``, ``null``, ``true``, ``"auto"`` where a bare word would read as another type)."""
+    import yaml
+    from pydantic_core import to_jsonable_python
+
     if isinstance(value, enum.Enum):
         value = value.value
-    text = repr(value) if not isinstance(value, str) else f'"{value}"'
-    text = {"None": "null", "True": "true", "False": "false"}.get(text, text)
-    return f"`{text}`" if len(text) < 60 else f"`{text[:57]}...`"
+    return yaml.safe_dump(to_jsonable_python(value), default_flow_style=True, width=10**6).strip().removesuffix(
+        "\n...").strip()
 
 
 def _cell(text: str) -> str:

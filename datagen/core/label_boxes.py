@@ -35,7 +35,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Literal
+from typing import Final, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -66,6 +66,21 @@ class Exclusion(IntEnum):
     def reason(self) -> str | None:
         """The name recorded in manifests: ``None`` or e.g. ``"edge_margin"``."""
         return None if self is Exclusion.NONE else self.name.lower()
+
+    @property
+    def meaning(self) -> str:
+        """What the reason says of a feature in a frame, in a phrase."""
+        return _MEANINGS[self]
+
+
+_MEANINGS: Final = {
+    Exclusion.NONE: "labeled",
+    Exclusion.BEHIND_CAMERA: "a point or the centre at or behind the camera plane",
+    Exclusion.OFF_FRAME: "the label box reaches outside the image",
+    Exclusion.EDGE_MARGIN: "the label box inside the image but closer than labels.edge_margin_px to a border",
+    Exclusion.OCCLUDED: "fewer than labels.min_visible_fraction of its points visible in the rendered frame",
+    Exclusion.TOO_SMALL: "a side of the label box under the size a detector can learn (labels.small_boxes: exclude)",
+}
 
 
 @dataclass(frozen=True, eq=False)

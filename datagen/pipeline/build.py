@@ -68,7 +68,7 @@ def build_dataset(config: Config, out: Path, *, workers: int | str | None = None
     check_folder(layout)  # refuse someone else's folder before anything (the lock included) is created
     jobs = plan_shards(config)
     fingerprint = config_fingerprint(scene, render=render)
-    report = BuildReport(config.name, root, jobs)
+    report = BuildReport(config.name, root, jobs, classes=list(scene.features.name))
     created = not root.exists()
     try:
         with kind.cluster(workers), DatasetLock(root):
@@ -80,9 +80,11 @@ def build_dataset(config: Config, out: Path, *, workers: int | str | None = None
                 if manifest.is_file():
                     try:
                         counts = read_manifest_summary(manifest)
+                        per_class = counts.get("per_class")
                         summary = ShardSummary(job.name, int(counts.get("frames", len(job.frames))),
                                                int(counts.get("labels", 0)),
-                                               {str(k): int(v) for k, v in counts.get("excluded", {}).items()})
+                                               {str(k): int(v) for k, v in counts.get("excluded", {}).items()},
+                                               per_class=[int(n) for n in per_class] if per_class else None)
                     except Exception as exc:  # damaged outside datagen: manifests are written atomically
                         raise DatagenError(f"{manifest}: unreadable manifest ({type(exc).__name__}); delete it to "
                                            "render its shard again") from None

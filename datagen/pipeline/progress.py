@@ -29,10 +29,12 @@ class ShardSummary:
     blank: int = 0  # label boxes of the rendered frames that show nothing (datagen.core.box_content)
     blank_frames: int = 0  # rendered frames with such a box
     compiled: int = 0  # JIT kernels first launched by a rendered frame after its process's first
+    per_class: list[int] | None = None  # label lines per class (None: a shard written before they were counted)
 
     def counts(self) -> dict:
         """The deterministic part, stored in the manifest's metadata."""
-        return {"frames": self.frames, "labels": self.labels, "excluded": dict(sorted(self.excluded.items()))}
+        return {"frames": self.frames, "labels": self.labels, "excluded": dict(sorted(self.excluded.items())),
+                "per_class": self.per_class}
 
 
 # --- the build ---------------------------------------------------------------------------
@@ -48,6 +50,7 @@ class BuildReport:
     name: str
     root: Path
     jobs: list[ShardJob]
+    classes: list[str] = field(default_factory=list)  # the feature table's class names, by class id
     shards: dict[str, ShardSummary] = field(default_factory=dict)
     resumed: list[str] = field(default_factory=list)  # shards done by an earlier run
     wall_s: float = 0.0
@@ -74,6 +77,15 @@ class BuildReport:
         """Features excluded per reason, every reason named (0 where none)."""
         total = self._counted("excluded")
         return {r.reason: total.get(r.reason, 0) for r in Exclusion if r.reason}
+
+    @property
+    def never_labeled(self) -> list[int]:
+        """The class ids no frame of the finished shards labels (empty where a shard's per-class
+        counts are unknown, or without class names)."""
+        counts = [s.per_class for s in self.shards.values()]
+        if not self.classes or not counts or any(c is None for c in counts):
+            return []
+        return [c for c in range(len(self.classes)) if not any(per[c] for per in counts)]
 
     @property
     def stages(self) -> dict[str, float]:
@@ -115,6 +127,12 @@ class BuildReport:
         excluded = ", ".join(f"{k} {v}" for k, v in self.excluded.items())
         scope = "" if done == len(self.jobs) else f" (in the {done} finished shards)"
         out.append(f"  labels: {self.labels} boxes{scope}; excluded: {excluded}")
+        out += [f"    {r.reason}: {r.meaning}" for r in Exclusion if r.reason and self.excluded[r.reason]]
+        unseen = self.never_labeled
+        if unseen:
+            names = ", ".join(self.classes[c] for c in unseen[:6]) + (", ..." if len(unseen) > 6 else "")
+            out.append(f"  never labeled in this build: {len(unseen)} of {len(self.classes)} classes "
+                       f"({_ranges(unseen)}: {names}); no frame showed them inside the image and its margins")
         if self.blank:
             out.append(f"  warning: {self.blank} label boxes in {self.blank_frames} of the {self.rendered} "
                        "rendered frames show "
@@ -124,3 +142,14 @@ class BuildReport:
             out.append(f"  interrupted: {len(self.jobs) - done} shards unfinished; run the same command "
                        "again to finish them")
         return out
+
+
+def _ranges(ids: list[int]) -> str:
+    """Sorted integers as ranges: ``6-39, 41``."""
+    spans: list[list[int]] = []
+    for i in ids:
+        if spans and i == spans[-1][1] + 1:
+            spans[-1][1] = i
+        else:
+            spans.append([i, i])
+    return ", ".join(f"{a}-{b}" if b > a else f"{a}" for a, b in spans)

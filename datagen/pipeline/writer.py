@@ -150,6 +150,7 @@ class ShardWriter:
         approaches = {} if approaches is None else approaches  # each chain's weather and liveries, drawn once
         draws = [draw_frame(self.scene, self.states, i, approaches) for i in job.frames]
         labels_all, objects_all = shard_labels(self.scene, draws)  # every frame's labels at once
+        per_class = np.zeros(len(self.scene.features), dtype=np.int64)  # label lines per class
         recording = self._census.recording() if self._census is not None else contextlib.nullcontext()
         with recording:  # the kernels each frame launches
             for b, frame_draws in enumerate(draws):
@@ -158,6 +159,7 @@ class ShardWriter:
                 row = self.frame(job, frame_draws, labels_all.frame(b), objects_all.frame(b))
                 rows.append(row)
                 labels += row["n_labeled"]
+                per_class += row["features"].labeled
                 excluded.update(row["features"].exclusion_counts())
                 if row["render_s"] is not None:
                     rendered += 1
@@ -175,7 +177,7 @@ class ShardWriter:
         self._wait_for_writes(0)
         summary = ShardSummary(job.name, len(job.frames), labels, dict(excluded), rendered, render_s, denoise_s,
                                frame_s, stages=dict(stages), blank=blank, blank_frames=blank_frames,
-                               compiled=compiled)
+                               compiled=compiled, per_class=per_class.tolist())
         write_manifest(self.layout.manifest(job), rows, summary.counts())
         summary.wall_s = time.perf_counter() - start
         return summary

@@ -25,6 +25,20 @@ __all__ = ["report_document", "write_report"]
 
 
 # --- the report --------------------------------------------------------------------------------
+def colour_key_html() -> str:
+    """The overlays' colour key: a swatch and a name for each colour the sheets draw, from
+    their own palette (:data:`datagen.report.overlays.COLOURS`)."""
+    from datagen.report.overlays import COLOURS, REGION
+
+    def swatch(bgr: tuple[int, int, int]) -> str:
+        b, g, r = bgr
+        return (f'<span class="swatch" style="display:inline-block;width:0.9em;height:0.9em;'
+                f'background:rgb({r},{g},{b});border:1px solid #444;vertical-align:middle"></span>')
+
+    items = [*COLOURS.items(), ("object region", REGION)]
+    return "<p>Colours of the sheets: " + "; ".join(f"{swatch(c)} {name}" for name, c in items) + ".</p>"
+
+
 def report_document(result: AuditResult) -> dict:
     """report.json: machine-readable, for gating in CI (``passed`` and each check's)."""
     stats = result.stats
@@ -119,7 +133,7 @@ boxes learns this drift.</p>
 <h2>Plots</h2>
 {figures}
 <h2>Overlays</h2>
-<p>Magenta crosshair: true centre projection; amber: tight box; green: corrected box (the paper's label); cyan: the label box where it was grown to the minimum training size; grey: excluded.</p>
+{colour_key_html()}
 {''.join(overlay_html)}
 <script>
 window.addEventListener("load", () => {{
