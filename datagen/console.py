@@ -18,6 +18,7 @@ class Estimate(Protocol):
     seconds: float
     cores: int
     setting: str
+    disk_bytes: float  # per frame
 
     @property
     def frames_per_hour(self) -> float: ...
@@ -84,7 +85,8 @@ class ConsoleProgress:
             todo = total - done
             self._print(f"{self.verb} {self.name}: estimate {estimate.seconds:.2f} s a frame = "
                         f"{estimate.frames_per_hour:,.0f} frames/h on {estimate.cores} cores ({estimate.setting}), "
-                        f"{_duration(todo * estimate.seconds)} for {todo} frames; measured rates follow")
+                        f"{_duration(todo * estimate.seconds)} and about {_size(todo * estimate.disk_bytes)} on disk "
+                        f"for {todo} frames; measured rates follow")
         self.t0 = self._last = time.perf_counter()
         if self.live:
             from rich.console import Console
@@ -149,3 +151,12 @@ def _duration(seconds: float) -> str:
     if s >= 3600:
         return f"{s // 3600} h {s % 3600 // 60:02d} min"
     return f"{s // 60} min {s % 60:02d} s" if s >= 60 else f"{s} s"
+
+
+def _size(n_bytes: float) -> str:
+    """``n_bytes`` as ``2.3 GB``, ``19 MB`` or ``640 KB`` (decimal units, two or three figures)."""
+    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6)):
+        if n_bytes >= scale:
+            value = n_bytes / scale
+            return f"{value:.1f} {unit}" if value < 10 else f"{value:.0f} {unit}"
+    return f"{max(1.0, n_bytes / 1e3):.0f} KB"

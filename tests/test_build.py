@@ -647,3 +647,22 @@ def test_every_exclusion_reason_has_a_meaning_of_its_own() -> None:
 
     meanings = [reason.meaning for reason in Exclusion]
     assert all(meanings) and len(set(meanings)) == len(meanings)
+
+
+def test_the_estimate_says_the_disk_a_build_will_use_within_a_factor_of_what_it_writes(tmp_path: Path) -> None:
+    import io
+
+    from datagen.console import ConsoleProgress
+    from datagen.pipeline.estimate import frame_cost
+
+    config = override_config(load_config("wingcam55"), {"dataset.frames": 120, "dataset.shard_size": 60})
+    stream = io.StringIO()
+    build_dataset(config, tmp_path / "ds", render=False,
+                  progress=ConsoleProgress("w", stream=stream, interval_s=1e9, live=False))
+    assert re.search(r", 0 s and about [0-9.]+ (KB|MB) on disk for 120 frames;", stream.getvalue().splitlines()[0])
+    written = sum(p.stat().st_size for p in (tmp_path / "ds").rglob("*") if p.is_file())
+    predicted = 120 * frame_cost(config, 2, render=False).disk_bytes
+    assert 0.5 < written / predicted < 2.0, (written, predicted)
+    rendered = frame_cost(config, 2)  # a 2048x1080 PNG is megabytes; the EXR is several times more
+    exr = frame_cost(override_config(config, {"render.exr": True}), 2)
+    assert 1e6 < rendered.disk_bytes < 1e7 and exr.disk_bytes > 5 * rendered.disk_bytes

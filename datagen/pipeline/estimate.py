@@ -1,5 +1,5 @@
 """What a build will cost before it starts: seconds per frame from the config and the
-device, and how many workers suit the device.
+device, bytes per frame on disk, and how many workers suit the device.
 
 On the CPU (``llvm_ad_rgb``, ``scalar_rgb``): a model of the frame's stages, in
 core-seconds measured on the project's standard machine (a 2-core x86_64 VM:
@@ -33,6 +33,13 @@ DENOISE_CORE_S: Final = {"fast": 0.63, "balanced": 1.15, "high": 1.13}
 GUIDES_FACTOR: Final = 1.4
 #: Core-seconds per megapixel of the geometry pass, the camera model, encoding (sensor on, off).
 REST_CORE_S: Final = {True: 0.135, False: 0.086}
+#: Bytes a frame adds to a dataset (measured on wingcam55's default world, every randomizer
+#: on, at 2048x1080): its image per pixel by format, its EXR per pixel (linear RGB, Z, object
+#: id), and its label files and manifest row (80 classes: 1.8 KB of label lines, 8.8 KB of
+#: manifest).
+IMAGE_BYTES_PER_PX: Final = {"png": 1.1, "jpg": 0.17}
+EXR_BYTES_PER_PX: Final = 13.9
+LABEL_BYTES_PER_FRAME: Final = 10_700
 #: Seconds per frame of a labels-only build (labels, manifests), one core.
 LABELS_ONLY_S: Final = 1.0 / 250
 #: Local workers ``--workers auto`` runs on the CPU (at most one per core), the cores
@@ -52,11 +59,12 @@ GPU_HOST_CORE_S_PER_MPX: Final = 0.8
 
 @dataclass(frozen=True)
 class FrameCost:
-    """A frame's predicted wall seconds on ``cores`` cores, and what it assumed."""
+    """A frame's predicted wall seconds on ``cores`` cores and bytes on disk, and what it assumed."""
 
     seconds: float
     cores: int
     setting: str  # "2048x1080, 4 spp, oidn high, clouds on, camera model on" or "labels only"
+    disk_bytes: float = LABEL_BYTES_PER_FRAME
 
     @property
     def frames_per_hour(self) -> float:
@@ -71,6 +79,8 @@ def frame_cost(config: Config, cores: int, *, render: bool = True, variant: str 
         return FrameCost(LABELS_ONLY_S / cores, cores, "labels only")
     cam, r, world = config.camera, config.render, config.randomization
     mpx = cam.width * cam.height / 1e6
+    per_px = IMAGE_BYTES_PER_PX[r.image_format] + (EXR_BYTES_PER_PX if r.exr else 0.0)
+    disk = LABEL_BYTES_PER_FRAME + 1e6 * mpx * per_px
     clouds = world.clouds.enabled
     integrator = "volpath" if clouds else "path"
     denoised = r.denoise != "off"
@@ -81,12 +91,12 @@ def frame_cost(config: Config, cores: int, *, render: bool = True, variant: str 
     if variant.startswith("cuda"):
         gpu_s = mpx * r.spp * GPU_TRACE_S * guides + (mpx * GPU_DENOISE_S if denoised else 0.0)
         host_s = (GPU_HOST_CORE_S + mpx * GPU_HOST_CORE_S_PER_MPX) / cores
-        return FrameCost(max(gpu_s, host_s), cores, setting)
+        return FrameCost(max(gpu_s, host_s), cores, setting, disk)
     core_s = FIXED_CORE_S[integrator] + mpx * r.spp * TRACE_CORE_S[integrator] * guides
     if denoised:
         core_s += mpx * DENOISE_CORE_S[r.denoise_quality]
     core_s += mpx * REST_CORE_S[world.sensor.enabled]
-    return FrameCost(core_s / cores, cores, setting)
+    return FrameCost(core_s / cores, cores, setting, disk)
 
 
 def auto_workers(variant: str, cores: int, *, render: bool = True) -> int:
