@@ -79,12 +79,7 @@ def build_dataset(config: Config, out: Path, *, workers: int | str | None = None
                 manifest = layout.manifest(job)
                 if manifest.is_file():
                     try:
-                        counts = read_manifest_summary(manifest)
-                        per_class = counts.get("per_class")
-                        summary = ShardSummary(job.name, int(counts.get("frames", len(job.frames))),
-                                               int(counts.get("labels", 0)),
-                                               {str(k): int(v) for k, v in counts.get("excluded", {}).items()},
-                                               per_class=[int(n) for n in per_class] if per_class else None)
+                        summary = ShardSummary.from_counts(job.name, read_manifest_summary(manifest), len(job.frames))
                     except Exception as exc:  # damaged outside datagen: manifests are written atomically
                         raise DatagenError(f"{manifest}: unreadable manifest ({type(exc).__name__}); delete it to "
                                            "render its shard again") from None

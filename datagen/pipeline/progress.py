@@ -36,6 +36,15 @@ class ShardSummary:
         return {"frames": self.frames, "labels": self.labels, "excluded": dict(sorted(self.excluded.items())),
                 "per_class": self.per_class}
 
+    @classmethod
+    def from_counts(cls, name: str, counts: dict, frames: int) -> ShardSummary:
+        """A finished shard's summary from :meth:`counts` as its manifest's metadata holds
+        them (``frames``: the plan's, where the metadata has none)."""
+        per_class = counts.get("per_class")
+        return cls(name, int(counts.get("frames", frames)), int(counts.get("labels", 0)),
+                   {str(k): int(v) for k, v in counts.get("excluded", {}).items()},
+                   per_class=[int(n) for n in per_class] if per_class else None)
+
 
 # --- the build ---------------------------------------------------------------------------
 def _summed(name: str, doc: str) -> property:

@@ -8,6 +8,7 @@ import itertools
 import math
 import re
 from collections import Counter
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Final
 
@@ -111,6 +112,12 @@ class _LabelLines:
         """The indices of the well-formed lines."""
         return np.flatnonzero(np.array([p is None for p in self.problems], dtype=bool))
 
+    def well_per_file(self) -> Iterator[tuple[int, NDArray[np.int64]]]:
+        """Per file: its frame row and the indices of its well-formed lines."""
+        idx = self.well
+        for b_file, (_rel, start, count) in self.files.items():
+            yield b_file, idx[np.searchsorted(idx, start):np.searchsorted(idx, start + count)]
+
 
 def check_label_files(view: DatasetView, labels: FrameLabels) -> tuple[list[Check], NDArray[np.float64]]:
     """The per-line checks, and every well-formed line as a row ``(frame row, class, cx, cy, w, h)``.
@@ -151,8 +158,7 @@ def _ultralytics_rules(read: _LabelLines, rules: Check) -> None:
     for i in idx[outside]:
         rules.fail(read.where(i), f"values {read.texts[i].split()[1:]} outside [0, 1] or a size not positive",
                    row=read.row[i], seq=read.seq(i, 1))
-    for b_file, (_rel, start, count) in read.files.items():
-        mine = idx[np.searchsorted(idx, start):np.searchsorted(idx, start + count)]  # the file's well-formed lines
+    for b_file, mine in read.well_per_file():
         keys = [tuple(read.texts[i].split()) for i in mine]
         if len(set(keys)) < len(keys):
             seen: Counter = Counter()
@@ -168,8 +174,7 @@ def _label_lines(read: _LabelLines, labels: FrameLabels, lines: Check) -> None:
     view, idx = read.view, read.well
     w, h = view.intrinsics.width, view.intrinsics.height
     v, b, f = read.values[idx], read.row[idx], read.values[idx, 0].astype(np.int64)
-    for b_file, (_rel, start, count) in read.files.items():
-        mine = idx[np.searchsorted(idx, start):np.searchsorted(idx, start + count)]
+    for b_file, mine in read.well_per_file():
         classes = read.values[mine, 0].astype(np.int64)
         if len(set(classes.tolist())) < len(classes):
             per_class: Counter = Counter()
