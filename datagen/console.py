@@ -125,8 +125,8 @@ class ConsoleProgress:
     def _status(self) -> None:
         rate, eta = self._rate()
         eta_text = time.strftime("%H:%M:%S", time.gmtime(eta)) if math.isfinite(eta) and eta < 86400 * 365 else "?"
-        share = 100 * self.done / max(1, self.total)
-        self._print(f"{self.verb} {self.name}: {self.done}/{self.total} frames ({share:.0f}%),"
+        share = 100 * self.done // max(1, self.total)  # 100% only when every frame is done
+        self._print(f"{self.verb} {self.name}: {self.done}/{self.total} frames ({share}%),"
                     f" {rate:.3f} frames/s = {3600 * rate:,.0f} frames/h, ETA {eta_text}")
 
     def shard_done(self, summary: ShardDone) -> None:

@@ -19,6 +19,26 @@ DOCUMENTS = {"manifests/README.md": "reference/dataset-format.md", "assets/READM
 IMAGES = ("assets/previews/*.png",)
 
 
+#: Markers a page may hold, replaced by text generated from the code when the site is built.
+MARKERS = {"<!-- generated: exclusion reasons -->": "exclusion_table"}
+
+
+def on_page_markdown(markdown, page, config, files):
+    """Replace each marker of :data:`MARKERS` with what its function writes."""
+    for marker, name in MARKERS.items():
+        if marker in markdown:
+            markdown = markdown.replace(marker, globals()[name]())
+    return markdown
+
+
+def exclusion_table() -> str:
+    """The exclusion reasons and what each means, from ``datagen.core.label_boxes.Exclusion``."""
+    from datagen.core.label_boxes import Exclusion
+
+    rows = [f"| `{e.reason}` | {e.meaning} |" for e in Exclusion if e.reason is not None]
+    return "\n".join(["| reason | meaning (`Exclusion.meaning`) |", "|---|---|", *rows])
+
+
 def on_files(files, config):
     from datagen.cli.command_reference import cli_reference
     from datagen.config.key_reference import config_reference

@@ -22,7 +22,7 @@ camera: {mount: wingcam, hfov_deg: 55.0, width: 128, height: 68}
 render: {spp: 1, max_depth: 3, exr: %(exr)s}
 labels: {edge_margin_px: 2.0}
 approach: {frames_per_approach: 4}
-dataset: {frames: 8, shard_size: 3, seed: 7}
+dataset: {frames: 8, shard_size: 3, min_shards: 1, seed: 7}
 """
 
 

@@ -96,7 +96,7 @@ def test_traced_approach_is_the_one_the_frames_come_from(sampling: str) -> None:
     """`datagen approach` plots chain a's first approach: its frames lie on that trace."""
     cfg = variant(approach={"sampling": sampling, "stride_steps": 3})
     trace = chains.trace_approach(cfg, 5, 2, every=1)
-    k = cfg.approach.frames_per_approach
+    k = cfg.frames_per_chain
     for s in ap.frame_states(cfg, range(2 * k, 3 * k), seed=5):
         if s.approach_number:
             continue
@@ -134,7 +134,7 @@ def test_recorded_ptd_equals_ptd_recomputed_from_poses(seed, frame, config) -> N
 
 def test_frame_alone_equals_frame_in_sequence() -> None:
     cfg = variant(dataset={"seed": 1234})
-    k = cfg.approach.frames_per_approach
+    k = cfg.frames_per_chain
     in_sequence = ap.frame_states(cfg, range(3 * k))
     for i in (0, 5, k - 1, k, 2 * k + 3):
         alone = ap.frame_state(cfg, i)  # simulated afresh: frame_state keeps no cache
@@ -178,7 +178,7 @@ def test_camera_pose_is_mount_plus_bounded_perturbation(mount: str) -> None:
     nominal = MOUNTS[mount].body_from_cam()
     shifts, angles = [], []
     for a in range(40):
-        s = ap.frame_state(cfg, a * cfg.approach.frames_per_approach)
+        s = ap.frame_state(cfg, a * cfg.frames_per_chain)
         body_from_cam = invert_rigid(s.world_from(body)) @ s.world_from_cam
         shifts.append(body_from_cam[:3, 3] - nominal[:3, 3])
         angles.append(np.degrees(np.linalg.norm(rotvec_from_rotation(nominal[:3, :3].T @ body_from_cam[:3, :3]))))
@@ -322,7 +322,7 @@ def test_prefetched_frame_states_equal_frame_states_made_alone() -> None:
     of such a chain is simulated again, the same."""
     states = ap.FrameStates(BASE, 5)
     states.prefetch(range(3, 300, 7))
-    k = BASE.approach.frames_per_approach
+    k = BASE.frames_per_chain
     for i in (3, 10, 150, 297, k - 1, 290 // k * k + k - 1):
         alone = ap.frame_state(BASE, i, 5)
         assert np.array_equal(states(i).world_from_cam, alone.world_from_cam)
@@ -348,3 +348,25 @@ def test_the_earlier_state_is_made_on_first_use_motion_dt_before_and_kept() -> N
 
 def test_simulating_no_chain_gives_no_snapshots() -> None:
     assert chains.simulate_chains(BASE, 3, []) == {}
+
+
+@settings(max_examples=60, deadline=None)
+@given(frames=st.integers(1, 3000), k=st.integers(1, 40), least=st.integers(1, 20))
+def test_a_build_spans_min_approaches_and_a_large_build_keeps_frames_per_approach(frames: int, k: int,
+                                                                                   least: int) -> None:
+    cfg = variant(approach={"frames_per_approach": k, "min_approaches": least}, dataset={"frames": frames})
+    chains_used = len({i // cfg.frames_per_chain for i in range(frames)})
+    assert chains_used >= min(frames, least)
+    if frames >= k * least:
+        assert cfg.frames_per_chain == k
+
+
+def test_a_small_build_shows_several_approaches_and_a_full_build_draws_what_it_drew() -> None:
+    """Twelve frames come from twelve approaches (their own sky, sea and clouds); the full
+    build's frames are those it has without the rule (min_approaches 1)."""
+    small = variant(dataset={"frames": 12})
+    states = ap.frame_states(small, range(12))
+    assert len({s.approach_index for s in states}) == 12
+    full, unruled = BASE, variant(approach={"min_approaches": 1})
+    for i in (0, 17, 9_999):
+        assert np.array_equal(ap.frame_state(full, i).world_from_cam, ap.frame_state(unruled, i).world_from_cam)

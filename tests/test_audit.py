@@ -235,6 +235,25 @@ def test_html_report_renders_in_headless_chromium(dataset, tmp_path: Path) -> No
 
 
 @pytest.mark.render
+def test_the_report_links_each_sheet_at_full_size_and_shows_it_unscaled(dataset, tmp_path: Path) -> None:
+    """Each sheet is a file of the report (listed in report.json) that the page links, and the
+    page shows it at its own width in a scrolling box, never shrunk to the page's width."""
+    import cv2
+
+    view = load_dataset(dataset)
+    written = write_report(audit(view), view, tmp_path, frames=frames_to_draw(view, 3))
+    page = written["html"].read_text()
+    sheets = sorted((tmp_path / "sheets").glob("*.jpg"))
+    assert len(sheets) == 3
+    listed = json.loads(written["json"].read_text())["files"]
+    for sheet in sheets:
+        height, width = cv2.imread(str(sheet)).shape[:2]
+        assert f"sheets/{sheet.name}" in listed and f"<a href='sheets/{sheet.name}'>" in page
+        assert f"width='{width}' height='{height}'" in page and width >= 1600
+    assert ".sheet .scroll img { max-width: none;" in page
+
+
+@pytest.mark.render
 def test_duplicate_coarse_and_non_finite_lines_fail_without_a_traceback(copy, tmp_path: Path) -> None:
     path, lines = first_line(copy)
     cls, cx, cy, w, h = lines[0].split()

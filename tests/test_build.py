@@ -61,16 +61,19 @@ def test_shards_partition_the_frames(tmp_path_factory, frames, shard_size, val, 
     jobs = plan_shards(config)
     every = sorted(i for job in jobs for i in job.frames)
     assert every == list(range(frames))
+    assert len(jobs) >= min(frames, config.dataset.min_shards)  # a small build still keeps workers busy
+    if frames >= shard_size * config.dataset.min_shards:
+        assert config.frames_per_shard == shard_size
     for split in SPLITS:
         mine = [job for job in jobs if job.split == split]
         assert [job.shard for job in mine] == list(range(len(mine)))
-        assert all(0 < len(job.frames) <= shard_size for job in mine)
-        assert all(len(job.frames) == shard_size for job in mine[:-1])  # only the last shard is short
+        assert all(0 < len(job.frames) <= config.frames_per_shard for job in mine)
+        assert all(len(job.frames) == config.frames_per_shard for job in mine[:-1])  # only the last is short
         flat = [i for job in mine for i in job.frames]
         assert flat == sorted(flat)
         assert all(frame_split(config, i) == split for i in flat)
     if by == "approach":
-        k = config.approach.frames_per_approach
+        k = config.frames_per_chain
         assert all(frame_split(config, i) == frame_split(config, i - i % k) for i in range(frames))
 
 

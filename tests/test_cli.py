@@ -52,7 +52,7 @@ def test_bad_files_exit_nonzero_without_traceback(tmp_path: Path, content: str |
 
 
 def test_dataset_commands_on_a_missing_folder_are_one_line() -> None:
-    for command in ("audit", "preview"):
+    for command in ("audit", "preview", "train"):
         out = run(command, "datasets/none")
         assert out.returncode == 2 and out.stderr == "datasets/none: no such dataset folder\n"
 
@@ -116,3 +116,19 @@ def test_assets_preview_without_out_writes_previews_in_the_working_folder_and_no
     assert done.returncode == 0, done.stderr[-2000:]
     assert (tmp_path / "previews" / "drogue.png").stat().st_size > 0
     assert tracked.stat().st_mtime_ns == before
+
+
+def test_train_refuses_a_labels_only_build_and_pose_without_pose_labels_in_one_line(tmp_path: Path) -> None:
+    """Checked before Ultralytics is imported: these run without the train extra."""
+    root = tmp_path / "labels"
+    built = run("build", "--config", "wingcam55", "--frames", "2", "--no-render", "--out", str(root))
+    assert built.returncode == 0, built.stderr
+    out = run("train", str(root))
+    assert out.returncode == 2 and out.stderr.strip() == (
+        f"{root / 'dataset.json'}: render: false: a labels-only build has no images to train on "
+        "(build it without --no-render)")
+    document = root / "dataset.json"
+    document.write_text(document.read_text().replace('"render": false', '"render": true'))
+    out = run("train", str(root), "--pose")
+    assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1
+    assert "--pose needs a build with pose labels" in out.stderr

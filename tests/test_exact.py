@@ -169,3 +169,21 @@ def test_a_full_disk_names_the_spill_file_and_tmpdir_and_the_folder_goes(monkeyp
     assert info.value.errno == errno.ENOSPC and info.value.filename == "/dev/full"
     assert "TMPDIR" in info.value.strerror
     assert not spill.folder.exists()
+
+
+@settings(max_examples=300, deadline=None)
+@given(lo=st.floats(-1e300, 1e300), ulps=st.integers(0, 64), spread=st.booleans())
+@example(lo=0.020833475029788828, ulps=1, spread=False)
+def test_a_histogram_of_values_equal_or_ulps_apart_counts_every_value(lo: float, ulps: int, spread: bool) -> None:
+    """The audit's appearance histograms (histogram_range): values a few ulps apart, which
+    numpy's own range refused, land in the histogram, every one."""
+    from datagen.analysis.audit.statistics import APPEARANCE_BINS, histogram_range
+
+    hi = lo
+    for _ in range(ulps):
+        hi = float(np.nextafter(hi, np.inf))
+    if spread:
+        hi = lo + abs(lo) + 1.0
+    values = np.array([lo, hi, (lo + hi) / 2])
+    counts, _ = np.histogram(values, bins=APPEARANCE_BINS, range=histogram_range(lo, hi))
+    assert counts.sum() == 3

@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 MINIMAL = "name: t\ncamera: {mount: wingcam, hfov_deg: 55}\ndataset: {frames: 4}\n"
 TINY = ("name: tiny\ncamera: {mount: wingcam, hfov_deg: 55.0, width: 128, height: 68}\n"
         "render: {spp: 1, max_depth: 2}\nlabels: {edge_margin_px: 2.0}\napproach: {frames_per_approach: 4}\n"
-        "dataset: {frames: 8, shard_size: 3, seed: 7}\n")
+        "dataset: {frames: 8, shard_size: 3, min_shards: 1, seed: 7}\n")
 #: A guard against a hang, not a limit asserted: a run still going after this many seconds
 #: is stopped and reported as hung (a refusal takes a second or two; under load, more).
 HANG_GUARD_S = 300.0

@@ -56,17 +56,49 @@ def test_no_two_tags_overlap_and_every_feature_in_view_is_numbered_in_each_panel
         frame = labels.frame(b)
         in_view = set(np.flatnonzero(~np.isin(frame.exclusion, (Exclusion.BEHIND_CAMERA, Exclusion.OFF_FRAME))))
         assert set(np.flatnonzero(frame.labeled)) <= in_view and in_view, what
+        numbered: dict[tuple[str, str], list[int]] = {}
         for index, panel in enumerate(sheet.panels):
             rects = [r for p, _, r in sheet.tags if p == index]
             assert not [(a, c) for a, c in itertools.combinations(rects, 2) if _overlap(a, c)], (what, panel.kind)
-            numbered = {f for p, f, _ in sheet.tags if p == index}
-            mine = {f for f in in_view if view.features.objects[view.features.object_index[f]] == panel.obj}
-            assert numbered == mine, (what, panel.kind)
+            numbered.setdefault((panel.obj, panel.kind), []).extend(f for p, f, _ in sheet.tags if p == index)
+        for (obj, kind), features in numbered.items():  # an object's crops number each feature once
+            mine = {f for f in in_view if view.features.objects[view.features.object_index[f]] == obj}
+            assert sorted(features) == sorted(mine), (what, obj, kind)
         assert {f for _, f, _ in sheet.keys} == in_view, what
         assert [p.kind for p in sheet.panels] == list(PANELS) * (len(sheet.panels) // 3)
         keys = [r for _, _, r in sheet.keys]
         assert not [(a, c) for a, c in itertools.combinations(keys, 2) if _overlap(a, c)], what
         assert all(r[2] < sheet.image.shape[1] and r[3] < sheet.image.shape[0] for r in keys), what  # the key fits
+
+
+def test_far_and_crowded_objects_are_magnified_in_several_crops_and_no_key_line_is_cut(wingcam) -> None:
+    """Every crop magnifies at least MIN_SCALE times (or shows one feature) and holds at most
+    MAX_CROP_FEATURES features, over the frames of the longest ranges, the most features and
+    frames with a tanker far out; each key line's whole text fits its place."""
+    import cv2
+
+    from datagen.report.overlays import KEY_FONT, MAX_CROP_FEATURES, MIN_SCALE
+
+    view, labels = wingcam
+    frames = set(_frames(view, labels).values())
+    far = np.flatnonzero(view.distance_m > 90.0)
+    frames.update(int(b) for b in far[:: max(1, len(far) // 6)])
+    split = 0
+    for b in sorted(frames):
+        sheet = draw_sheet(view, b, labels)
+        for index, panel in enumerate(sheet.panels):
+            shown = [f for p, f, _ in sheet.tags if p == index]
+            assert len(shown) <= MAX_CROP_FEATURES, (b, panel.obj)
+            assert panel.scale >= MIN_SCALE or len(shown) == 1, (b, panel.obj, panel.scale)
+        objects = [p.obj for p in sheet.panels if p.kind == "points"]
+        split += len(objects) - len(set(objects))
+        frame = labels.frame(b)
+        for name, f, rect in sheet.keys:
+            reason = Exclusion(int(frame.exclusion[f]))
+            text = name.split(".", 1)[-1] + (f" ({reason.reason})" if reason != Exclusion.NONE else "")
+            width = cv2.getTextSize(f"{0:>3} {text}", 0, KEY_FONT, 1)[0][0]
+            assert rect[2] - rect[0] >= width, (b, name)
+    assert split > 0  # some object needed several crops
 
 
 def _crosses(line, rect) -> bool:

@@ -148,6 +148,7 @@ def test_audit_and_evaluate_report_their_progress_in_frames(built) -> None:
         lines = stream.getvalue().splitlines()
         assert lines[0] == f"{verb} ds: 600 frames, 0 already done"
         assert lines[-1].startswith(f"{verb} ds: 600/600 frames (100%)"), lines[-1]
+        assert sum("(100%)" in line for line in lines) == 1  # 599/600 is 99%, not a rounded 100%
 
 
 def _report_file(folder: Path) -> dict:

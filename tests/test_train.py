@@ -123,18 +123,23 @@ def documented_commands(root: Path) -> list[str]:
 
 
 def test_documented_train_predict_evaluate_commands_run_offline_from_another_folder(rendered, tmp_path) -> None:
+    """The hyp.yaml's Ultralytics and evaluate commands, as written, from another folder and a
+    shell whose PATH lacks the environment's bin folder (the commands spell it out)."""
     root = rendered
     commands = documented_commands(root)
-    assert [c.split()[:3] for c in commands] == [["yolo", "detect", "train"], ["yolo", "detect", "predict"],
-                                                 ["datagen", "evaluate", str(root)]]
+    bin_dir = Path(sys.executable).parent
+    assert [c.split()[:3] for c in commands] == [[str(bin_dir / "datagen"), "train", str(root)],
+                                                 [str(bin_dir / "yolo"), "detect", "train"],
+                                                 [str(bin_dir / "yolo"), "detect", "predict"],
+                                                 [str(bin_dir / "datagen"), "evaluate", str(root)]]
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
-    bin_dir = Path(sys.executable).parent
-    env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}"}
+    path = os.pathsep.join(p for p in os.environ["PATH"].split(os.pathsep) if Path(p) != bin_dir)
+    env = {**os.environ, "PATH": path}
     extra = {"train": ["epochs=1", "batch=2", "workers=0", "plots=False"], "predict": [], "evaluate": []}
-    for command in commands:
+    for command in commands[1:]:
         words = shlex.split(command)
-        verb = words[2] if words[0] == "yolo" else words[1]
+        verb = words[2] if words[0].endswith("yolo") else words[1]
         out = subprocess.run(words + extra[verb], cwd=elsewhere, env=env, capture_output=True, text=True,
                              timeout=1200)
         assert out.returncode == 0, (command, out.stdout[-2000:], out.stderr[-2000:])
@@ -250,6 +255,29 @@ def test_a_detector_trained_with_the_datasets_own_files_gets_a_learning_signal(t
     assert len(box) == 12
     assert box[0] > 1.0, box
     assert box[-1] < 0.8 * box[0], box
+
+
+def test_datagen_train_trains_predicts_and_prints_an_evaluate_command_that_runs(tmp_path: Path) -> None:
+    """`datagen train` on 6 rendered frames, 1 epoch on the CPU: weights, one prediction file
+    per validation image at most, and the evaluate command it prints exits 0 (the hyp.yaml
+    comment names the same command)."""
+
+    config = override_config(load_config(ROOT / "scenes" / "wingcam55.yaml"),
+                             {"dataset.frames": 6, "dataset.seed": HELD_OUT_SEED, "render.spp": 1,
+                              "dataset.val_fraction": 0.5})
+    root = tmp_path / "w55"
+    build_dataset(config, root)
+    out = subprocess.run([sys.executable, "-m", "datagen", "train", str(root), "--epochs", "1", "--device", "cpu"],
+                         check=False, capture_output=True, text=True, timeout=1800, cwd=tmp_path)
+    assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
+    assert (tmp_path / "runs" / "w55" / "weights" / "best.pt").is_file()
+    predictions = tmp_path / "runs" / "w55-predict" / "labels"
+    val_images = (root / "val.txt").read_text().split()
+    assert predictions.is_dir() and len(list(predictions.glob("*.txt"))) <= len(val_images)
+    command = out.stdout.strip().splitlines()[-1].removeprefix("score them: ")
+    assert command in (root / "hyp.yaml").read_text()
+    scored = subprocess.run(shlex.split(command), check=False, capture_output=True, text=True, timeout=600)
+    assert scored.returncode == 0, scored.stderr
 
 
 def test_the_closed_loop_bench_runs_end_to_end_in_miniature(tmp_path: Path) -> None:

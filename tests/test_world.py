@@ -71,7 +71,7 @@ def test_a_randomizer_switched_off_draws_none_of_its_fields_and_changes_no_other
 def test_weather_and_liveries_belong_to_the_approach_and_the_sensor_to_the_frame() -> None:
     config = wingcam()
     states = FrameStates(config)
-    per_approach = config.approach.frames_per_approach
+    per_approach = config.frames_per_chain
     a0, a1, b0 = (frame_look(config, states(i)) for i in (0, 1, per_approach))
     assert states(0).approach_index == states(1).approach_index != states(per_approach).approach_index
     for field in ("cloud_seed", "cloud_deck_coverage", "sea_seed", "sea_wind_speed_mps", "receiver_livery",

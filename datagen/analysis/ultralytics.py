@@ -11,6 +11,7 @@ the two.
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -18,9 +19,10 @@ import yaml
 
 from datagen.core.errors import DatagenError
 from datagen.core.training import ANCHOR_STRIDES
+from datagen.dataset.training_run import PREDICT_CONF, TrainingRun
 from datagen.paths import DatasetFolder
 
-__all__ = ["assigner_positives", "dataloader_learnability", "pose_items", "require_ultralytics"]
+__all__ = ["assigner_positives", "dataloader_learnability", "pose_items", "require_ultralytics", "train_and_predict"]
 
 
 def require_ultralytics():
@@ -191,3 +193,37 @@ def assigner_positives(root: str | Path, split: str = "train", *, images: int | 
     return {"images": count, "label_lines": label_lines, "instances": lines, "positive": positive,
             "target_sum": target_sum, "target_median": float(best_target.median()) if len(best_target) else 0.0,
             "targeted": int((best_target >= 0.01).sum())}
+
+
+def train_and_predict(run: TrainingRun, *, epochs: int | None = None, device: str | None = None,
+                      workers: int | None = None) -> None:
+    """Train ``run.network`` on the set with its own ``hyp.yaml``, then predict its validation
+    frames with the best weights (the prediction folder is written afresh: Ultralytics
+    appends to label files that are there)."""
+    require_ultralytics()
+    from ultralytics import YOLO
+
+    folder = DatasetFolder(run.root)
+    data = folder.file("data.yaml")
+    hyp = folder.file("hyp.yaml")
+    doc = yaml.safe_load(data.read_text())
+    recipe = yaml.safe_load(hyp.read_text())
+    if not isinstance(doc, dict) or not isinstance(doc.get("val"), str):
+        raise DatagenError(f"{data}: val: no image list named")
+    if not isinstance(recipe, dict) or not isinstance(recipe.get("imgsz"), int):
+        raise DatagenError(f"{hyp}: imgsz: not an integer")
+    val = folder.file(doc["val"])
+    extra = {k: v for k, v in (("epochs", epochs), ("device", device), ("workers", workers)) if v is not None}
+    YOLO(run.network, task=run.task).train(data=str(data), cfg=str(hyp), project=str(run.project),
+                                           name=run.run_name, exist_ok=True, **extra)
+    if not run.weights.is_file():
+        raise DatagenError(f"{run.weights}: Ultralytics wrote no weights")
+    if run.predictions.parent.is_dir() and not run.predictions.parent.is_symlink():
+        shutil.rmtree(run.predictions.parent)
+    predictor = YOLO(str(run.weights), task=run.task)
+    for _ in predictor.predict(source=str(val), imgsz=recipe["imgsz"], conf=PREDICT_CONF, save_txt=True,
+                               save_conf=True, project=str(run.project), name=f"{run.run_name}-predict",
+                               exist_ok=True, stream=True, verbose=False,
+                               **({"device": device} if device is not None else {})):
+        pass
+    run.predictions.mkdir(parents=True, exist_ok=True)  # Ultralytics makes it only for a first detection

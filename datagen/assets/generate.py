@@ -7,6 +7,13 @@ Random surface features (paper model I) are drawn area-weighted over a mesh's
 outer parts. :func:`asset_documents` gives the bytes of every built-in mesh and
 feature file, made from :mod:`datagen.assets.models`; the committed files are
 exactly these bytes (``datagen assets build`` writes them).
+
+A user's own feature file is made the same way (``datagen assets features``):
+:func:`named_model` turns named surface points (each a :class:`FeatureAnchor`) and
+rings (:func:`ring_feature`) on the user's mesh into a :class:`Model`,
+:func:`stored_features` gives its features in every stored variant,
+:func:`features_text` their file, and :func:`write_features` checks that text with
+the loader before writing it.
 """
 
 from __future__ import annotations
@@ -20,25 +27,31 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from datagen.assets.loader import BUILTIN_DIR, FEATURE_FORMAT, Feature, ObjectMesh, builtin_paths
-from datagen.assets.models import FeatureAnchor, Model
+from datagen.assets.loader import BUILTIN_DIR, FEATURE_FORMAT, Feature, ObjectMesh, builtin_paths, parse_features
+from datagen.assets.models import FeatureAnchor, InternalFeature, Model, Size
 from datagen.assets.models.drogue import build_drogue
 from datagen.assets.models.receiver import build_receiver
 from datagen.assets.models.tanker import build_tanker
-from datagen.atomic import write_bytes
+from datagen.atomic import write_bytes, write_text
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.features import SIZE_SCALE, STORED_VARIANTS
 
 __all__ = [
+    "AXES",
     "RING_POINTS",
     "asset_documents",
     "build_model",
     "features_document",
+    "features_text",
     "mesh_document",
     "model_features",
+    "named_model",
     "random_features",
+    "ring_feature",
     "ring_points",
+    "stored_features",
     "write_assets",
+    "write_features",
 ]
 
 #: Points of a feature ring (besides the snapped anchor).
@@ -47,6 +60,10 @@ RING_POINTS: Final = 8
 
 #: Coordinates in feature files are rounded to micrometres.
 COORD_DECIMALS: Final = 6
+
+
+#: The body axes a ring's plane may be normal to: axis -> the two axes in the plane (indices).
+AXES: Final = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}
 
 
 _BUILDERS: Final = {"tanker": build_tanker, "receiver": build_receiver, "drogue": build_drogue}
@@ -108,6 +125,32 @@ def random_features(mesh: ObjectMesh, count: int, rng: np.random.Generator,
     ]
 
 
+def ring_feature(name: str, center_m: Sequence[float], radius_m: float, axis: str, count: int = RING_POINTS,
+                 size: Size = "medium") -> InternalFeature:
+    """A ring of ``count`` points, ``radius_m`` around ``center_m`` in the plane normal to body
+    ``axis`` (``x``, ``y`` or ``z``; the first point along the next axis in x, y, z order):
+    an internal feature (its centre, the ring's, is not on the surface), such as an
+    engine inlet's lip or a basket's rim. Its points are where given, not snapped."""
+    u, v = AXES[axis]
+    t = np.linspace(0.0, 2 * np.pi, count, endpoint=False)
+    points = np.tile(np.asarray(center_m, dtype=np.float64), (count, 1))
+    points[:, u] += radius_m * np.cos(t)
+    points[:, v] += radius_m * np.sin(t)
+    return InternalFeature(name, tuple(tuple(float(c) for c in p) for p in points),
+                           tuple(float(c) for c in center_m), size)
+
+
+def named_model(object_name: str, points: Sequence[FeatureAnchor], rings: Sequence[InternalFeature],
+                small_radius_m: float, mesh: ObjectMesh | None = None) -> Model:
+    """A user's object as a :class:`Model`: ``points`` become features on ``mesh``'s surface as
+    a built-in model's anchors do (:func:`model_features`; they need the mesh), ``rings`` keep
+    their own points; class ids: the points in order, then the rings."""
+    if points and mesh is None:
+        raise ValueError("surface points need the mesh they are snapped to")
+    return Model(object_name, dict(mesh.parts) if mesh is not None else {}, tuple(points), tuple(rings),
+                 small_radius_m=small_radius_m)
+
+
 def model_features(model: Model, variant: str) -> list[Feature]:
     """A built-in model's features for one stored variant: the baseline keeps each
     anchor's own size; small, medium and large give every anchor that size,
@@ -141,17 +184,37 @@ def _feature_record(feature: Feature) -> dict:
     }
 
 
+def stored_features(model: Model) -> dict[str, list[Feature]]:
+    """A model's features in every stored variant (:data:`STORED_VARIANTS`)."""
+    return {variant: model_features(model, variant) for variant in STORED_VARIANTS}
+
+
 def features_document(model: Model) -> str:
     """The feature file of a built-in model: one feature per line, stable bytes."""
-    lines = ["{", f'  "format": "{FEATURE_FORMAT}",', f'  "object": "{model.name}",',
-             f'  "small_radius_m": {model.small_radius_m},', '  "variants": {']
-    for v, variant in enumerate(STORED_VARIANTS):
-        records = [json.dumps(_feature_record(f)) for f in model_features(model, variant)]
+    return features_text(model.name, model.small_radius_m, stored_features(model))
+
+
+def features_text(object_name: str, small_radius_m: float, variants: dict[str, list[Feature]]) -> str:
+    """A feature file (format :data:`FEATURE_FORMAT`) of features by variant."""
+    lines = ["{", f'  "format": "{FEATURE_FORMAT}",', f'  "object": "{object_name}",',
+             f'  "small_radius_m": {small_radius_m},', '  "variants": {']
+    for v, variant in enumerate(variants):
+        records = [json.dumps(_feature_record(f)) for f in variants[variant]]
         lines.append(f'    "{variant}": [')
         lines.extend(f"      {r}{',' if i < len(records) - 1 else ''}" for i, r in enumerate(records))
-        lines.append("    ]" + ("," if v < len(STORED_VARIANTS) - 1 else ""))
+        lines.append("    ]" + ("," if v < len(variants) - 1 else ""))
     lines += ["  }", "}", ""]
     return "\n".join(lines)
+
+
+def write_features(path: Path, text: str, object_name: str) -> Path:
+    """Write a feature file atomically once the loader accepts every variant in ``text``
+    (:func:`datagen.assets.loader.parse_features`; its problems name ``path``, which
+    is then left as it was)."""
+    data = json.loads(text)
+    for variant in data["variants"]:
+        parse_features(data, Path(path), object_name, variant)
+    return write_text(path, text)
 
 
 def mesh_document(model: Model) -> bytes:

@@ -3,8 +3,11 @@
 Files (package data under :data:`BUILTIN_DIR`, found through ``importlib.resources``)
     ``meshes/{object}.glb``: one GLB per object in its body frame
     (metres), one named geometry per part (``paint``, ``glass``, ``metal``...).
-    A user may give any OBJ, PLY or GLB instead; its geometry names become part
-    names.
+    A user may give any OBJ, PLY or GLB instead: a GLB's geometry names, an OBJ's
+    materials (``usemtl``) become part names, and a part's name gives its material
+    class (:func:`datagen.assets.models.material_class`; anything unknown is paint).
+    A mesh that names no parts (an OBJ without materials, a PLY, a GLB of unnamed
+    meshes) is one painted part: :attr:`ObjectMesh.warnings` says so.
 
     ``features/{object}.json``: the object's feature sets, format
     ``datagen.features/1``::
@@ -29,6 +32,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import io
+import re
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -57,6 +61,7 @@ __all__ = [
     "hull_distance",
     "load_features",
     "load_mesh",
+    "parse_features",
     "read_feature_file",
 ]
 
@@ -94,6 +99,14 @@ MAX_MESH_BYTES: Final = 1 << 30
 MESH_SUFFIXES: Final = (".glb", ".gltf", ".obj", ".ply", ".stl", ".off")
 
 
+#: Formats that hold one unnamed mesh: no part names, no materials.
+UNNAMED_SUFFIXES: Final = (".ply", ".stl", ".off")
+
+
+#: The names trimesh gives a GLB's unnamed meshes.
+_PLACEHOLDER_NAME: Final = re.compile(r"geometry(_\d+)?")
+
+
 @dataclass(frozen=True, eq=False)
 class Feature:
     """One feature of one object, as read from a feature file (``class_id`` local to it)."""
@@ -115,6 +128,9 @@ class ObjectMesh:
     path: Path
     parts: dict[str, trimesh.Trimesh]
     sha256: str  # of the file's bytes, as read for the parts
+    #: One line each, naming the file: what will not render as the file's author may
+    #: expect (a mesh that names no parts is painted all over); nothing fails on them.
+    warnings: tuple[str, ...] = ()
 
     @functools.cached_property
     def combined(self) -> trimesh.Trimesh:
@@ -172,7 +188,32 @@ def load_mesh(path: Path, object_name: str) -> ObjectMesh:
     for name, mesh in merged.items():
         if not np.isfinite(mesh.vertices).all():
             raise fail(f"part {name!r} has non-finite vertex coordinates")
-    return ObjectMesh(object_name, path, merged, hashlib.sha256(data).hexdigest())
+    why = _no_materials(path, data, merged)
+    warnings = () if why is None else (
+        f"{path}: warning: {why}: the whole mesh is painted with the livery (or the default paint), with no glass, "
+        "metal or dark engine inlets; name each part for its material (glass, metal, engine_inlets...: an OBJ's "
+        "usemtl names, a GLB's mesh names)",)
+    return ObjectMesh(object_name, path, merged, hashlib.sha256(data).hexdigest(), warnings)
+
+
+def _no_materials(path: Path, data: bytes, parts: dict[str, trimesh.Trimesh]) -> str | None:
+    """Why a mesh file names none of its parts, or None: an OBJ without materials (trimesh
+    then merges its objects and groups into one part), or whose materials did not reach its
+    parts (its .mtl missing), a format without parts, a GLB whose meshes have no names."""
+    suffix = path.suffix.lower()
+    if suffix in UNNAMED_SUFFIXES:
+        return f"{'an' if suffix in ('.stl', '.off') else 'a'} {suffix[1:].upper()} file has no materials or part names"
+    if suffix == ".obj":
+        named = [m.decode("utf-8", "replace").strip() for m in re.findall(rb"(?m)^[ \t]*usemtl[ \t]+([^\r\n]+)", data)]
+        materials = {*named, *(m.split()[0] for m in named if m)}
+        if not materials:
+            return "no materials (no usemtl lines)"
+        if not materials & set(parts):
+            return "its materials did not reach its parts (is the .mtl file of its mtllib line beside it?)"
+        return None
+    if all(_PLACEHOLDER_NAME.fullmatch(name) for name in parts):
+        return "its meshes have no names"
+    return None
 
 
 def mesh_hull(mesh: ObjectMesh) -> NDArray[np.float64]:
@@ -192,7 +233,12 @@ def load_features(path: Path, object_name: str, variant: str) -> list[Feature]:
     Every problem found is reported, one line each, naming the file and the key.
     """
     path = Path(path)
-    data = read_feature_file(path)
+    return parse_features(read_feature_file(path), path, object_name, variant)
+
+
+def parse_features(data: object, path: Path, object_name: str, variant: str) -> list[Feature]:
+    """Validate one variant of a feature file's JSON ``data`` (problems name ``path``):
+    what :func:`load_features` does once the file is read."""
     problems: list[Problem] = []
 
     def problem(key: str, message: str, value: object = None, has_value: bool = False) -> None:

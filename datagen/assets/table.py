@@ -6,6 +6,7 @@ then the next object's; names are qualified by object (``receiver.probe_tip``).
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -106,7 +107,11 @@ def feature_table(config: Config, meshes: Mapping[str, ObjectMesh] | None = None
 
 def check_assets(config: Config) -> tuple[FeatureTable, dict[str, ObjectMesh]]:
     """Load every mesh and the labeled features a config uses (each file read once); all
-    problems are raised together. Returns the dataset's feature table and the meshes."""
+    problems are raised together. Returns the dataset's feature table and the meshes.
+
+    A mesh's warnings (:attr:`ObjectMesh.warnings`: a mesh that names no parts is painted
+    all over) go to stderr, one line each, once per file: ``datagen validate`` and
+    ``datagen build`` say them without failing."""
     problems: list[Problem] = []
     meshes: dict[str, ObjectMesh] = {}
     for name in RIGID_OBJECTS:
@@ -114,6 +119,8 @@ def check_assets(config: Config) -> tuple[FeatureTable, dict[str, ObjectMesh]]:
             meshes[name] = load_mesh(object_paths(config, name)[0], name)
         except ConfigError as exc:
             problems += exc.problems
+    for line in dict.fromkeys(line for mesh in meshes.values() for line in mesh.warnings):
+        print(line, file=sys.stderr, flush=True)
     try:
         table = feature_table(config, meshes)
     except ConfigError as exc:

@@ -1,5 +1,5 @@
 """The ``datagen`` commands on scenes and datasets: validate, scenes, approach, build,
-audit, preview, evaluate, export, render, gallery."""
+audit, preview, evaluate, export, train, render, gallery."""
 
 
 from __future__ import annotations
@@ -196,9 +196,11 @@ def audit(
     written = write_report(result, source, folder, frames=frames_to_draw(source, overlays, index))
     for check in result.checks:
         status = "n/a " if not check.applicable else ("pass" if check.passed else "FAIL")
-        if check.min_pass_share is not None:
-            share = "-" if check.pass_share is None else f"{100 * check.pass_share:.1f}%"
-            typer.echo(f"{status}  {check.name}: {share} of {check.checked} pass (needs "
+        if check.min_pass_share is not None and check.pass_share is None:
+            typer.echo(f"{status}  {check.name}: nothing to check (needs {100 * check.min_pass_share:g}% to pass "
+                       "where there is)")
+        elif check.min_pass_share is not None:
+            typer.echo(f"{status}  {check.name}: {100 * check.pass_share:.1f}% of {check.checked} pass (needs "
                        f"{100 * check.min_pass_share:g}%), {check.failures} failed")
         else:
             worst = "" if check.worst is None else f", worst {check.worst:.3g}"
@@ -379,6 +381,52 @@ def export(
     require_plan(view, partial)
     written = export_dataset(view, folder, format)
     typer.echo(f"wrote {format.upper()} export of {len(view)} frames: {written}")
+
+
+@app.command()
+@user_errors
+def train(
+    dataset: Annotated[Path, typer.Argument(parser=path_value, help="Dataset folder (rendered).",
+                                            show_default=False)],
+    pose: Annotated[bool, typer.Option("--pose", help="Train the pose set (pose/ beside the detect set of "
+                                       "labels.format both).")] = False,
+    model: Annotated[str | None, typer.Option("--model", help="Ultralytics model: a .yaml builds it from "
+                                              "scratch, a local .pt starts from its weights (default: "
+                                              "yolo11n.yaml, yolo11n-pose.yaml for pose labels).",
+                                              show_default=False)] = None,
+    epochs: Annotated[int | None, typer.Option("--epochs", min=1, help="Epochs (default: Ultralytics' 100).",
+                                               show_default=False)] = None,
+    device: Annotated[str | None, typer.Option("--device", help="cpu, or CUDA device ids such as 0 or 0,1 "
+                                               "(default: Ultralytics' choice, a GPU where there is one).",
+                                               show_default=False)] = None,
+    runs: Annotated[Path | None, typer.Option("--runs", parser=path_value, help="Ultralytics' project folder "
+                                              "(default: runs/ beside the dataset).", show_default=False)]
+    = None,
+    name: Annotated[str | None, typer.Option("--name", help="The run's name (default: the dataset's).",
+                                             show_default=False)] = None,
+) -> None:
+    """Train a detector with Ultralytics on the dataset's own recipe (hyp.yaml), predict the
+    validation frames, and print the evaluate command (needs the train extra)."""
+    from datagen.analysis.ultralytics import train_and_predict
+    from datagen.dataset.reader import open_dataset
+    from datagen.dataset.training_run import TrainingRun
+
+    source = open_dataset(dataset)  # the checks every reading command makes, one line each
+    if source.doc.get("render") is False:
+        raise DatagenError(f"{source.root / 'dataset.json'}: render: false: a labels-only build has no images to "
+                           "train on (build it without --no-render)")
+    labels = source.doc["config"]["labels"].get("format", "detect")
+    if pose and labels == "detect":
+        raise DatagenError(f"{source.root / 'dataset.json'}: config.labels.format: detect; --pose needs a build "
+                           "with pose labels (labels.format pose or both)")
+    task = "pose" if labels == "pose" or pose else "detect"
+    root = source.root / "pose" if labels == "both" and pose else source.root
+    run = TrainingRun(root, Path(dataset), task, runs=output_path(runs, "--runs") if runs else None, name=name,
+                      model=model)
+    train_and_predict(run, epochs=epochs, device=device)
+    typer.echo(f"weights: {run.weights}")
+    typer.echo(f"predictions of the validation frames: {run.predictions}")
+    typer.echo(f"score them: {run.evaluate_command()}")
 
 
 def _at_contact(contact: dict, contact_m: float) -> str:

@@ -103,6 +103,13 @@ def _cell(text: str) -> str:
     return text.replace("|", "\\|")
 
 
+def key_cell(key: str) -> str:
+    """A key as the reference's table shows it: code that a narrow column wraps only after a
+    dot (``<wbr>``, which a copy leaves out), never inside a name (the site's CSS class
+    ``config-key``)."""
+    return f'<code class="config-key">{".<wbr>".join(key.split("."))}</code>'
+
+
 def config_reference() -> str:
     """The reference page (Markdown)."""
     lines = ["# Configuration reference", "",
@@ -122,7 +129,7 @@ def config_reference() -> str:
         lines += [f"## {anchor}`{title}`", "", _cell(model.__doc__ or ""), "",
                   "| key | type | default | description |", "|---|---|---|---|"]
         for name, info in model.model_fields.items():
-            lines.append(f"| `{prefix}{name}` | {_type(info.annotation)} | {_default(info)} | "
+            lines.append(f"| {key_cell(prefix + name)} | {_type(info.annotation)} | {_default(info)} | "
                          f"{_cell(info.description or '')} |")
         lines.append("")
     return "\n".join(lines)

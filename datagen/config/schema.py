@@ -261,7 +261,15 @@ class ApproachConfig(_Section):
     dynamics are the same; the sampled trajectories differ."""
 
     frames_per_approach: Integer = Field(16, ge=1, le=100_000)
-    """Consecutive frames taken from one approach (the unit of simulation)."""
+    """Consecutive frames taken from one approach (the unit of simulation). A build too
+    small to span min_approaches approaches of this many frames takes fewer from each
+    (dataset.frames / min_approaches, at least 1): see Config.frames_per_chain."""
+
+    min_approaches: Integer = Field(8, ge=1, le=100_000)
+    """The fewest approaches a build takes its frames from, when it has that many frames:
+    each approach has its own sky, sun, sea, clouds and liveries, so a small build still
+    shows the world's variety. Builds of frames_per_approach x min_approaches frames or
+    more are unaffected; 1 turns this off."""
 
     stride_steps: Integer = Field(15, ge=1, le=100_000)
     """Simulation steps between frames in 'time' sampling."""
@@ -734,14 +742,21 @@ class DatasetConfig(_Section):
     """Number of frames."""
 
     shard_size: Integer = Field(500, ge=1, le=100_000)
-    """Frames per shard (a shard is the unit of work, resumption and manifest files)."""
+    """Frames per shard (a shard is the unit of work, resumption and manifest files). A build
+    too small to make min_shards shards of this size makes smaller ones: see
+    Config.frames_per_shard."""
+
+    min_shards: Integer = Field(16, ge=1, le=100_000)
+    """The fewest shards a build is cut into, when it has that many frames, so that a small
+    build keeps every worker busy. Builds of shard_size x min_shards frames or more are
+    unaffected; 1 turns this off."""
 
     val_fraction: Number = Field(0.2, ge=0.0, lt=1.0)
     """Share of frames assigned to the validation split, decided per frame from the seed."""
 
     split_by: Literal["frame", "approach"] = "frame"
     """Unit of the train/val split: 'frame' decides every frame on its own; 'approach'
-    keeps the frames of one approach chain (frames_per_approach consecutive frames,
+    keeps the frames of one approach chain (Config.frames_per_chain consecutive frames,
     which share a trajectory) in the same split, so that validation frames are not
     near-duplicates of training frames."""
 
@@ -790,6 +805,21 @@ class Config(_Section):
 
     dataset: DatasetConfig
     """Dataset size, split and seed."""
+
+    @property
+    def frames_per_shard(self) -> int:
+        """Frames per shard: dataset.shard_size, or fewer in a build of fewer than
+        shard_size x min_shards frames (dataset.frames // min_shards, at least 1)."""
+        d = self.dataset
+        return max(1, min(d.shard_size, d.frames // d.min_shards))
+
+    @property
+    def frames_per_chain(self) -> int:
+        """Consecutive frames taken from one approach chain: approach.frames_per_approach,
+        or fewer in a build of fewer than frames_per_approach x min_approaches frames
+        (dataset.frames // min_approaches, at least 1)."""
+        a = self.approach
+        return max(1, min(a.frames_per_approach, self.dataset.frames // a.min_approaches))
 
     @model_validator(mode="after")
     def _margin_fits(self) -> Config:

@@ -95,7 +95,7 @@ def dataset_document(scene: Scene, jobs: list[ShardJob], fingerprint: str, *, re
                      "variant": config.features.variant, "objects": list(config.features.objects)},
         "seed": config.dataset.seed,
         "approach_model": config.approach.model,
-        "shard_size": config.dataset.shard_size,
+        "shard_size": config.frames_per_shard,
         "splits": splits,
         "assets": assets,
         "config": config.model_dump(mode="json"),

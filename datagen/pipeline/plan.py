@@ -21,18 +21,18 @@ def frame_split(config: Config, frame_index: int, seed: int | None = None) -> st
     """``train`` or ``val``, decided by the seed for the frame (or its approach chain)."""
     d = config.dataset
     seed = d.seed if seed is None else seed
-    unit = frame_index if d.split_by == "frame" else frame_index // config.approach.frames_per_approach
+    unit = frame_index if d.split_by == "frame" else frame_index // config.frames_per_chain
     return "val" if split_uniform(seed, unit) < d.val_fraction else "train"
 
 
 def plan_shards(config: Config) -> list[ShardJob]:
     """Every shard of the dataset, train first: a pure function of the config."""
-    d = config.dataset
+    d, size = config.dataset, config.frames_per_shard
     frames: dict[str, list[int]] = {s: [] for s in SPLITS}
     for i in range(d.frames):
         frames[frame_split(config, i)].append(i)
     return [
-        ShardJob(split, n, tuple(indices[start:start + d.shard_size]))
+        ShardJob(split, n, tuple(indices[start:start + size]))
         for split, indices in frames.items()
-        for n, start in enumerate(range(0, len(indices), d.shard_size))
+        for n, start in enumerate(range(0, len(indices), size))
     ]

@@ -11,6 +11,7 @@ import yaml
 from datagen.core.keypoints import PoseLayout
 from datagen.core.training import TRAIN_BATCH
 from datagen.dataset.layout import SPLITS
+from datagen.dataset.training_run import TrainingRun
 from datagen.scene.resolved import Scene
 
 __all__ = [
@@ -21,20 +22,20 @@ __all__ = [
 
 
 def _commands(root: Path, imgsz: int, task: str = "detect", dataset: Path | None = None) -> str:
-    """Train, predict and evaluate commands that work offline from any folder. ``root``: the
+    """Train, predict and evaluate commands that work offline from any shell. ``root``: the
     folder of the set's data.yaml; ``dataset``: the dataset's root, when that is another."""
-    model = "yolo11s.yaml" if task == "detect" else "yolo11s-pose.yaml"
-    dataset = dataset or root
-    runs = dataset.parent / "runs"
-    name = dataset.name if dataset == root else f"{dataset.name}-{task}"
+    run = TrainingRun(root, dataset or root, task)
+    train, predict = run.yolo_commands(imgsz)
     return f"""\
-# Train (offline, from any folder; {model} builds the network from scratch, a local .pt file works too):
-#   yolo {task} train data={root / 'data.yaml'} cfg={root / 'hyp.yaml'} model={model} project={runs} name={name}
-# Predict the validation frames (keeping low-confidence detections) and score the PtD vectors
-# that PnP makes of the {'detections' if task == 'detect' else 'keypoints'} at or above --conf:
-#   yolo {task} predict model={runs / name / 'weights' / 'best.pt'} source={root / 'val.txt'} imgsz={imgsz} conf=0.001 save_txt=True save_conf=True project={runs} name={name}-predict
-#   datagen evaluate {dataset} --predictions {runs / (name + '-predict') / 'labels'} --conf 0.25
-"""  # noqa: E501 (text the user reads, one line per sentence)
+# Train {run.network} from scratch (offline) and predict the validation frames, keeping
+# low-confidence detections (needs the train extra: pip install 'datagen[train]'):
+#   {run.train_command()}
+# which runs Ultralytics' own commands (pass another model= to either, a local .pt file too):
+#   {train}
+#   {predict}
+# Score the PtD vectors that PnP makes of the {'detections' if task == 'detect' else 'keypoints'} at or above --conf:
+#   {run.evaluate_command()}
+"""
 
 
 def data_yaml(root: Path, class_names: list[str], splits: tuple[str, ...] = SPLITS, *, imgsz: int = 864,

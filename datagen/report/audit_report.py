@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from datagen.analysis.audit import AuditResult
-from datagen.atomic import write_text
+from datagen.atomic import write_image, write_text
 from datagen.core.label_boxes import FrameLabels
 from datagen.dataset.reader import DatasetMeta, DatasetView
 from datagen.paths import real_folder, report_folder
@@ -92,15 +92,20 @@ def write_report(result: AuditResult, dataset: DatasetMeta, out: Path, *,
     sizes = "".join(f"<tr><td>{esc(s)}</td>{cells(v)}</tr>" for s, v in drift["by_size"].items())
     figures = "".join(f"<figure><img alt='{esc(name)}' src='{data_uri(path.read_bytes(), 'png')}'>"
                       f"<figcaption>{esc(name)}</figcaption></figure>" for name, path in plots.items())
-    overlay_html = []
+    overlay_html, sheets = [], []
     for view, b, labels in frames:
+        # Each sheet at full size, a file of its own that the page links, and on the page at
+        # its own size in a box that scrolls: scaled to the page's width no number could be read.
         image = draw_sheet(view, b, labels).image
-        scale = min(1.0, 2600 / image.shape[1])
-        image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        sheets.append(write_image(real_folder(out / "sheets") / f"{int(view.frame_id[b]):08d}.jpg", image,
+                                  jpeg_quality=90))
         _, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 85])
-        overlay_html.append(f"<figure><img alt='overlay frame {view.frame_id[b]}' "
-                            f"src='{data_uri(data.tobytes(), 'jpeg')}'><figcaption>frame {view.frame_id[b]} "
-                            f"({esc(view.split[b])})</figcaption></figure>")
+        link = f"sheets/{sheets[-1].name}"
+        overlay_html.append(f"<figure class='sheet'><figcaption>frame {view.frame_id[b]} ({esc(view.split[b])}): "
+                            f"<a href='{link}'>the sheet at full size</a> ({image.shape[1]}x{image.shape[0]} px)"
+                            f"</figcaption><div class='scroll'><img alt='overlay frame {view.frame_id[b]}' "
+                            f"width='{image.shape[1]}' height='{image.shape[0]}' "
+                            f"src='{data_uri(data.tobytes(), 'jpeg')}'></div></figure>")
     verdict = "PASSED" if result.passed else "FAILED"
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>datagen audit: {esc(result.name)}</title>
@@ -110,6 +115,8 @@ table {{ border-collapse: collapse; margin: 1em 0; }} td, th {{ border: 1px soli
 tr.fail td {{ background: #fdd; }} tr.pass td:nth-child(2) {{ color: #080; }} code {{ font-size: 12px; }}
 td.hist {{ font-family: monospace; letter-spacing: 1px; }}
 figure {{ display: inline-block; margin: 0.5em; }} img {{ max-width: 100%; border: 1px solid #ddd; }}
+figure.sheet {{ display: block; }} .sheet .scroll {{ overflow: auto; max-height: 90vh; border: 1px solid #ddd; }}
+.sheet .scroll img {{ max-width: none; border: 0; }}
 .verdict {{ font-weight: bold; color: {'#080' if result.passed else '#c00'}; }}
 </style></head>
 <body>
@@ -148,9 +155,10 @@ window.addEventListener("load", () => {{
     # report.json last: it is the record of every file the report wrote (``files``, relative to
     # the report folder), which --overwrite removes and nothing else.
     doc = report_document(result)
-    doc["files"] = ["report.html", *(str(p.relative_to(out)) for p in plots.values())]
+    doc["files"] = ["report.html", *(str(p.relative_to(out)) for p in [*plots.values(), *sheets])]
     write_text(out / "report.json", json.dumps(doc, indent=2, allow_nan=False, default=_json_default) + "\n")
-    return {"json": out / "report.json", "html": out / "report.html", **plots}
+    return {"json": out / "report.json", "html": out / "report.html", **plots,
+            **{f"sheet {p.stem}": p for p in sheets}}
 
 
 def _appearance_html(stats: dict, frames: int, esc) -> str:

@@ -57,10 +57,18 @@ PANEL_H: Final = 450
 TAG_H: Final = 17
 TAG_W: Final = 34
 KEY_W: Final = 250
+#: The key's font scale (OpenCV's Hershey simplex).
+KEY_FONT: Final = 0.42
 #: An object's crop is its features' boxes with this margin (share of its size, and px).
 MARGIN: Final = (0.15, 6.0)
 #: The most a crop magnifies (a single small feature would otherwise fill a panel).
 MAX_SCALE: Final = 24.0
+#: An object whose features a panel would show shrunk (below this magnification), or more
+#: than :data:`MAX_CROP_FEATURES` of them, is shown in several crops, each magnified by its
+#: own factor (a tanker 100 m out spans much of a wide frame: one crop shrank it and piled
+#: up its boxes).
+MIN_SCALE: Final = 1.0
+MAX_CROP_FEATURES: Final = 12
 #: Tags (or key lines) a column beside a panel holds.
 COLUMN_ROWS: Final = PANEL_H // TAG_H
 _FONT: Final = 0  # cv2.FONT_HERSHEY_SIMPLEX
@@ -148,6 +156,27 @@ def _crop(boxes: NDArray[np.float64]) -> tuple[float, float, float]:
     return cx - PANEL_W / scale / 2, cy - PANEL_H / scale / 2, scale
 
 
+def _feature_boxes(frame: FrameLabels, features: NDArray) -> NDArray[np.float64]:
+    """What a crop must show of ``features``: their tight boxes and true centres (not the label
+    boxes grown to the training size: those may run past the panel, the features never do)."""
+    boxes = np.concatenate([frame.tight_xyxy[features], np.tile(frame.center_px[features], 2)])
+    return boxes[np.isfinite(boxes).all(axis=1)]
+
+
+def _groups(frame: FrameLabels, features: NDArray) -> list[NDArray]:
+    """``features`` in groups a crop each: halves along the wider spread of their centres until
+    each group's crop magnifies at least :data:`MIN_SCALE` times and holds at most
+    :data:`MAX_CROP_FEATURES` features (or is a single feature), in reading order."""
+    boxes = _feature_boxes(frame, features)
+    if len(features) <= 1 or (len(boxes) and _crop(boxes)[2] >= MIN_SCALE and len(features) <= MAX_CROP_FEATURES):
+        return [features]
+    centres = np.nan_to_num(frame.center_px[features], nan=0.0)
+    axis = int(np.ptp(centres[:, 0]) < np.ptp(centres[:, 1]))
+    order = np.argsort(centres[:, axis], kind="stable")
+    half = len(features) // 2
+    return [*_groups(frame, features[np.sort(order[:half])]), *_groups(frame, features[np.sort(order[half:])])]
+
+
 def _magnified(image: NDArray[np.uint8], panel: Panel) -> NDArray[np.uint8]:
     """The panel's crop of ``image``, exactly registered: sheet pixel centre ``i + 0.5`` shows
     frame point ``crop + (i + 0.5) / scale`` (whole image pixels as blocks when magnified)."""
@@ -206,14 +235,17 @@ def _draw_panel(sheet: Sheet, crop: NDArray[np.uint8], panel: Panel, frame: Fram
     import cv2
 
     image, (px, py) = sheet.image, (int(panel.origin[0]), int(panel.origin[1]))
-    image[py:py + PANEL_H, px:px + PANEL_W] = crop
     thick = 1
     index = len(sheet.panels)
     sheet.panels.append(panel)
     marks = np.array([panel.to_sheet(frame.center_px[f]) for f in features]).reshape(-1, 2)
+    origin = np.array([px, py], dtype=np.float64)
+
+    # Boxes and crosshairs are drawn on the crop (so a box larger than the panel is cut at
+    # its border), the tags and their leaders on the sheet (they stand beside the panel).
     def box(xyxy, colour):
-        (x0, y0), (x1, y1) = panel.to_sheet(xyxy[:2]), panel.to_sheet(xyxy[2:])
-        cv2.rectangle(image, _fixed(x0, y0), _fixed(x1, y1), colour, thick, cv2.LINE_AA, _SHIFT)
+        (x0, y0), (x1, y1) = panel.to_sheet(xyxy[:2]) - origin, panel.to_sheet(xyxy[2:]) - origin
+        cv2.rectangle(crop, _fixed(x0, y0), _fixed(x1, y1), colour, thick, cv2.LINE_AA, _SHIFT)
 
     for f, mark in zip(features, marks, strict=True):
         excluded = Exclusion(int(frame.exclusion[f])) != Exclusion.NONE
@@ -224,7 +256,8 @@ def _draw_panel(sheet: Sheet, crop: NDArray[np.uint8], panel: Panel, frame: Fram
             if not excluded and not np.array_equal(frame.label_xyxy[f], frame.corrected_xyxy[f]):
                 box(frame.label_xyxy[f], WRITTEN)
         if panel.kind != "tight boxes":
-            draw_crosshair(image, mark, EXCLUDED if excluded else CENTRE, arm=7.0, halo=True)
+            draw_crosshair(crop, mark - origin, EXCLUDED if excluded else CENTRE, arm=7.0, halo=True)
+    image[py:py + PANEL_H, px:px + PANEL_W] = crop
     placed = _place_tags(marks, [_tag_width(numbers[f]) for f in features], (px, py, px + PANEL_W, py + PANEL_H))
     for f, mark, (rect, leader) in zip(features, marks, placed, strict=True):
         excluded = Exclusion(int(frame.exclusion[f])) != Exclusion.NONE
@@ -283,17 +316,34 @@ def _overlap(a, b) -> bool:
     return a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3]
 
 
+def _key_lines(view: DatasetView, frame: FrameLabels, features: NDArray, numbers: dict[int, int]) -> list[str]:
+    """A key line per feature: its number, its name and, when excluded, the reason, whole."""
+    lines = []
+    for f in features:
+        reason = Exclusion(int(frame.exclusion[f]))
+        name = view.features.name[f].split(".", 1)[-1] + (f" ({reason.reason})" if reason != Exclusion.NONE else "")
+        lines.append(f"{numbers[f]:>3} {name}")
+    return lines
+
+
+def _key_width(lines: list[str]) -> int:
+    """The width of a column of the key: its longest line, never cut, and at least :data:`KEY_W`."""
+    import cv2
+
+    return max([KEY_W] + [cv2.getTextSize(line, _FONT, KEY_FONT, 1)[0][0] + 12 for line in lines])
+
+
 def _draw_key(sheet: Sheet, x: int, y: int, view: DatasetView, frame: FrameLabels, features: NDArray,
               numbers: dict[int, int]) -> int:
     """The numbers' names in columns of at most a panel's height; returns its width."""
-    for i, f in enumerate(features):
-        reason = Exclusion(int(frame.exclusion[f]))
-        name = view.features.name[f].split(".", 1)[-1] + (f" ({reason.reason})" if reason != Exclusion.NONE else "")
-        kx, ky = x + (i // COLUMN_ROWS) * KEY_W, y + (i % COLUMN_ROWS) * TAG_H
-        draw_text(sheet.image, f"{numbers[f]:>3} {name}"[:34], (kx, ky + TAG_H - 4),
-              EXCLUDED if reason != Exclusion.NONE else INK, 0.42)
-        sheet.keys.append((view.features.name[f], int(f), (kx, ky, kx + KEY_W - 6, ky + TAG_H - 1)))
-    return KEY_W * _columns(len(features))
+    lines = _key_lines(view, frame, features, numbers)
+    column = _key_width(lines)
+    for i, (f, line) in enumerate(zip(features, lines, strict=True)):
+        excluded = Exclusion(int(frame.exclusion[f])) != Exclusion.NONE
+        kx, ky = x + (i // COLUMN_ROWS) * column, y + (i % COLUMN_ROWS) * TAG_H
+        draw_text(sheet.image, line, (kx, ky + TAG_H - 4), EXCLUDED if excluded else INK, KEY_FONT)
+        sheet.keys.append((view.features.name[f], int(f), (kx, ky, kx + column - 6, ky + TAG_H - 1)))
+    return column * _columns(len(features))
 
 
 def _legend(width: int, caption: str) -> NDArray[np.uint8]:
@@ -331,17 +381,17 @@ def draw_sheet(view: DatasetView, b: int, labels: FrameLabels, image: NDArray[np
                for i, o in enumerate(view.features.objects)]
     objects = [(o, f) for o, f in objects if len(f)]
     numbering = {o: {int(f): n + 1 for n, f in enumerate(fs)} for o, fs in objects}
-    # Rows of panels first (their widths set the sheet's), then the whole frame above them.
+    # Rows of panels first (their widths set the sheet's), then the whole frame above them:
+    # an object in one row, or in several crops (a row each) where one would not magnify it.
     rows = []
     for o, fs in objects:
-        # The features themselves (tight boxes and true centres), not the label boxes grown
-        # to the training size: those may run past the panel, the features never do.
-        boxes = np.concatenate([frame.tight_xyxy[fs], np.tile(frame.center_px[fs], 2)])
-        boxes = boxes[np.isfinite(boxes).all(axis=1)]
-        x0, y0, s = _crop(boxes)
-        rows.append((o, fs, (x0, y0, s)))
-    tag_room = [TAG_W * _columns(len(fs)) + 12 for _, fs, _ in rows]
-    key_room = [KEY_W * _columns(len(fs)) for _, fs, _ in rows]
+        groups = _groups(frame, fs)
+        for part, group in enumerate(groups):
+            title = o if len(groups) == 1 else f"{o} ({part + 1} of {len(groups)})"
+            rows.append((o, title, group, _crop(_feature_boxes(frame, group)), numbering[o]))
+    tag_room = [TAG_W * _columns(len(fs)) + 12 for _, _, fs, _, _ in rows]
+    key_room = [_key_width(_key_lines(view, frame, fs, numbers)) * _columns(len(fs))
+                for _, _, fs, _, numbers in rows]
     width = max([3 * (PANEL_W + t) + k + 24 for t, k in zip(tag_room, key_room, strict=True)] + [1600])
     k = view.intrinsics
     scale = width / k.width
@@ -352,21 +402,21 @@ def draw_sheet(view: DatasetView, b: int, labels: FrameLabels, image: NDArray[np
     row_h = PANEL_H + 40
     sheet = Sheet(np.concatenate([legend, overview, np.full((row_h * len(rows), width, 3), PAPER, np.uint8)]))
     top = legend.shape[0]
-    for o, (x0, y0, s) in ((o, c) for o, _, c in rows):  # each region in the whole frame
+    for o, (x0, y0, s) in ((title, c) for _, title, _, c, _ in rows):  # each region in the whole frame
         a = (np.array([x0, y0]) * scale) + (0, top)
         z = (np.array([x0 + PANEL_W / s, y0 + PANEL_H / s]) * scale) + (0, top)
         cv2.rectangle(sheet.image, _fixed(*a), _fixed(*z), REGION, 2, cv2.LINE_AA, _SHIFT)
         draw_text(sheet.image, o, (int(max(a[0], 4)), int(max(a[1] - 6, top + 16))), REGION, 0.7)
     y = top + overview.shape[0]
-    for o, fs, (x0, y0, s) in rows:
-        draw_text(sheet.image, f"{o}: {len(fs)} features in view, x{s:.1f}", (12, y + 26), REGION, 0.6)
+    for o, title, fs, (x0, y0, s), numbers in rows:
+        draw_text(sheet.image, f"{title}: {len(fs)} features in view, x{s:.1f}", (12, y + 26), REGION, 0.6)
         x = 12
         for kind in PANELS:
             panel = Panel(o, kind, (x, y + 36), (x0, y0), s)
             crop = _magnified(image, panel)
             draw_text(crop, kind, (8, 20), INK, 0.55)
-            x += PANEL_W + _draw_panel(sheet, crop, panel, frame, fs, numbering[o])
-        _draw_key(sheet, x, y + 36, view, frame, fs, numbering[o])
+            x += PANEL_W + _draw_panel(sheet, crop, panel, frame, fs, numbers)
+        _draw_key(sheet, x, y + 36, view, frame, fs, numbers)
         y += row_h
     return sheet
 

@@ -26,7 +26,7 @@ the drogue as a cubic Hermite curve; the tanker flies straight and level or in
 a coordinated banking turn. The camera sits on its mount with a per-approach
 pose perturbation: extrinsics are unknown and change in flight.
 
-Frames are grouped ``frames_per_approach`` at a time: frames
+Frames are grouped ``Config.frames_per_chain`` at a time: frames
 ``[a*K, (a+1)*K)`` come from approach chain ``a``, whose every draw comes from
 :func:`datagen.core.conventions.approach_rng` ``(seed, a)``. A frame's state is thus
 a pure function of (config, seed, frame index), and any frame can be
@@ -199,7 +199,7 @@ class FrameStates:
         """Simulate the chains of ``frame_indices`` that are not held, together
         (:func:`simulate_chains`), each only as far as its last frame here, and hold
         every chain of them."""
-        k = self.config.approach.frames_per_approach
+        k = self.config.frames_per_chain
         upto: dict[int, int] = {}
         for i in frame_indices:
             a, j = divmod(int(i), k)
@@ -210,7 +210,7 @@ class FrameStates:
             self._add(a, snapshots)
 
     def __call__(self, frame_index: int) -> FrameState:
-        k = self.config.approach.frames_per_approach
+        k = self.config.frames_per_chain
         a, j = divmod(frame_index, k)
         if a not in self._chains or j >= len(self._chains[a]):  # not held, or held only up to an earlier frame
             self._add(a, simulate_chain(self.config, self.seed, a))

@@ -292,7 +292,7 @@ def _begin_chain(chain: _Chain) -> FloatArray | None:
     fixes the order of a chain's first draws, so that a traced approach is the one its
     frames come from."""
     a = chain.config.approach
-    k = a.frames_per_approach
+    k = chain.config.frames_per_chain
     lo, hi = a.range_m
     if a.sampling == "distance":
         # One frame per distance stratum, visited from far to near, on one approach.
@@ -304,11 +304,11 @@ def _begin_chain(chain: _Chain) -> FloatArray | None:
 
 
 def simulate_chain(config: Config, seed: int, approach_index: int) -> list[ChainSnapshot]:
-    """Simulate approach chain ``approach_index``; return its ``frames_per_approach`` snapshots."""
+    """Simulate approach chain ``approach_index``; return its ``Config.frames_per_chain`` snapshots."""
     if config.approach.model == 2:
         return simulate_chains(config, seed, [approach_index])[approach_index]
     a = config.approach
-    k = a.frames_per_approach
+    k = config.frames_per_chain
     chain, targets = _start_chain(config, seed, approach_index)
     snapshots: list[ChainSnapshot] = []
     if targets is not None:
@@ -345,7 +345,7 @@ def simulate_chains(config: Config, seed: int, approach_indices,
     a = config.approach
     if a.model == 1 or not indices:
         return {i: simulate_chain(config, seed, i) for i in indices}
-    k = a.frames_per_approach
+    k = config.frames_per_chain
     wanted = np.array([min(max(int((upto or {}).get(i, k)), 1), k) for i in indices])
     batch = _Chains(config, seed, indices)
     chains, targets = batch.chains, batch.targets

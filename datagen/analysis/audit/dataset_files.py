@@ -133,10 +133,10 @@ MAX_WORLD_TEXEL_PX: Final = 1.5
 
 
 def check_texels(view: DatasetIndex | DatasetView) -> Check:
-    """No rendered frame shows a world texture's texel (the sea's wave normals) larger than
-    :data:`MAX_WORLD_TEXEL_PX` on screen (the manifest's ``world_texel_px``)."""
+    """No rendered frame shows a world texture's texel larger than :data:`MAX_WORLD_TEXEL_PX`
+    on screen (the manifest's ``world_texel_px``; 0 for the procedural sea and clouds)."""
     check = Check("world_texels", f"no rendered frame shows a world texel over {MAX_WORLD_TEXEL_PX:g} px "
-                  "(clouds are procedural; the sea's wave normals are a texture)")
+                  "(the sea and clouds are procedural: 0)")
     values = np.array([np.nan if v is None else v for v in view.world_texel_px], dtype=np.float64)
     seen = np.isfinite(values)
     check.checked = int(seen.sum())

@@ -332,6 +332,14 @@ def appearance_finish(spill: Spill, columns: dict[str, dict]) -> dict:
     return out
 
 
+def histogram_range(lo: float, hi: float, bins: int = APPEARANCE_BINS) -> tuple[float, float]:
+    """``(lo, hi)``, or ``(lo, lo + max(1, |lo|))`` where ``bins`` bins of it would not have
+    increasing edges (equal values, or values a few ulps apart: numpy refuses such a range;
+    the sea's wave slope variance of a 4-frame build was one value and its neighbour)."""
+    edges = np.linspace(lo, hi, bins + 1)
+    return (lo, hi) if hi > lo and bool(np.all(np.diff(edges) > 0)) else (lo, lo + max(1.0, abs(lo)))
+
+
 def _number_summary(spill: Spill, stream: str) -> dict:
     """Min, max, mean (in frame order) and a histogram of a spilled stream's finite values."""
     n, lo, hi = 0, math.inf, -math.inf
@@ -347,6 +355,6 @@ def _number_summary(spill: Spill, stream: str) -> dict:
     counts = np.zeros(APPEARANCE_BINS, dtype=np.int64)
     for part in spill.parts(stream, "value"):
         v = part["value"][np.isfinite(part["value"])]
-        counts_, edges = np.histogram(v, bins=APPEARANCE_BINS, range=(lo, hi if hi > lo else lo + 1.0))
+        counts_, edges = np.histogram(v, bins=APPEARANCE_BINS, range=histogram_range(lo, hi))
         counts += counts_
     return {"min": lo, "max": hi, "mean": total.mean(), "edges": edges.tolist(), "histogram": counts.tolist()}
