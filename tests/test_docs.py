@@ -278,3 +278,23 @@ def test_the_tutorials_audit_figures_are_the_readme_builds(readme_build) -> None
     assert result.passed
     assert (f"every check passes (worst label-centre drift {drift:.2e} px); tight-box drift median "
             f"{tight['median']:.2f} px, 95th percentile {tight['p95']:.2f} px, max {tight['max']:.2f} px") in page
+
+
+def test_the_readme_and_the_site_cite_the_paper_alike() -> None:
+    readme, index = ((ROOT / name).read_text() for name in ("README.md", "docs/index.md"))
+    entries = [re.findall(r"```bibtex\n(.*?)```", text, re.S) for text in (readme, index)]
+    assert entries[0] == entries[1] and len(entries[0]) == 1
+    title = "Relative vectoring using dual object detection for autonomous aerial refueling"
+    assert title in entries[0][0] and title in " ".join(readme.split())
+
+
+def test_no_page_names_an_issue_or_a_commit() -> None:
+    """The pages describe the program; its history (issues, commits) is in CHANGELOG.md only."""
+    from datagen.cli.command_reference import cli_reference
+    from datagen.config.key_reference import config_reference
+
+    pages = {str(p.relative_to(ROOT)): p.read_text() for p in DOC_FILES + [ROOT / "assets" / "README.md"]}
+    pages.update({"reference/config.md": config_reference(), "reference/cli.md": cli_reference()})
+    history = re.compile(r"\bissues? #?\d+|\bcommit\b|\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*\d)[0-9a-f]{7,40}\b", re.I)
+    found = [f"{name}: {m.group(0)}" for name, text in pages.items() for m in history.finditer(text)]
+    assert found == []
