@@ -63,9 +63,11 @@ def log(message: str) -> None:
 
 
 def config_of(args, seed: int, frames: int, **overrides):
+    """The scene with ``frames`` frames in chains of frames_per_approach whatever the count
+    (approach.min_approaches 1): the datasets the recorded figures were measured on."""
     config = load_config(find_config(args.scene))
-    return override_config(config, {"dataset.frames": frames, "dataset.seed": seed, **overrides,
-                                    **({"render.spp": args.spp} if args.spp else {})})
+    return override_config(config, {"dataset.frames": frames, "dataset.seed": seed, "approach.min_approaches": 1,
+                                    **overrides, **({"render.spp": args.spp} if args.spp else {})})
 
 
 def build(config, root: Path, workers: int) -> float:

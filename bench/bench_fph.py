@@ -3,11 +3,12 @@
     python bench/bench_fph.py [--scenes wingcam55 podcam15 ...] [--frames 48] [--workers 2]
 
 Each scene is built as a user builds it (a subprocess: ``datagen build --config NAME
---frames N --workers W``, shards of ``frames_per_approach`` frames so that every worker
-has work), after a warm-up build of the same frames: Dr.Jit compiles its kernels once per
-machine and keeps them on disk (after a process's first frame no frame compiles one:
-``tests/test_render.py``), so the timed build pays no compile; ``--workers auto`` is
-accepted as the build takes it.
+--frames N --workers W`` of the scene's config with ``approach.min_approaches`` and
+``dataset.min_shards`` 1, as a full build takes its frames; shards of
+``frames_per_approach`` frames so that every worker has work), after a warm-up build of
+the same frames: Dr.Jit compiles its kernels once per machine and keeps them on disk
+(after a process's first frame no frame compiles one: ``tests/test_render.py``), so the
+timed build pays no compile; ``--workers auto`` is accepted as the build takes it.
 Prints a markdown table: the estimate the build printed in its first line, the measured
 frames/h of the build's own summary, its split of a rendered frame (``other``: the host
 work outside ``mi.render`` and the denoiser) and the kernels its workers compiled after
@@ -25,7 +26,22 @@ import sys
 import tempfile
 from pathlib import Path
 
+import yaml
+
 from datagen.config.load import load_config, shipped_scenes
+
+
+def full_build_config(name: str, folder: Path) -> Path:
+    """The scene's config as a full build runs it however few frames the bench builds: chains
+    of frames_per_approach frames and shards of the bench's size (approach.min_approaches and
+    dataset.min_shards 1; a small build spreads its frames over more approaches, whose
+    simulation costs more a frame)."""
+    data = load_config(name).model_dump(mode="json")
+    data["approach"]["min_approaches"] = 1
+    data["dataset"]["min_shards"] = 1
+    path = folder / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
 
 
 def build(name: str, out: Path, frames: int, workers: int, shard: int) -> str:
@@ -50,8 +66,9 @@ def main() -> None:
         count = int(args.workers) if args.workers != "auto" else os.cpu_count() or 1  # shards enough for any count
         shard = max(1, min(load_config(name).approach.frames_per_approach, args.frames // max(1, count)))
         with tempfile.TemporaryDirectory() as tmp:
-            build(name, Path(tmp) / "warm", args.frames, args.workers, shard)
-            text = build(name, Path(tmp) / "ds", args.frames, args.workers, shard)
+            config = str(full_build_config(name, Path(tmp)))
+            build(config, Path(tmp) / "warm", args.frames, args.workers, shard)
+            text = build(config, Path(tmp) / "ds", args.frames, args.workers, shard)
         estimate = re.search(r"estimate [0-9.]+ s a frame = ([0-9,]+) frames/h on \d+ cores \(([^)]*)\)", text)
         measured = re.search(r"this run: .* = ([0-9,]+) frames/h", text)
         split = re.search(r"per rendered frame: (.*)\n", text)

@@ -59,8 +59,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def config_for(seed: int, frames: int, **overrides):
+    """wingcam55 with ``frames`` frames: chains of frames_per_approach frames whatever the
+    count (approach.min_approaches 1), the datasets the recorded figures were measured on."""
     return override_config(load_config(ROOT / "scenes" / "wingcam55.yaml"),
-                           {"dataset.frames": frames, "dataset.seed": seed, **overrides})
+                           {"dataset.frames": frames, "dataset.seed": seed, "approach.min_approaches": 1,
+                            **overrides})
 
 
 # --- the sweep ---------------------------------------------------------------------------------

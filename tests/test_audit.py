@@ -251,6 +251,10 @@ def test_the_report_links_each_sheet_at_full_size_and_shows_it_unscaled(dataset,
         assert f"sheets/{sheet.name}" in listed and f"<a href='sheets/{sheet.name}'>" in page
         assert f"width='{width}' height='{height}'" in page and width >= 1600
     assert ".sheet .scroll img { max-width: none;" in page
+    # An audit drawing other frames keeps the earlier sheets in its record (--overwrite removes them).
+    again = write_report(audit(view), view, tmp_path, frames=frames_to_draw(view, 1))
+    listed = json.loads(again["json"].read_text())["files"]
+    assert {f"sheets/{sheet.name}" for sheet in sheets} <= set(listed)
 
 
 @pytest.mark.render

@@ -159,6 +159,21 @@ def test_overrides_are_validated_and_named() -> None:
     assert str(err.value).startswith("command line: dataset.shard_size: value 0:")
 
 
+def test_a_dataset_json_without_the_small_build_keys_plans_the_shards_its_build_made() -> None:
+    """A config recorded before approach.min_approaches and dataset.min_shards existed plans
+    (for --overwrite and resumption) the shards and chains that build made, not today's."""
+    from datagen.config.load import stored_config
+
+    config = override_config(load_config(ROOT / "scenes/wingcam55.yaml"),
+                             {"dataset.frames": 40, "dataset.shard_size": 30})
+    recorded = config.model_dump(mode="json")
+    del recorded["approach"]["min_approaches"], recorded["dataset"]["min_shards"]
+    old = stored_config(recorded)
+    assert (old.frames_per_shard, old.frames_per_chain) == (30, 16)
+    assert (config.frames_per_shard, config.frames_per_chain) == (2, 5)
+    assert stored_config(config.model_dump(mode="json")) == config
+
+
 # --- metadata files -----------------------------------------------------------------------
 def test_manifest_readme_documents_every_column() -> None:
     text = (ROOT / "manifests" / "README.md").read_text()

@@ -132,3 +132,23 @@ def test_train_refuses_a_labels_only_build_and_pose_without_pose_labels_in_one_l
     out = run("train", str(root), "--pose")
     assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1
     assert "--pose needs a build with pose labels" in out.stderr
+
+
+def test_train_refuses_training_files_ultralytics_would_run_or_load(tmp_path: Path) -> None:
+    """A dataset is a stranger's: Ultralytics executes a data.yaml's `download` and loads the
+    files hyp.yaml names. train refuses such files in one line, before Ultralytics runs."""
+    root = tmp_path / "labels"
+    assert run("build", "--config", "wingcam55", "--frames", "2", "--no-render", "--out", str(root)).returncode == 0
+    touched = tmp_path / "pwned"
+    data, hyp = (root / "data.yaml").read_text(), (root / "hyp.yaml").read_text()
+    for name, text, said in (
+            ("data.yaml", data + f"download: \"open('{touched}', 'w').write('x')\"\n", "'download': not a key"),
+            ("hyp.yaml", hyp + f"pretrained: {tmp_path / 'evil.pt'}\n", "'pretrained': names a file"),
+            ("hyp.yaml", hyp + "imgsz: [\n", "invalid YAML")):
+        (root / "data.yaml").write_text(data)
+        (root / "hyp.yaml").write_text(hyp)
+        (root / name).write_text(text)
+        out = run("train", str(root))
+        assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, out.stderr
+        assert out.stderr.startswith(str(root / name)) and said in out.stderr, out.stderr
+    assert not touched.exists()

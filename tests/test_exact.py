@@ -172,18 +172,20 @@ def test_a_full_disk_names_the_spill_file_and_tmpdir_and_the_folder_goes(monkeyp
 
 
 @settings(max_examples=300, deadline=None)
-@given(lo=st.floats(-1e300, 1e300), ulps=st.integers(0, 64), spread=st.booleans())
-@example(lo=0.020833475029788828, ulps=1, spread=False)
-def test_a_histogram_of_values_equal_or_ulps_apart_counts_every_value(lo: float, ulps: int, spread: bool) -> None:
-    """The audit's appearance histograms (histogram_range): values a few ulps apart, which
-    numpy's own range refused, land in the histogram, every one."""
-    from datagen.analysis.audit.statistics import APPEARANCE_BINS, histogram_range
+@given(lo=st.floats(allow_nan=False, allow_infinity=False), ulps=st.integers(0, 64),
+       spread=st.floats(allow_nan=False, allow_infinity=False))
+@example(lo=0.020833475029788828, ulps=1, spread=0.0)
+@example(lo=-1e308, ulps=0, spread=1e308)
+@example(lo=1.7e308, ulps=0, spread=0.0)
+def test_a_histogram_of_any_finite_values_counts_every_value(lo: float, ulps: int, spread: float) -> None:
+    """The audit's appearance histograms (histogram_range over values clipped to
+    HISTOGRAM_BOUND): values equal, a few ulps apart (which numpy's own range refused) or as
+    far apart as floats go land in the histogram, every one."""
+    from datagen.analysis.audit.statistics import APPEARANCE_BINS, _histogrammable, histogram_range
 
     hi = lo
     for _ in range(ulps):
-        hi = float(np.nextafter(hi, np.inf))
-    if spread:
-        hi = lo + abs(lo) + 1.0
-    values = np.array([lo, hi, (lo + hi) / 2])
-    counts, _ = np.histogram(values, bins=APPEARANCE_BINS, range=histogram_range(lo, hi))
+        hi = float(np.nextafter(hi, np.inf)) if hi < np.finfo(np.float64).max else hi
+    values = _histogrammable(np.array([lo, hi, spread]))
+    counts, _ = np.histogram(values, bins=APPEARANCE_BINS, range=histogram_range(values.min(), values.max()))
     assert counts.sum() == 3

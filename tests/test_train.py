@@ -258,22 +258,22 @@ def test_a_detector_trained_with_the_datasets_own_files_gets_a_learning_signal(t
 
 
 def test_datagen_train_trains_predicts_and_prints_an_evaluate_command_that_runs(tmp_path: Path) -> None:
-    """`datagen train` on 6 rendered frames, 1 epoch on the CPU: weights, one prediction file
-    per validation image at most, and the evaluate command it prints exits 0 (the hyp.yaml
-    comment names the same command)."""
-
+    """`datagen train w55` from the dataset's parent folder (a relative path, as the README
+    runs it), 1 epoch on the CPU: the weights and Ultralytics' prediction folder beside the
+    dataset in runs/, at most one prediction file per validation image, and the evaluate
+    command it prints (the one hyp.yaml names) exits 0."""
     config = override_config(load_config(ROOT / "scenes" / "wingcam55.yaml"),
                              {"dataset.frames": 6, "dataset.seed": HELD_OUT_SEED, "render.spp": 1,
                               "dataset.val_fraction": 0.5})
     root = tmp_path / "w55"
     build_dataset(config, root)
-    out = subprocess.run([sys.executable, "-m", "datagen", "train", str(root), "--epochs", "1", "--device", "cpu"],
+    out = subprocess.run([sys.executable, "-m", "datagen", "train", "w55", "--epochs", "1", "--device", "cpu"],
                          check=False, capture_output=True, text=True, timeout=1800, cwd=tmp_path)
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
     assert (tmp_path / "runs" / "w55" / "weights" / "best.pt").is_file()
+    assert (tmp_path / "runs" / "w55-predict").is_dir()  # Ultralytics' own folder: datagen makes only labels/
     predictions = tmp_path / "runs" / "w55-predict" / "labels"
-    val_images = (root / "val.txt").read_text().split()
-    assert predictions.is_dir() and len(list(predictions.glob("*.txt"))) <= len(val_images)
+    assert len(list(predictions.glob("*.txt"))) <= len((root / "val.txt").read_text().split())
     command = out.stdout.strip().splitlines()[-1].removeprefix("score them: ")
     assert command in (root / "hyp.yaml").read_text()
     scored = subprocess.run(shlex.split(command), check=False, capture_output=True, text=True, timeout=600)

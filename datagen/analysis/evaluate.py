@@ -91,9 +91,10 @@ def solve_pose(points_model: NDArray, uv_px: NDArray, k: Intrinsics, settings: P
     the frame's lens (OpenCV's five coefficients), None for a pinhole camera.
 
     Four or more matches: RANSAC with the paper's settings (and ``guess`` as the
-    extrinsic guess), checked against SQPnP on its inliers. Exactly three: SQPnP's pose,
-    unless the three fit poses apart (:func:`_three_point_pose`). Points OpenCV's solvers refuse (SQPnP's
-    variance check on points far outside any image) are a failed solve, as is no pose.
+    extrinsic guess), checked against SQPnP on its inliers. Exactly three: SQPnP's pose
+    where it is the only one they fit (:func:`_three_point_pose`: almost never).
+    Points OpenCV's solvers refuse (SQPnP's variance check on points far outside any image)
+    are a failed solve, as is no pose.
     """
     import cv2
 
@@ -114,7 +115,7 @@ def _solve_pose(points_model: NDArray, uv_px: NDArray, k: Intrinsics, settings: 
     obj = np.ascontiguousarray(points_model, dtype=np.float64).reshape(-1, 1, 3)
     img = np.ascontiguousarray(uv_px, dtype=np.float64).reshape(-1, 1, 2)
     if n < 4:
-        return _three_point_pose(obj, img, camera, distortion, guess)
+        return _three_point_pose(obj, img, camera, distortion)
     use_guess = guess is not None
     rvec0 = np.array(guess[0], dtype=np.float64).reshape(3, 1) if use_guess else None
     tvec0 = np.array(guess[1], dtype=np.float64).reshape(3, 1) if use_guess else None
@@ -153,23 +154,25 @@ def _solve_pose(points_model: NDArray, uv_px: NDArray, k: Intrinsics, settings: 
     return rvec.ravel(), tvec.ravel()
 
 
-def _three_point_pose(obj: NDArray, img: NDArray, camera: NDArray, distortion: NDArray | None,
-                      guess: tuple[NDArray, NDArray] | None) -> tuple[NDArray, NDArray] | None:
-    """The pose of three matches, or None when they fit two poses apart. Three points fit
-    up to four poses exactly (P3P): SQPnP alone picked poses 15-55 m off from noise-free
-    points, and the approach's previous pose (``guess``) only carries a wrong pick along.
-    So a pose is kept only where every pose that fits lies within :data:`THREE_POINT_AGREEMENT`
-    of the distance of SQPnP's."""
+def _three_point_pose(obj: NDArray, img: NDArray, camera: NDArray, distortion: NDArray | None
+                      ) -> tuple[NDArray, NDArray] | None:
+    """The pose of three matches, or None when they do not tell it. Three points fit up to
+    four poses exactly (P3P), and for almost every three-point set two or more of them lie
+    in front of the camera, metres apart: SQPnP alone picked poses 15-55 m off from
+    noise-free points. A pose is kept only where every pose in front of the camera that
+    fits lies within :data:`THREE_POINT_AGREEMENT` of SQPnP's distance. (The approach's
+    previous pose does not choose reliably: frames of an approach lie metres apart, and
+    on podcam15 frames it chose poses 33 m off.)"""
     import cv2
 
     ok, rvec, tvec = cv2.solvePnP(obj, img, camera, distortion, flags=cv2.SOLVEPNP_SQPNP)
     if not ok:
         return None
+    rvec, tvec = np.ravel(rvec), np.ravel(tvec)
     solved, _, tvecs = cv2.solveP3P(obj, img, camera, distortion, flags=cv2.SOLVEPNP_AP3P)
     reach = THREE_POINT_AGREEMENT * float(np.linalg.norm(tvec))
-    if solved and any(np.linalg.norm(np.ravel(t) - np.ravel(tvec)) > reach for t in tvecs):
-        return None
-    return np.ravel(rvec), np.ravel(tvec)
+    others = [np.ravel(t) for t in tvecs if np.ravel(t)[2] > 0] if solved else []
+    return (rvec, tvec) if all(np.linalg.norm(t - tvec) <= reach for t in others) else None
 
 
 def _score(obj: NDArray, img: NDArray, rvec: NDArray, tvec: NDArray, camera: NDArray,

@@ -11,12 +11,12 @@ the two.
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from datagen.config.inputs import parse_yaml, read_text
 from datagen.core.errors import DatagenError
 from datagen.core.training import ANCHOR_STRIDES
 from datagen.dataset.training_run import PREDICT_CONF, TrainingRun
@@ -198,32 +198,43 @@ def assigner_positives(root: str | Path, split: str = "train", *, images: int | 
 def train_and_predict(run: TrainingRun, *, epochs: int | None = None, device: str | None = None,
                       workers: int | None = None) -> None:
     """Train ``run.network`` on the set with its own ``hyp.yaml``, then predict its validation
-    frames with the best weights (the prediction folder is written afresh: Ultralytics
-    appends to label files that are there)."""
+    frames with the best weights. Ultralytics appends to the label files of a prediction
+    folder, so those of an earlier run (``*.txt`` in ``run.predictions``, no other file) are
+    removed first. ``run``'s folders should be absolute: Ultralytics puts a relative project
+    folder under its own settings folder. The caller checks the recipe files first
+    (:func:`datagen.analysis.audit.dataset_files.check_recipe`)."""
     require_ultralytics()
     from ultralytics import YOLO
 
     folder = DatasetFolder(run.root)
     data = folder.file("data.yaml")
     hyp = folder.file("hyp.yaml")
-    doc = yaml.safe_load(data.read_text())
-    recipe = yaml.safe_load(hyp.read_text())
+    doc = parse_yaml(read_text(data, "data.yaml"), data)
+    recipe = parse_yaml(read_text(hyp, "hyp.yaml"), hyp)
     if not isinstance(doc, dict) or not isinstance(doc.get("val"), str):
         raise DatagenError(f"{data}: val: no image list named")
     if not isinstance(recipe, dict) or not isinstance(recipe.get("imgsz"), int):
         raise DatagenError(f"{hyp}: imgsz: not an integer")
     val = folder.file(doc["val"])
+    predictions = run.predictions
+    for path in (predictions.parent, predictions):
+        if path.is_symlink() or (path.exists() and not path.is_dir()):
+            raise DatagenError(f"{path}: not a folder (a file or a symbolic link is in the way of the predictions)")
     extra = {k: v for k, v in (("epochs", epochs), ("device", device), ("workers", workers)) if v is not None}
     YOLO(run.network, task=run.task).train(data=str(data), cfg=str(hyp), project=str(run.project),
                                            name=run.run_name, exist_ok=True, **extra)
     if not run.weights.is_file():
         raise DatagenError(f"{run.weights}: Ultralytics wrote no weights")
-    if run.predictions.parent.is_dir() and not run.predictions.parent.is_symlink():
-        shutil.rmtree(run.predictions.parent)
+    if predictions.is_dir():
+        for old in predictions.glob("*.txt"):
+            if old.is_file() and not old.is_symlink():
+                old.unlink()
     predictor = YOLO(str(run.weights), task=run.task)
     for _ in predictor.predict(source=str(val), imgsz=recipe["imgsz"], conf=PREDICT_CONF, save_txt=True,
                                save_conf=True, project=str(run.project), name=f"{run.run_name}-predict",
                                exist_ok=True, stream=True, verbose=False,
                                **({"device": device} if device is not None else {})):
         pass
-    run.predictions.mkdir(parents=True, exist_ok=True)  # Ultralytics makes it only for a first detection
+    if not predictions.parent.is_dir():
+        raise DatagenError(f"{predictions.parent}: Ultralytics wrote no predictions")
+    predictions.mkdir(exist_ok=True)  # Ultralytics makes it only for a first detection

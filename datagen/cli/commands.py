@@ -407,11 +407,16 @@ def train(
 ) -> None:
     """Train a detector with Ultralytics on the dataset's own recipe (hyp.yaml), predict the
     validation frames, and print the evaluate command (needs the train extra)."""
+    from datagen.analysis.audit.dataset_files import check_recipe
     from datagen.analysis.ultralytics import train_and_predict
     from datagen.dataset.reader import open_dataset
     from datagen.dataset.training_run import TrainingRun
 
     source = open_dataset(dataset)  # the checks every reading command makes, one line each
+    recipe = check_recipe(source).finish()  # Ultralytics runs a data.yaml's download and loads files hyp.yaml names
+    if not recipe.passed:
+        raise DatagenError(f"{source.root}/{recipe.offenders[0]} (datagen audit checks the training files; "
+                           "rebuild the dataset to rewrite them)")
     if source.doc.get("render") is False:
         raise DatagenError(f"{source.root / 'dataset.json'}: render: false: a labels-only build has no images to "
                            "train on (build it without --no-render)")
@@ -421,8 +426,9 @@ def train(
                            "with pose labels (labels.format pose or both)")
     task = "pose" if labels == "pose" or pose else "detect"
     root = source.root / "pose" if labels == "both" and pose else source.root
-    run = TrainingRun(root, Path(dataset), task, runs=output_path(runs, "--runs") if runs else None, name=name,
-                      model=model)
+    # Absolute folders: Ultralytics puts a relative project folder under its own settings folder.
+    run = TrainingRun(root.resolve(), source.root.resolve(), task,
+                      runs=output_path(runs, "--runs").resolve() if runs else None, name=name, model=model)
     train_and_predict(run, epochs=epochs, device=device)
     typer.echo(f"weights: {run.weights}")
     typer.echo(f"predictions of the validation frames: {run.predictions}")

@@ -27,7 +27,12 @@ from datagen.config.schema import Config, ObjectSpec
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import ConfigError, Problem
 
-__all__ = ["SCENES_DIR", "find_config", "load_config", "override_config", "parse_config", "shipped_scenes"]
+__all__ = ["SCENES_DIR", "find_config", "load_config", "override_config", "parse_config", "shipped_scenes",
+           "stored_config"]
+
+#: Keys added to the schema after datasets were built without them, and the value that gives
+#: what those builds made (1: no small-build rule).
+ADDED_KEYS: Final = {("approach", "min_approaches"): 1, ("dataset", "min_shards"): 1}
 
 #: The scene configs shipped with datagen (package data).
 SCENES_DIR: Final = Path(str(resources.files("datagen") / "scenes"))
@@ -255,3 +260,17 @@ def override_config(config: Config, updates: dict[str, object], source: str = "c
                     value=err.get("input"), has_value="input" in err)
             for err in exc.errors(include_url=False)
         ]) from None
+
+
+def stored_config(data: object) -> Config:
+    """The config a dataset.json recorded (``config``), as the build that wrote it planned:
+    a key of :data:`ADDED_KEYS` it lacks takes the value that reproduces that build's shards
+    and approaches, not today's default. Raises ValueError or TypeError for what is not a
+    config."""
+    if not isinstance(data, dict):
+        raise TypeError("a config is a mapping")
+    data = {k: (dict(v) if isinstance(v, dict) else v) for k, v in data.items()}
+    for (section, key), value in ADDED_KEYS.items():
+        if isinstance(data.get(section, {}), dict):
+            data.setdefault(section, {}).setdefault(key, value)
+    return Config.model_validate(data)

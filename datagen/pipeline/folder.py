@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Final
 
 from datagen.atomic import is_temporary
-from datagen.config.schema import Config
+from datagen.config.load import stored_config
 from datagen.core.errors import DatagenError
 from datagen.dataset.columns import FILE_COLUMNS
 from datagen.dataset.layout import LOCK_NAME, MANIFEST_NAME, POSE_IMAGES_LINK, Layout
@@ -192,7 +192,7 @@ def owned_files(layout: Layout, doc: dict) -> list[Path]:
     manifests: list[Path] = []
     frames: list[str] = []
     try:
-        config = Config.model_validate(doc.get("config", {}))
+        config = stored_config(doc.get("config", {}))
     except (ValueError, TypeError):
         config = None
     if config is not None:

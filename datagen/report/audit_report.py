@@ -10,6 +10,7 @@ from __future__ import annotations
 import base64
 import html
 import json
+import re
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -19,7 +20,7 @@ from datagen.analysis.audit import AuditResult
 from datagen.atomic import write_image, write_text
 from datagen.core.label_boxes import FrameLabels
 from datagen.dataset.reader import DatasetMeta, DatasetView
-from datagen.paths import real_folder, report_folder
+from datagen.paths import real_folder, regular_file, report_folder
 
 __all__ = ["report_document", "write_report"]
 
@@ -155,10 +156,28 @@ window.addEventListener("load", () => {{
     # report.json last: it is the record of every file the report wrote (``files``, relative to
     # the report folder), which --overwrite removes and nothing else.
     doc = report_document(result)
-    doc["files"] = ["report.html", *(str(p.relative_to(out)) for p in [*plots.values(), *sheets])]
+    doc["files"] = ["report.html", *(str(p.relative_to(out)) for p in plots.values()),
+                    *sorted({*_earlier_sheets(out), *(f"sheets/{p.name}" for p in sheets)})]
     write_text(out / "report.json", json.dumps(doc, indent=2, allow_nan=False, default=_json_default) + "\n")
     return {"json": out / "report.json", "html": out / "report.html", **plots,
             **{f"sheet {p.stem}": p for p in sheets}}
+
+
+#: A sheet's name in the report record.
+_SHEET = re.compile(r"sheets/\d{8}\.jpg")
+
+
+def _earlier_sheets(out: Path) -> list[str]:
+    """The sheets an earlier report.json in ``out`` lists (an audit of other frames leaves
+    them, and the record keeps naming them so that --overwrite removes them): names of the
+    sheet form only, read never through a link."""
+    record = out / "report.json"
+    try:
+        files = json.loads(record.read_text()).get("files", []) \
+            if regular_file(record) and not record.is_symlink() else []
+    except (OSError, ValueError, AttributeError):
+        files = []
+    return [f for f in files if isinstance(f, str) and _SHEET.fullmatch(f)] if isinstance(files, list) else []
 
 
 def _appearance_html(stats: dict, frames: int, esc) -> str:

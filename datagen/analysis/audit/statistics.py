@@ -332,6 +332,17 @@ def appearance_finish(spill: Spill, columns: dict[str, dict]) -> dict:
     return out
 
 
+#: The largest magnitude a histogram holds: a manifest's value beyond it (only a tampered one
+#: has such) is counted at this bound, so that no range or bin width overflows.
+HISTOGRAM_BOUND: Final = float(np.finfo(np.float64).max / 4)
+
+
+def _histogrammable(values: NDArray) -> NDArray[np.float64]:
+    """The finite values, clipped to +-:data:`HISTOGRAM_BOUND`."""
+    values = np.asarray(values, dtype=np.float64)
+    return np.clip(values[np.isfinite(values)], -HISTOGRAM_BOUND, HISTOGRAM_BOUND)
+
+
 def histogram_range(lo: float, hi: float, bins: int = APPEARANCE_BINS) -> tuple[float, float]:
     """``(lo, hi)``, or ``(lo, lo + max(1, |lo|))`` where ``bins`` bins of it would not have
     increasing edges (equal values, or values a few ulps apart: numpy refuses such a range;
@@ -344,17 +355,17 @@ def _number_summary(spill: Spill, stream: str) -> dict:
     """Min, max, mean (in frame order) and a histogram of a spilled stream's finite values."""
     n, lo, hi = 0, math.inf, -math.inf
     for part in spill.parts(stream, "value"):
-        v = part["value"][np.isfinite(part["value"])]
+        v = _histogrammable(part["value"])
         if v.size:
             n, lo, hi = n + v.size, min(lo, float(v.min())), max(hi, float(v.max()))
     if not n:
         return {}
     total = OrderedSum(n)
     for part in spill.ordered(stream, "value"):
-        total.feed(part["value"][np.isfinite(part["value"])])
+        total.feed(_histogrammable(part["value"]))
     counts = np.zeros(APPEARANCE_BINS, dtype=np.int64)
     for part in spill.parts(stream, "value"):
-        v = part["value"][np.isfinite(part["value"])]
-        counts_, edges = np.histogram(v, bins=APPEARANCE_BINS, range=histogram_range(lo, hi))
+        counts_, edges = np.histogram(_histogrammable(part["value"]), bins=APPEARANCE_BINS,
+                                      range=histogram_range(lo, hi))
         counts += counts_
     return {"min": lo, "max": hi, "mean": total.mean(), "edges": edges.tolist(), "histogram": counts.tolist()}
