@@ -13,6 +13,7 @@ under it is made, never followed. Files themselves are replaced by a rename
 from __future__ import annotations
 
 import functools
+import json
 import os
 import stat
 from collections.abc import Iterator
@@ -21,7 +22,7 @@ from pathlib import Path, PurePosixPath
 
 from datagen.core.errors import DatagenError
 
-__all__ = ["DatasetFolder", "named_inside", "real_folder", "regular_file", "report_folder"]
+__all__ = ["DatasetFolder", "named_inside", "real_folder", "recorded_files", "regular_file", "report_folder"]
 
 #: The problem of a path that names no file inside the dataset (absolute, ``..``, empty).
 NOT_INSIDE = "is not a path inside the dataset"
@@ -87,6 +88,19 @@ def regular_file(path: Path) -> bool:
         return stat.S_ISREG(os.stat(path).st_mode)
     except (OSError, ValueError):
         return False
+
+
+def recorded_files(record: Path) -> list[str]:
+    """The names a report's record (``preview.json``, ``report.json``) lists under ``files``,
+    the strings only; none where the record is missing, a link (never read through), not a
+    regular file or not such JSON. A report keeps listing an earlier run's files, so that
+    --overwrite removes them."""
+    try:
+        files = json.loads(record.read_text()).get("files", []) \
+            if regular_file(record) and not record.is_symlink() else []
+    except (OSError, ValueError, AttributeError):
+        return []
+    return [f for f in files if isinstance(f, str)] if isinstance(files, list) else []
 
 
 def real_folder(folder: Path, flag: str = "--out", *, make: bool = True) -> Path:

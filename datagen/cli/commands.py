@@ -420,7 +420,7 @@ def train(
     if source.doc.get("render") is False:
         raise DatagenError(f"{source.root / 'dataset.json'}: render: false: a labels-only build has no images to "
                            "train on (build it without --no-render)")
-    labels = source.doc["config"]["labels"].get("format", "detect")
+    labels = source.label_format
     if pose and labels == "detect":
         raise DatagenError(f"{source.root / 'dataset.json'}: config.labels.format: detect; --pose needs a build "
                            "with pose labels (labels.format pose or both)")

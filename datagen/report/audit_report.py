@@ -20,7 +20,7 @@ from datagen.analysis.audit import AuditResult
 from datagen.atomic import write_image, write_text
 from datagen.core.label_boxes import FrameLabels
 from datagen.dataset.reader import DatasetMeta, DatasetView
-from datagen.paths import real_folder, regular_file, report_folder
+from datagen.paths import real_folder, recorded_files, report_folder
 
 __all__ = ["report_document", "write_report"]
 
@@ -170,14 +170,8 @@ _SHEET = re.compile(r"sheets/\d{8}\.jpg")
 def _earlier_sheets(out: Path) -> list[str]:
     """The sheets an earlier report.json in ``out`` lists (an audit of other frames leaves
     them, and the record keeps naming them so that --overwrite removes them): names of the
-    sheet form only, read never through a link."""
-    record = out / "report.json"
-    try:
-        files = json.loads(record.read_text()).get("files", []) \
-            if regular_file(record) and not record.is_symlink() else []
-    except (OSError, ValueError, AttributeError):
-        files = []
-    return [f for f in files if isinstance(f, str) and _SHEET.fullmatch(f)] if isinstance(files, list) else []
+    sheet form only."""
+    return [f for f in recorded_files(out / "report.json") if _SHEET.fullmatch(f)]
 
 
 def _appearance_html(stats: dict, frames: int, esc) -> str:

@@ -428,7 +428,7 @@ def write_previews(view: DatasetView, frames: list[int] | None, out: Path, label
 
     from datagen.atomic import write_image, write_text
     from datagen.core.errors import DatagenError
-    from datagen.paths import regular_file, report_folder
+    from datagen.paths import recorded_files, report_folder
 
     labels = labels if labels is not None else view.recompute()
     index = {int(fid): b for b, fid in enumerate(view.frame_id)}
@@ -446,11 +446,6 @@ def write_previews(view: DatasetView, frames: list[int] | None, out: Path, label
     # preview.json: the record of every sheet written here (``files``, relative to the folder),
     # which --overwrite removes and nothing else.
     record = out / "preview.json"
-    try:  # the record of earlier sheets, never through a link
-        earlier = json.loads(record.read_text()).get("files", []) \
-            if regular_file(record) and not record.is_symlink() else []
-    except (OSError, ValueError, AttributeError):
-        earlier = []
-    files = sorted({*(f for f in earlier if isinstance(f, str)), *(p.name for p in written)})
+    files = sorted({*recorded_files(record), *(p.name for p in written)})
     write_text(record, json.dumps({"dataset": str(view.root), "files": files}, indent=2) + "\n")
     return written
