@@ -196,7 +196,12 @@ def link_or_copy(source: str | Path, target: str | Path) -> Path:
         os.link(source, target)
     except OSError:
         with atomic_path(target) as tmp:
-            shutil.copy2(source, tmp)
+            try:
+                shutil.copy2(source, tmp)
+            except OSError as exc:  # a full disk is the destination's: name it, not the source
+                if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS) or exc.filename == str(tmp):
+                    exc.filename = str(target)
+                raise
     return target
 
 

@@ -68,26 +68,30 @@ class ConsoleProgress:
     every ``interval_s`` seconds and one per finished shard (on stderr)."""
 
     def __init__(self, name: str, *, stream=None, interval_s: float = 30.0, live: bool | None = None,
-                 verb: str = "build", announce: bool = True) -> None:
+                 verb: str = "build", announce: bool = True, clock=time.perf_counter) -> None:
         self.name = name
         self.verb = verb  # what the lines say is under way: build, audit, evaluate
         self.announce = announce  # a line at the start (else the first after interval_s)
         self.stream = stream or sys.stderr
         self.live = self.stream.isatty() if live is None else live
         self.interval_s = interval_s
+        self.clock = clock
         self._bar = None
+        self._estimate: Estimate | None = None  # the model's, until the first frames are measured
 
     def start(self, total: int, done: int, estimate: Estimate | None = None) -> None:
         """Begin: ``total`` frames, ``done`` of them by an earlier run; ``estimate``, the
         model's cost of a frame, is printed with what it predicts for the rest."""
         self.total, self.done, self.first = total, done, done
+        self._estimate = estimate
         if estimate is not None:
             todo = total - done
             self._print(f"{self.verb} {self.name}: estimate {estimate.seconds:.2f} s a frame = "
                         f"{estimate.frames_per_hour:,.0f} frames/h on {estimate.cores} cores ({estimate.setting}), "
                         f"{_duration(todo * estimate.seconds)} and about {_size(todo * estimate.disk_bytes)} on disk "
-                        f"for {todo} frames; measured rates follow")
-        self.t0 = self._last = time.perf_counter()
+                        f"for {todo} frames (a model of an idle machine; corrected after the first "
+                        f"{self._measured_after()} frames)")
+        self.t0 = self._last = self.clock()
         if self.live:
             from rich.console import Console
             from rich.progress import (
@@ -107,9 +111,32 @@ class ConsoleProgress:
         elif self.announce:
             self._print(f"{self.verb} {self.name}: {total} frames, {done} already done")
 
+    def _measured_after(self) -> int:
+        """Frames after which the estimate gives way to the measured rate: the first two (a
+        worker's first frame compiles its kernels), more for a longer build (an eighth of it,
+        at most 16)."""
+        return max(2, min(16, (self.total - self.first) // 8))
+
+    def _correct(self) -> None:
+        """Once the first frames are measured, say what they cost beside the estimate and what
+        is left at the measured rate (a busy or slower machine is not the model's)."""
+        measured = self.done - self.first
+        if self._estimate is None or measured < min(self._measured_after(), self.total - self.first):
+            return
+        elapsed = self.clock() - self.t0
+        per_frame = elapsed / measured
+        rate, eta = self._rate()
+        said = self._estimate.seconds  # wall seconds a frame on the cores the build uses
+        self._estimate = None
+        if self.total == self.done:
+            return
+        self._print(f"{self.verb} {self.name}: measured {per_frame:.2f} s a frame over the first {measured} frames "
+                    f"(estimated {said:.2f}, {per_frame / said:.1f}x); {_duration(eta)} left at "
+                    f"{3600 * rate:,.0f} frames/h")
+
     def _rate(self) -> tuple[float, float]:
         """Frames per second so far and the seconds still to go."""
-        elapsed = time.perf_counter() - self.t0
+        elapsed = self.clock() - self.t0
         rate = (self.done - self.first) / elapsed if elapsed > 0 else 0.0
         eta = (self.total - self.done) / rate if rate > 0 else math.inf
         return rate, eta
@@ -119,7 +146,8 @@ class ConsoleProgress:
         rate, _ = self._rate()
         if self._bar is not None:
             self._bar.update(self._task, advance=n, rate=f"{rate:.2f} frames/s")
-        elif time.perf_counter() - self._last >= self.interval_s:
+        self._correct()
+        if self._bar is None and self.clock() - self._last >= self.interval_s:
             self._status()
 
     def _status(self) -> None:
@@ -136,8 +164,11 @@ class ConsoleProgress:
             self._status()
 
     def _print(self, text: str) -> None:
-        self._last = time.perf_counter()
-        print(text, file=self.stream, flush=True)
+        self._last = self.clock()
+        if self._bar is not None:
+            self._bar.console.print(text, markup=False, highlight=False)
+        else:
+            print(text, file=self.stream, flush=True)
 
     def close(self) -> None:
         if self._bar is not None:

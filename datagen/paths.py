@@ -12,8 +12,8 @@ under it is made, never followed. Files themselves are replaced by a rename
 
 from __future__ import annotations
 
+import contextlib
 import functools
-import json
 import os
 import stat
 from collections.abc import Iterator
@@ -22,7 +22,16 @@ from pathlib import Path, PurePosixPath
 
 from datagen.core.errors import DatagenError
 
-__all__ = ["DatasetFolder", "named_inside", "real_folder", "recorded_files", "regular_file", "report_folder"]
+__all__ = [
+    "DatasetFolder",
+    "Unreadable",
+    "named_inside",
+    "opened_file",
+    "read_bytes",
+    "real_folder",
+    "regular_file",
+    "report_folder",
+]
 
 #: The problem of a path that names no file inside the dataset (absolute, ``..``, empty).
 NOT_INSIDE = "is not a path inside the dataset"
@@ -90,17 +99,78 @@ def regular_file(path: Path) -> bool:
         return False
 
 
-def recorded_files(record: Path) -> list[str]:
-    """The names a report's record (``preview.json``, ``report.json``) lists under ``files``,
-    the strings only; none where the record is missing, a link (never read through), not a
-    regular file or not such JSON. A report keeps listing an earlier run's files, so that
-    --overwrite removes them."""
+class Unreadable(DatagenError):
+    """A file that may not be read, one line: ``path: problem`` (:func:`read_bytes`)."""
+
+    def __init__(self, path: Path, problem: str) -> None:
+        self.path, self.problem = Path(path), problem
+        super().__init__(f"{path}: {problem}")
+
+
+def _open_regular(path: Path, what: str, max_bytes: int) -> int:
+    """A descriptor of the regular file ``path`` of at most ``max_bytes`` (opened without
+    blocking and judged by the descriptor itself), or one :class:`Unreadable` line."""
     try:
-        files = json.loads(record.read_text()).get("files", []) \
-            if regular_file(record) and not record.is_symlink() else []
-    except (OSError, ValueError, AttributeError):
-        return []
-    return [f for f in files if isinstance(f, str)] if isinstance(files, list) else []
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except FileNotFoundError:
+        raise Unreadable(path, "no such file") from None
+    except IsADirectoryError:
+        raise Unreadable(path, f"is a directory, expected {what}") from None
+    except (OSError, ValueError) as exc:
+        raise Unreadable(path, f"cannot read: {getattr(exc, 'strerror', None) or exc}") from None
+    try:
+        info = os.fstat(fd)
+        if stat.S_ISDIR(info.st_mode):
+            raise Unreadable(path, f"is a directory, expected {what}")
+        if not stat.S_ISREG(info.st_mode):
+            raise Unreadable(path, f"not a regular file, expected {what}")
+        if info.st_size > max_bytes:
+            raise Unreadable(path, f"{info.st_size:,} bytes: larger than the {max_bytes:,} bytes {what} may have")
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd
+
+
+def read_bytes(path: str | Path, what: str, max_bytes: int, *, head: int | None = None) -> bytes:
+    """The bytes of the regular file ``path``, at most ``max_bytes`` of them (only the first
+    ``head`` where given), or one :class:`Unreadable` line saying why not: missing, a
+    folder, a FIFO or device (it is opened without blocking and judged by the descriptor
+    itself, so that a file swapped for a FIFO between a check and the read blocks nothing),
+    larger than ``max_bytes`` (judged before anything is read, so that a sparse or huge
+    file costs no memory), or unreadable. ``what`` names the kind of file in the message
+    (``a label file``)."""
+    path = Path(path)
+    fd = _open_regular(path, what, max_bytes)
+    want = max_bytes + 1 if head is None else min(head, max_bytes + 1)
+    chunks = []
+    try:
+        while want > 0:
+            chunk = os.read(fd, min(want, 1 << 24))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            want -= len(chunk)
+    except OSError as exc:
+        raise Unreadable(path, f"cannot read: {exc.strerror or exc}") from None
+    finally:
+        os.close(fd)
+    data = b"".join(chunks)
+    if len(data) > max_bytes:  # grown while it was read
+        raise Unreadable(path, f"larger than the {max_bytes:,} bytes {what} may have")
+    return data
+
+
+@contextlib.contextmanager
+def opened_file(path: str | Path, what: str, max_bytes: int) -> Iterator[str]:
+    """A name of the regular file ``path`` (of at most ``max_bytes``) that a library opening
+    files by name (OpenEXR) reads: the descriptor datagen opened and judged, as
+    ``/proc/self/fd/N``, so that the file read is the file checked (:func:`read_bytes`)."""
+    fd = _open_regular(Path(path), what, max_bytes)
+    try:
+        yield f"/proc/self/fd/{fd}"
+    finally:
+        os.close(fd)
 
 
 def real_folder(folder: Path, flag: str = "--out", *, make: bool = True) -> Path:

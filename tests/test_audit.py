@@ -224,7 +224,7 @@ def test_preview_sheets_show_each_frame_and_its_crops_pixel_for_pixel(dataset, t
 @pytest.mark.skipif(shutil.which("chromium") is None, reason="needs Chromium (apt-get install -y chromium)")
 def test_html_report_renders_in_headless_chromium(dataset, tmp_path: Path) -> None:
     view = load_dataset(dataset)
-    written = write_report(audit(view), view, tmp_path, frames=frames_to_draw(view, 3))
+    written = write_report(audit(view), view, tmp_path / "report", frames=frames_to_draw(view, 3))
     out = subprocess.run(["chromium", "--headless=new", "--no-sandbox", "--disable-gpu", "--enable-logging=stderr",
                           "--v=0", "--dump-dom", written["html"].as_uri()], capture_output=True, text=True,
                          timeout=120)
@@ -241,9 +241,9 @@ def test_the_report_links_each_sheet_at_full_size_and_shows_it_unscaled(dataset,
     import cv2
 
     view = load_dataset(dataset)
-    written = write_report(audit(view), view, tmp_path, frames=frames_to_draw(view, 3))
+    written = write_report(audit(view), view, tmp_path / "report", frames=frames_to_draw(view, 3))
     page = written["html"].read_text()
-    sheets = sorted((tmp_path / "sheets").glob("*.jpg"))
+    sheets = sorted((tmp_path / "report" / "sheets").glob("*.jpg"))
     assert len(sheets) == 3
     listed = json.loads(written["json"].read_text())["files"]
     for sheet in sheets:
@@ -252,7 +252,7 @@ def test_the_report_links_each_sheet_at_full_size_and_shows_it_unscaled(dataset,
         assert f"width='{width}' height='{height}'" in page and width >= 1600
     assert ".sheet .scroll img { max-width: none;" in page
     # An audit drawing other frames keeps the earlier sheets in its record (--overwrite removes them).
-    again = write_report(audit(view), view, tmp_path, frames=frames_to_draw(view, 1))
+    again = write_report(audit(view), view, tmp_path / "report", frames=frames_to_draw(view, 1))
     listed = json.loads(again["json"].read_text())["files"]
     assert {f"sheets/{sheet.name}" for sheet in sheets} <= set(listed)
 
@@ -273,8 +273,9 @@ def test_duplicate_coarse_and_non_finite_lines_fail_without_a_traceback(copy, tm
     assert f"{rel}:{len(lines) - 2}: class {cls} has more than one line" in line_offenders
     assert f"{rel}:{len(lines) - 2}: class {cls} differs from the manifest box" in line_offenders
     rules = "\n".join(by_name["ultralytics_rules"].offenders)
-    assert f"{rel}:{len(lines) - 1}: not finite" in rules and f"{rel}:{len(lines)}: not finite" in rules
-    written = write_report(result, view, tmp_path)  # strict JSON: no NaN or inf
+    assert f"{rel}:{len(lines) - 1}: value 1 of 5 is not finite" in rules
+    assert f"{rel}:{len(lines)}: value 2 of 5 is not finite" in rules
+    written = write_report(result, view, tmp_path / "report")  # strict JSON: no NaN or inf
     assert json.loads(written["json"].read_text())["passed"] is False
 
 

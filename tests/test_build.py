@@ -367,6 +367,27 @@ def test_a_stage_timed_inside_another_counts_for_the_inner_one_only() -> None:
     assert [name for name, _ in rest_of_frame(s)] == ["inner", "outer"]
 
 
+def test_the_estimate_gives_way_to_the_first_measured_frames() -> None:
+    """A machine busier or slower than the model's: after the first frames the progress says
+    what they measured beside the estimate and what is left at the measured rate."""
+    import io
+    from types import SimpleNamespace
+
+    from datagen.console import ConsoleProgress
+
+    now = [0.0]
+    stream = io.StringIO()
+    progress = ConsoleProgress("w", stream=stream, interval_s=1e9, live=False, clock=lambda: now[0])
+    progress.start(40, 0, SimpleNamespace(seconds=1.0, cores=2, setting="x", disk_bytes=1.0, frames_per_hour=3600))
+    for _ in range(5):  # 3 s a frame, three times the estimate
+        now[0] += 3.0
+        progress.advance(1)
+    lines = stream.getvalue().splitlines()
+    assert "corrected after the first 5 frames" in lines[0]
+    assert lines[2:] == ["build w: measured 3.00 s a frame over the first 5 frames (estimated 1.00, 3.0x); "
+                         "1 min 45 s left at 1,200 frames/h"]
+
+
 def test_a_build_prints_its_estimate_first_and_the_model_grows_with_the_work(tmp_path: Path) -> None:
     import io
 
@@ -379,7 +400,8 @@ def test_a_build_prints_its_estimate_first_and_the_model_grows_with_the_work(tmp
                   progress=ConsoleProgress("tiny", stream=stream, interval_s=1e9, live=False))
     first = stream.getvalue().splitlines()[0]
     assert re.fullmatch(r"build tiny: estimate [0-9.]+ s a frame = [0-9,]+ frames/h on \d+ cores \(labels only\), "
-                        r".* for 8 frames; measured rates follow", first), first
+                        r".* for 8 frames \(a model of an idle machine; corrected after the first 2 frames\)",
+                        first), first
     shipped = load_config("wingcam55")
     cost = frame_cost(shipped, 2)
     assert cost.frames_per_hour == pytest.approx(3600 / cost.seconds)
@@ -532,6 +554,28 @@ def test_two_workers_give_the_same_dataset(reference, tmp_path: Path) -> None:
 
 
 @pytest.mark.render
+def test_any_worker_count_with_default_threads_gives_the_same_labels_and_manifests(reference, tmp_path: Path) -> None:
+    """The promise as :data:`datagen.dataset.columns.PIXEL_COLUMNS` states it: with the default
+    threads (here 2 for one worker, 1 each for two) the label files and every manifest column
+    but the run's and the pixel statistics are identical, and those agree to 1e-5."""
+    from datagen.dataset.columns import PIXEL_COLUMNS, RUN_COLUMNS
+
+    root, config = reference
+    one, two = tmp_path / "one", tmp_path / "two"
+    build_dataset(config, one, workers=1)
+    build_dataset(config, two, workers=2)
+    assert label_files(one) == label_files(two) == label_files(root)
+    rows = [manifest_rows(r) for r in (one, two)]
+    for frame, row in rows[0].items():
+        other = rows[1][frame]
+        for column, value in row.items():
+            if column in PIXEL_COLUMNS:
+                assert value == pytest.approx(other[column], rel=1e-5, abs=1e-9), column
+            elif column not in RUN_COLUMNS:
+                assert json.dumps(value) == json.dumps(other[column]), column
+
+
+@pytest.mark.render
 @pytest.mark.ray
 def test_ray_gives_the_same_dataset(reference, ray_cluster, tmp_path: Path) -> None:
     root, config = reference
@@ -677,7 +721,7 @@ def test_the_estimate_says_the_disk_a_build_will_use_within_a_factor_of_what_it_
     stream = io.StringIO()
     build_dataset(config, tmp_path / "ds", render=False,
                   progress=ConsoleProgress("w", stream=stream, interval_s=1e9, live=False))
-    assert re.search(r", 0 s and about [0-9.]+ (KB|MB) on disk for 120 frames;", stream.getvalue().splitlines()[0])
+    assert re.search(r", 0 s and about [0-9.]+ (KB|MB) on disk for 120 frames \(", stream.getvalue().splitlines()[0])
     written = sum(p.stat().st_size for p in (tmp_path / "ds").rglob("*") if p.is_file())
     predicted = 120 * frame_cost(config, 2, render=False).disk_bytes
     assert 0.5 < written / predicted < 2.0, (written, predicted)

@@ -143,7 +143,7 @@ def test_train_refuses_training_files_ultralytics_would_run_or_load(tmp_path: Pa
     data, hyp = (root / "data.yaml").read_text(), (root / "hyp.yaml").read_text()
     for name, text, said in (
             ("data.yaml", data + f"download: \"open('{touched}', 'w').write('x')\"\n", "'download': not a key"),
-            ("hyp.yaml", hyp + f"pretrained: {tmp_path / 'evil.pt'}\n", "'pretrained': names a file"),
+            ("hyp.yaml", hyp + f"pretrained: {tmp_path / 'evil.pt'}\n", "'pretrained': not a setting"),
             ("hyp.yaml", hyp + "imgsz: [\n", "invalid YAML")):
         (root / "data.yaml").write_text(data)
         (root / "hyp.yaml").write_text(hyp)

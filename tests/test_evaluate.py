@@ -154,7 +154,8 @@ def test_predictions_are_parsed_and_matched_by_stem(wingcam, tmp_path: Path) -> 
             lines += [worse, good] if f % 2 else [good, worse]
             lines.append(f"{f} 0.5 0.5 0.01 0.01 0.10")  # below the confidence threshold
         (folder / Path(wingcam.label_path[b]).name).write_text("\n".join(lines) + "\n")
-    found = parse_predictions(tmp_path / "pred", k.width, k.height, len(wingcam.features))
+    found = parse_predictions(tmp_path / "pred", k.width, k.height, len(wingcam.features),
+                              max_bytes=wingcam.limits.prediction_bytes)
     assert dropped and len(found) == len(wingcam)
     b = 0
     stem = Path(wingcam.label_path[b]).stem
@@ -172,7 +173,7 @@ def test_a_bad_prediction_line_names_its_file(tmp_path: Path) -> None:
     (tmp_path / "00000001.txt").write_text("3 0.5 0.5 0.1 0.1 0.9\n81 0.5 0.5 0.1 0.1 0.9\n")
     with pytest.raises(DatagenError, match=r"00000001\.txt:2: not a detection line 'class cx cy w h \[conf\]': "
                        r"class 81 is not an integer in \[0, 80\)"):
-        parse_predictions(tmp_path, 2048, 1080, 80)
+        parse_predictions(tmp_path, 2048, 1080, 80, max_bytes=1 << 20)
 
 
 @settings(max_examples=25)
@@ -228,7 +229,7 @@ def test_split_limits_the_attempts_and_bad_inputs_are_one_line(wingcam, tmp_path
         "--noise-px: '0,nan': radii must be finite and not negative")
     (tmp_path / "x.txt").write_bytes(b"\xff\xfe\x00")
     with pytest.raises(DatagenError, match=r"x\.txt: unreadable prediction file"):
-        parse_predictions(tmp_path, 2048, 1080, 80)
+        parse_predictions(tmp_path, 2048, 1080, 80, max_bytes=1 << 20)
 
 
 def write_predictions(view, folder: Path, frames, *, conf: float) -> None:

@@ -367,7 +367,11 @@ def test_overwrite_removes_exactly_what_datagen_wrote(tmp_path) -> None:
         assert (root / rel).read_text() == text, rel
     assert not (root / "audit" / "report.json").exists() and not (root / "preview" / "preview.json").exists()
     assert json.loads((root / "dataset.json").read_text())["seed"] == 8
-    assert datagen("audit", str(root)).returncode == 1  # the user's files in images/ and labels/ are orphans
+    # The user's file in audit/ keeps the audit from writing there (one line naming it); moved away, the
+    # audit runs and names the user's files in images/ and labels/ as orphans.
+    refused(datagen("audit", str(root)), "my-review.md", "did not write")
+    shutil.move(root / "audit" / "my-review.md", tmp_path / "my-review.md")
+    assert datagen("audit", str(root)).returncode == 1
     assert (outside / "keep.txt").read_text() == "keep"
 
 
@@ -464,7 +468,7 @@ def test_duplicate_manifest_rows_are_named_as_such(damaged) -> None:
 
 def test_a_missing_image_list_fails_the_audit(damaged) -> None:
     (damaged / "train.txt").unlink()
-    audit_fails(damaged, "files", "missing or unreadable")
+    audit_fails(damaged, "training_recipe", "train.txt: no such file; it lists the train images")
 
 
 @pytest.mark.parametrize(("name", "text", "expected"), [

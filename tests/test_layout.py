@@ -156,7 +156,9 @@ def writes(tree: ast.Module) -> list[str]:
             if isinstance(mode, ast.Constant) and set(str(mode.value)) & set("wax+") and target != "os.devnull":
                 found.append(f"open(mode={mode.value!r})")
         if name == "open" and isinstance(func, ast.Attribute) and ast.unparse(func) == "os.open":
-            found.append("os.open")
+            flags = ast.unparse(node.args[1]) if len(node.args) > 1 else ""
+            if any(f in flags for f in ("O_CREAT", "O_WRONLY", "O_RDWR", "O_TRUNC", "O_APPEND")):
+                found.append("os.open")
     return found
 
 

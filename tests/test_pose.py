@@ -172,7 +172,7 @@ def test_evaluate_scores_pose_predictions_at_the_true_centres_like_the_truth(tmp
         (predictions / Path(rel).name).write_text("\n".join(lines) + "\n")
     k = view.intrinsics
     found = parse_predictions(predictions, k.width, k.height, len(view.features), min_conf=0.25,
-                              pose=PoseLayout.from_features(view.features))
+                              pose=PoseLayout.from_features(view.features), max_bytes=view.limits.prediction_bytes)
     scored, truth = evaluate(view, predictions=found), evaluate(view)
     # The same features are found in every frame, and the same frames succeed.
     for key in ("matches_receiver", "matches_target", "success"):
@@ -269,7 +269,7 @@ def test_bop_export_follows_the_format_spec_poses_reproject_and_masks_are_the_ob
         for im, gt_list in gts.items():
             b = int(np.flatnonzero(view.frame_id == int(im))[0])
             k = np.array(cams[im]["cam_K"]).reshape(3, 3)
-            ids = read_object_ids(rendered / view.exr_path[b], (view.intrinsics.height, view.intrinsics.width))
+            ids = read_object_ids(rendered / view.exr_path[b], view.limits)
             assert (scene / "rgb" / f"{int(im):06d}.png").is_file()
             for index, gt in enumerate(gt_list):
                 name = next(o for o in f.objects if object_id(o) == gt["obj_id"])

@@ -145,7 +145,7 @@ def test_documented_train_predict_evaluate_commands_run_offline_from_another_fol
         assert out.returncode == 0, (command, out.stdout[-2000:], out.stderr[-2000:])
     assert (root.parent / "runs" / "w55" / "weights" / "best.pt").is_file()
     assert (root.parent / "runs" / "w55-predict" / "labels").is_dir()
-    doc = yaml.safe_load((root / "evaluation" / "evaluation.json").read_text())
+    doc = yaml.safe_load((root / "evaluation-predictions" / "evaluation.json").read_text())
     assert doc["runs"][0]["source"] == "predictions" and doc["runs"][0]["split"] == "val"
     assert doc["runs"][0]["overall"]["attempts"] == load_dataset(root).split.count("val")
     assert not list(elsewhere.iterdir())  # nothing written where the commands ran

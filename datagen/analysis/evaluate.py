@@ -253,7 +253,8 @@ def prediction_split(view: DatasetIndex | DatasetView, predictions: Mapping) -> 
         ValueError: files exist but none is named after an image of the dataset.
     """
     if not predictions:
-        return "val", "no prediction file: the detector found nothing; scoring the val split"
+        split = "val" if "val" in view.split else "train"  # the list data.yaml validates on
+        return split, f"no prediction file: the detector found nothing; scoring the {split} split"
     covered = covered_splits(view, predictions)
     if not covered:
         raise ValueError("no prediction file is named after an image of the dataset "

@@ -13,7 +13,7 @@ import numpy as np
 from datagen.core.errors import DatagenError
 from datagen.core.keypoints import PoseLayout
 from datagen.dataset.yolo import parse_line
-from datagen.paths import DatasetFolder
+from datagen.paths import DatasetFolder, read_bytes
 
 __all__ = ["Predictions", "parse_predictions"]
 
@@ -73,7 +73,7 @@ def _out_of_range(values: list[float], pose: bool) -> str | None:
     return None
 
 
-def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_conf: float = 0.25,
+def parse_predictions(folder: Path, width: int, height: int, nc: int, *, max_bytes: int, min_conf: float = 0.25,
                       pose: PoseLayout | None = None, stems: set[str] | None = None) -> Predictions:
     """Ultralytics ``save_txt`` files by image stem: per feature class the highest-confidence
     point at or above ``min_conf``, as ``(u_px, v_px, conf)`` (paper 3.3). Lines without a
@@ -86,8 +86,9 @@ def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_con
       feature, with the instance's confidence (an instance below ``min_conf`` gives nothing).
 
     A value outside the image, a negative size, a confidence outside [0, 1] and two files
-    of one stem (in two subfolders) are refused in one line; with ``stems`` (the dataset's
-    frames), a file of another stem is not read and is listed in ``ghosts``."""
+    of one stem (in two subfolders) are refused in one line, as is a file over ``max_bytes``
+    (:attr:`~datagen.dataset.limits.ReadLimits.prediction_bytes`); with ``stems`` (the
+    dataset's frames), a file of another stem is not read and is listed in ``ghosts``."""
     folder = Path(folder)
     if not folder.is_dir():
         raise DatagenError(f"--predictions: {folder}: no such folder")
@@ -116,9 +117,9 @@ def parse_predictions(folder: Path, width: int, height: int, nc: int, *, min_con
         seen[path.stem] = path
         best: dict[int, tuple[float, float, float]] = {}
         try:
-            text = path.read_text()
-        except (OSError, UnicodeDecodeError) as exc:
-            raise DatagenError(f"{path}: unreadable prediction file ({exc})") from None
+            text = read_bytes(path, "a prediction file", max_bytes).decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise DatagenError(f"{path}: unreadable prediction file (not UTF-8 text at byte {exc.start})") from None
 
         n_detections = n_below = 0
         for n, line in enumerate(text.splitlines(), start=1):

@@ -11,27 +11,66 @@ the two.
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
+from typing import Final
 
 import numpy as np
-import yaml
 
 from datagen.config.inputs import parse_yaml, read_text
 from datagen.core.errors import DatagenError
 from datagen.core.training import ANCHOR_STRIDES
+from datagen.dataset.limits import DATA_YAML_BYTES, HYP_YAML_BYTES
 from datagen.dataset.training_run import PREDICT_CONF, TrainingRun
 from datagen.paths import DatasetFolder
 
 __all__ = ["assigner_positives", "dataloader_learnability", "pose_items", "require_ultralytics", "train_and_predict"]
 
 
+#: torchvision's minor version for each torch 2.x: torch 2.N pairs with torchvision 0.(N + 15).
+TORCHVISION_MINOR_OFFSET: Final = 15
+
+
 def require_ultralytics():
-    """The ``ultralytics`` module, or one line saying how to install it."""
+    """The ``ultralytics`` module once the trainer's stack works, or one line saying what to
+    install: Ultralytics missing, or torch and torchvision of different releases or builds
+    (a CPU torch beside a CUDA torchvision, say), whose operators fail only when training
+    reaches them (``operator torchvision::nms does not exist``, after ~60 lines of traceback)."""
     try:
         import ultralytics
     except ImportError:
         raise DatagenError("Ultralytics is not installed; install it with `pip install -e '.[train]'`") from None
+    check_torch_stack()
     return ultralytics
+
+
+def check_torch_stack() -> None:
+    """Run one torchvision operator (non-maximum suppression, which Ultralytics' every
+    prediction uses) on a tiny input; one line naming the versions and what to install when
+    it fails."""
+    try:
+        import torch
+        from torchvision.ops import nms
+
+        nms(torch.zeros((1, 4)), torch.zeros(1), 0.5)
+    except Exception as exc:  # an ImportError, a RuntimeError of a missing operator, a symbol error
+        versions = []
+        for name in ("torch", "torchvision"):
+            try:
+                from importlib.metadata import version
+
+                versions.append(f"{name} {version(name)}")
+            except Exception:
+                versions.append(f"no {name}")
+        torch_version = versions[0].split(" ")[-1]
+        major, _, rest = torch_version.partition(".")
+        minor = rest.split(".")[0]
+        pair = (f"torchvision 0.{int(minor) + TORCHVISION_MINOR_OFFSET}.x built for torch {torch_version}"
+                if major == "2" and minor.isdigit() else "matching torch and torchvision")
+        raise DatagenError(f"the trainer's stack does not work: {' and '.join(versions)} "
+                           f"({type(exc).__name__}: {' '.join(str(exc).split())[:100]}); install {pair} from the "
+                           "same index as torch (CPU builds: pip install torch torchvision --index-url "
+                           "https://download.pytorch.org/whl/cpu)") from None
 
 
 def _training_dataset(root: Path, split: str, task: str = "detect"):
@@ -43,7 +82,7 @@ def _training_dataset(root: Path, split: str, task: str = "detect"):
 
     folder = DatasetFolder(Path(root))
     data = check_det_dataset(str(folder.file("data.yaml")))
-    hyp = yaml.safe_load(folder.file("hyp.yaml").read_text())
+    hyp = parse_yaml(read_text(folder.file("hyp.yaml"), "hyp.yaml", max_bytes=HYP_YAML_BYTES), Path(root) / "hyp.yaml")
     cfg = get_cfg(overrides={**hyp, "task": task, "mode": "train", "cache": False, "workers": 0})
     return build_yolo_dataset(cfg, data[split], batch=1, data=data, mode="train", stride=max(ANCHOR_STRIDES)), cfg
 
@@ -196,7 +235,7 @@ def assigner_positives(root: str | Path, split: str = "train", *, images: int | 
 
 
 def train_and_predict(run: TrainingRun, *, epochs: int | None = None, device: str | None = None,
-                      workers: int | None = None) -> None:
+                      workers: int | None = None, batch: int | None = None, imgsz: int | None = None) -> None:
     """Train ``run.network`` on the set with its own ``hyp.yaml``, then predict its validation
     frames with the best weights. Ultralytics appends to the label files of a prediction
     folder, so those of an earlier run (``*.txt`` in ``run.predictions``, no other file) are
@@ -209,8 +248,8 @@ def train_and_predict(run: TrainingRun, *, epochs: int | None = None, device: st
     folder = DatasetFolder(run.root)
     data = folder.file("data.yaml")
     hyp = folder.file("hyp.yaml")
-    doc = parse_yaml(read_text(data, "data.yaml"), data)
-    recipe = parse_yaml(read_text(hyp, "hyp.yaml"), hyp)
+    doc = parse_yaml(read_text(data, "data.yaml", max_bytes=DATA_YAML_BYTES), data)
+    recipe = parse_yaml(read_text(hyp, "hyp.yaml", max_bytes=HYP_YAML_BYTES), hyp)
     if not isinstance(doc, dict) or not isinstance(doc.get("val"), str):
         raise DatagenError(f"{data}: val: no image list named")
     if not isinstance(recipe, dict) or not isinstance(recipe.get("imgsz"), int):
@@ -220,9 +259,12 @@ def train_and_predict(run: TrainingRun, *, epochs: int | None = None, device: st
     for path in (predictions.parent, predictions):
         if path.is_symlink() or (path.exists() and not path.is_dir()):
             raise DatagenError(f"{path}: not a folder (a file or a symbolic link is in the way of the predictions)")
-    extra = {k: v for k, v in (("epochs", epochs), ("device", device), ("workers", workers)) if v is not None}
-    YOLO(run.network, task=run.task).train(data=str(data), cfg=str(hyp), project=str(run.project),
-                                           name=run.run_name, exist_ok=True, **extra)
+    extra = {k: v for k, v in (("epochs", epochs), ("device", device), ("workers", workers), ("imgsz", imgsz),
+                                ("batch", batch), ("nbs", batch)) if v is not None}  # one step per batch: nbs = batch
+    with warnings.catch_warnings():  # Ultralytics' Ray Tune callback asks Ray for a session that a run has not
+        warnings.filterwarnings("ignore", category=UserWarning, module=r"ray(\.|$)")
+        YOLO(run.network, task=run.task).train(data=str(data), cfg=str(hyp), project=str(run.project),
+                                               name=run.run_name, exist_ok=True, **extra)
     if not run.weights.is_file():
         raise DatagenError(f"{run.weights}: Ultralytics wrote no weights")
     if predictions.is_dir():
@@ -230,7 +272,7 @@ def train_and_predict(run: TrainingRun, *, epochs: int | None = None, device: st
             if old.is_file() and not old.is_symlink():
                 old.unlink()
     predictor = YOLO(str(run.weights), task=run.task)
-    for _ in predictor.predict(source=str(val), imgsz=recipe["imgsz"], conf=PREDICT_CONF, save_txt=True,
+    for _ in predictor.predict(source=str(val), imgsz=imgsz or recipe["imgsz"], conf=PREDICT_CONF, save_txt=True,
                                save_conf=True, project=str(run.project), name=f"{run.run_name}-predict",
                                exist_ok=True, stream=True, verbose=False,
                                **({"device": device} if device is not None else {})):

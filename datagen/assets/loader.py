@@ -44,7 +44,7 @@ from numpy.typing import NDArray
 from datagen.config.inputs import parse_json, read_text
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import ConfigError, Problem
-from datagen.core.features import SIZE_SCALE
+from datagen.core.features import MAX_NAME_CHARS, SIZE_SCALE, valid_name
 
 if TYPE_CHECKING:  # trimesh takes most of a second to import: only where meshes are read
     import trimesh
@@ -81,10 +81,6 @@ MAX_FEATURE_POINTS: Final = 1024
 
 
 MAX_FEATURES: Final = 1000
-
-
-#: Longest feature name, characters.
-MAX_NAME_CHARS: Final = 100
 
 
 #: A point set is degenerate (cannot make a box in every view) when its second-largest
@@ -309,7 +305,7 @@ def _parse_feature(record: object, key: str, object_name: str, problem) -> Featu
     if not isinstance(class_id, int) or isinstance(class_id, bool) or class_id < 0:
         problem(f"{key}.class_id", "must be a non-negative integer", class_id, True)
         ok = False
-    if not isinstance(name, str) or not name or len(name) > MAX_NAME_CHARS or not name.isprintable():
+    if not valid_name(name):
         problem(f"{key}.name", f"must be a non-empty printable string of at most {MAX_NAME_CHARS} characters",
                 name, True)
         ok = False

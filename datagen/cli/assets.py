@@ -50,13 +50,13 @@ MIN_RADIUS_M = 1e-3
 
 def _split(flag: str, text: str, form: str, counts: tuple[int, int]) -> tuple[str, list[str]]:
     """``NAME=a,b,...`` as the name and its values, their count in ``counts``."""
-    from datagen.assets.loader import MAX_NAME_CHARS
+    from datagen.core.features import MAX_NAME_CHARS, valid_name
 
     name, equals, rest = text.partition("=")
     name = name.strip()
     if not equals:
         raise DatagenError(f"{flag} {text!r}: expected {form}")
-    if not name or len(name) > MAX_NAME_CHARS or not name.isprintable():
+    if not valid_name(name):
         raise DatagenError(f"{flag} {text!r}: the name before '=' must be 1 to {MAX_NAME_CHARS} printable "
                            "characters")
     values = [v.strip() for v in rest.split(",")]

@@ -10,6 +10,7 @@ from typing import Annotated
 import typer
 
 from datagen.cli.common import (
+    EXIT_INTERRUPTED,
     MAX_FRAME_LIST,
     MAX_OVERLAYS,
     MAX_PRINTED_FRAMES,
@@ -19,13 +20,14 @@ from datagen.cli.common import (
     app,
     output_path,
     path_value,
+    report_out,
     require_plan,
     unit_value,
     user_errors,
     workers_value,
 )
 from datagen.config import find_config, load_config
-from datagen.core.errors import ConfigError, DatagenError
+from datagen.core.errors import ConfigError, DatagenError, shown
 from datagen.core.training import MATCH_PX
 from datagen.pipeline.estimate import CPU_WORKERS
 
@@ -104,7 +106,8 @@ def approach(
         typer.echo(f"approach {a}: start {tr['distance_m'][0]:7.2f} m, contact after {tr['time_s'][-1]:6.1f} s")
     for i, st in enumerate(frame_states(cfg, range(frames), seed)):
         x, y, z = st.ptd_receiver_m
-        typer.echo(f"frame {i:5d}: approach {st.approach_index}.{st.approach_number} t={st.time_s:7.2f} s "
+        again = f" (after {st.approach_number} contacts)" if st.approach_number else ""
+        typer.echo(f"frame {i:5d}: approach {st.approach_index}{again} t={st.time_s:7.2f} s "
                    f"distance {st.distance_m:8.3f} m  PtD_receiver [{x:8.3f} {y:7.3f} {z:7.3f}] m")
     if plot is not None:
         from datagen.report.plots import plot_approaches
@@ -162,7 +165,7 @@ def build(
     for line in report.lines():
         typer.echo(line)
     if report.interrupted:
-        raise typer.Exit(130)
+        raise typer.Exit(EXIT_INTERRUPTED)
 
 
 @app.command()
@@ -184,11 +187,9 @@ def audit(
     from datagen.analysis.audit.frames import frames_to_draw
     from datagen.console import ConsoleProgress
     from datagen.dataset.reader import open_dataset
-    from datagen.paths import report_folder
     from datagen.report.audit_report import write_report
 
-    folder = report_folder(output_path(out if out is not None else Path(dataset) / "audit", "--out"), dataset,
-                           make=False)
+    folder = report_out("audit", out, dataset)
     source = open_dataset(dataset)
     index = source.index()
     result = run_audit(source, min_learnable=min_learnable, workers=workers, index=index,
@@ -228,16 +229,16 @@ def preview(
     partial: PartialOption = False,
 ) -> None:
     """Draw overlays of true centres, tight and corrected boxes (paper Fig. 11)."""
-    from datagen.dataset.reader import load_dataset
-    from datagen.paths import report_folder
+    from datagen.dataset.reader import open_dataset
     from datagen.report.overlays import write_previews
 
-    folder = report_folder(output_path(out if out is not None else Path(dataset) / "preview", "--out"), dataset,
-                           make=False)
-    wanted = _frame_list(frames) if frames else None
-    view = load_dataset(dataset)
-    require_plan(view, partial)
-    for path in write_previews(view, wanted, folder):
+    folder = report_out("preview", out, dataset)
+    source = open_dataset(dataset)
+    index = source.index(allow_duplicates=False)
+    require_plan(index, partial)
+    wanted = _frame_list(frames) if frames else [int(f) for f in index.frame_id[:4]]
+    view = source.read_frames(list(dict.fromkeys(wanted)), index)  # only the manifests that hold them
+    for path in write_previews(view, wanted, folder, warn=lambda line: typer.echo(shown(line), err=True)):
         typer.echo(f"wrote {path}")
 
 
@@ -260,7 +261,8 @@ def evaluate(
                                               "prediction files cover).", show_default=False)] = None,
     seed: Annotated[int | None, typer.Option("--seed", min=0, help="Noise seed (default: the dataset's).")] = None,
     out: Annotated[Path | None, typer.Option("--out", parser=path_value,
-                                             help="Output folder (default: DATASET/evaluation).")] = None,
+                                             help="Output folder (default: DATASET/evaluation, with --predictions "
+                                             "DATASET/evaluation-predictions).")] = None,
     workers: Annotated[int, typer.Option("--workers", min=1, max=64, help="Processes that solve approaches "
                                          "(results do not depend on it).")] = 1,
     match_px: Annotated[float, typer.Option("--match-px", min=0.0, max=1000.0, help="With --predictions: a "
@@ -286,13 +288,11 @@ def evaluate(
     from datagen.analysis.predictions import parse_predictions
     from datagen.console import ConsoleProgress
     from datagen.dataset.reader import open_dataset
-    from datagen.paths import report_folder
     from datagen.report.evaluation_report import write_evaluation
 
     if split not in (None, "all", "train", "val"):
         raise DatagenError(f"--split: {split!r}: choose all, train or val")
-    folder = report_folder(output_path(out if out is not None else Path(dataset) / "evaluation", "--out"), dataset,
-                           make=False)
+    folder = report_out("evaluate" if predictions is None else "evaluate --predictions", out, dataset)
     source = open_dataset(dataset)
     index = source.index(allow_duplicates=False)
     require_plan(index, partial, split if split in ("train", "val") else None)
@@ -306,14 +306,14 @@ def evaluate(
             raise DatagenError(f"{source.root}: two frames have files of the stem {twice!r}: a prediction file "
                                "could not say which frame it is of (datagen audit names the manifests' paths)")
         found = parse_predictions(predictions, k.width, k.height, len(source.features), min_conf=conf, pose=pose,
-                                  stems=set(stems))
+                                  stems=set(stems), max_bytes=source.limits.prediction_bytes)
         if found.ghosts and not found:
             raise DatagenError(f"--predictions: {predictions}: no prediction file is named after an image of the "
                                f"dataset ({len(found.ghosts)} files, the first: {found.ghosts[0]}; expected files "
                                "like 00000003.txt from `yolo predict save_txt=True`)")
         if found.ghosts:
             typer.echo(f"{predictions}: {len(found.ghosts)} prediction files name no frame of {source.root} "
-                       f"(the first: {found.ghosts[0]}); not read", err=True)
+                       f"(the first: {shown(found.ghosts[0])}); not read", err=True)
         if split is None:
             try:
                 split, why = prediction_split(index, found)
@@ -332,6 +332,10 @@ def evaluate(
         sources = [{"source": "truth", "noise_px": radius, "split": split} for radius in radii]
         plan = [Run(noise_px=radius, run=run) for run, radius in enumerate(radii)]
     only = None if split == "all" else split
+    if only is not None and only not in index.split:
+        counts = ", ".join(f"{index.split.count(s)} {s}" for s in ("train", "val"))
+        raise DatagenError(f"{source.root}: no {only} frames to score (the build drew {counts}); choose --split "
+                           "all or the other split")
     settings = PnPSettings()  # the paper's: every run is solved, summarized and reported with these
     results = evaluate_runs(source, plan, seed=seed, settings=settings, split=only, workers=workers,
                             progress=progress, index=index)
@@ -399,6 +403,12 @@ def train(
     device: Annotated[str | None, typer.Option("--device", help="cpu, or CUDA device ids such as 0 or 0,1 "
                                                "(default: Ultralytics' choice, a GPU where there is one).",
                                                show_default=False)] = None,
+    batch: Annotated[int | None, typer.Option("--batch", min=1, max=1024, help="Images per batch, one optimizer "
+                                              "step each (sets Ultralytics' batch and nbs; default: hyp.yaml's).",
+                                              show_default=False)] = None,
+    imgsz: Annotated[int | None, typer.Option("--imgsz", min=32, max=8192, help="Training and prediction size, "
+                                              "px (default: hyp.yaml's, labels.train_imgsz; the labels' minimum "
+                                              "sizes were grown for that size).", show_default=False)] = None,
     runs: Annotated[Path | None, typer.Option("--runs", parser=path_value, help="Ultralytics' project folder "
                                               "(default: runs/ beside the dataset).", show_default=False)]
     = None,
@@ -408,15 +418,16 @@ def train(
     """Train a detector with Ultralytics on the dataset's own recipe (hyp.yaml), predict the
     validation frames, and print the evaluate command (needs the train extra)."""
     from datagen.analysis.audit.dataset_files import check_recipe
+    from datagen.analysis.audit.label_lines import check_names
+    from datagen.analysis.audit.pose import check_pose_names
     from datagen.analysis.ultralytics import train_and_predict
     from datagen.dataset.reader import open_dataset
     from datagen.dataset.training_run import TrainingRun
 
     source = open_dataset(dataset)  # the checks every reading command makes, one line each
-    recipe = check_recipe(source).finish()  # Ultralytics runs a data.yaml's download and loads files hyp.yaml names
-    if not recipe.passed:
-        raise DatagenError(f"{source.root}/{recipe.offenders[0]} (datagen audit checks the training files; "
-                           "rebuild the dataset to rewrite them)")
+    # Ultralytics runs a data.yaml's download, loads what hyp.yaml names, reads every image a list names and
+    # prints the class names: each is checked as the audit checks it, before anything else.
+    _refuse_failed(source, check_recipe(source, source.index()))
     if source.doc.get("render") is False:
         raise DatagenError(f"{source.root / 'dataset.json'}: render: false: a labels-only build has no images to "
                            "train on (build it without --no-render)")
@@ -424,12 +435,13 @@ def train(
     if pose and labels == "detect":
         raise DatagenError(f"{source.root / 'dataset.json'}: config.labels.format: detect; --pose needs a build "
                            "with pose labels (labels.format pose or both)")
+    _refuse_failed(source, check_pose_names(source) if pose or labels == "pose" else check_names(source))
     task = "pose" if labels == "pose" or pose else "detect"
     root = source.root / "pose" if labels == "both" and pose else source.root
     # Absolute folders: Ultralytics puts a relative project folder under its own settings folder.
     run = TrainingRun(root.resolve(), source.root.resolve(), task,
                       runs=output_path(runs, "--runs").resolve() if runs else None, name=name, model=model)
-    train_and_predict(run, epochs=epochs, device=device)
+    train_and_predict(run, epochs=epochs, device=device, batch=batch, imgsz=imgsz)
     typer.echo(f"weights: {run.weights}")
     typer.echo(f"predictions of the validation frames: {run.predictions}")
     typer.echo(f"score them: {run.evaluate_command()}")
@@ -506,6 +518,15 @@ def gallery(
     typer.echo(f"wrote {write_gallery(configs, out, spp=spp)}")
     if closeups is not None:
         typer.echo(f"wrote {write_closeups(closeups, before=before, spp=spp)}")
+
+
+def _refuse_failed(source, check) -> None:
+    """One line naming the first offender of an audit check that fails (training refuses the
+    files the audit would fail)."""
+    check = check.finish()
+    if not check.passed:
+        raise DatagenError(f"{source.root}/{check.offenders[0]} (datagen audit checks the training files; rebuild "
+                           "the dataset to rewrite them)")
 
 
 def _frame_list(text: str) -> list[int]:

@@ -7,10 +7,11 @@ from __future__ import annotations
 import contextlib
 import functools
 import os
+import re
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, TypeVar
+from typing import Annotated, Final, TextIO, TypeVar
 
 import typer
 
@@ -23,13 +24,20 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # Click's own help: paragraphs wrapped to the terminal, up to 120 columns (a docstring's
+    # line breaks are not kept mid-sentence) and no type shown for a flag.
+    rich_markup_mode=None,
+    context_settings={"max_content_width": 120},
 )
-assets_app = typer.Typer(help="Build and inspect the built-in meshes and feature sets.", no_args_is_help=True)
+assets_app = typer.Typer(help="Build and inspect the built-in meshes and feature sets.", no_args_is_help=True,
+                         rich_markup_mode=None)
 app.add_typer(assets_app, name="assets")
 
 #: Exit status for bad input (configs, assets, dataset folders, flags) and for files that
 #: cannot be read or written.
 EXIT_BAD_INPUT = 2
+#: Exit status of a command interrupted by Ctrl-C (128 + SIGINT, as a shell reports it).
+EXIT_INTERRUPTED = 130
 #: Most frames one --frames list of preview or render may name.
 MAX_FRAME_LIST = 10_000
 #: Largest --noise-px radius, pixels, and most radii in one run.
@@ -118,6 +126,18 @@ def output_path(path: Path, flag: str) -> Path:
     return path
 
 
+def report_out(command: str, out: Path | None, dataset: Path) -> Path:
+    """The report folder of ``command`` (audit, evaluate or preview): its ``--out``, or its
+    folder in the dataset, checked before any work starts
+    (:func:`datagen.dataset.reports.claim_report_folder`: a folder holding anything but
+    the command's own earlier report is refused)."""
+    from datagen.dataset.reports import REPORTS, claim_report_folder
+
+    kind = REPORTS[command]
+    folder = output_path(out if out is not None else Path(dataset) / kind.folder, "--out")
+    return claim_report_folder(kind, folder, dataset, make=False)
+
+
 #: The ``--partial`` option of the commands that read a dataset's frames.
 PartialOption = Annotated[bool, typer.Option("--partial", help="Go on when the manifests hold fewer (or other) "
                                              "frames than dataset.json planned (an unfinished build): say so and "
@@ -154,11 +174,37 @@ def _root(
 
 
 
+#: What a terminal acts on instead of showing: C0 controls but tab and newline, DEL and C1 controls.
+_CONTROLS: Final = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")
+
+
+class _Shown:
+    """A text stream that writes every control character a terminal would act on (an escape
+    sequence that clears the screen or sets the window title, a carriage return that draws
+    over a line) as a Python escape: the last guard, behind the escaping of every name a
+    dataset gives (:func:`datagen.core.errors.shown`), between a hostile dataset and the
+    user's terminal."""
+
+    def __init__(self, stream: TextIO) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        self._stream.write(_CONTROLS.sub(lambda m: ascii(m.group())[1:-1], text))
+        return len(text)
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
 def main() -> None:
-    """The ``datagen`` command: a bad flag is one line too, and so is an unprintable path."""
+    """The ``datagen`` command: a bad flag is one line too, and so is an unprintable path;
+    nothing it prints controls the terminal (:class:`_Shown`; ``train`` prints Ultralytics'
+    own coloured progress, of names the recipe check allows)."""
     for stream in (sys.stdout, sys.stderr):  # paths with undecodable bytes print escaped, never crash
         with contextlib.suppress(AttributeError, ValueError):
             stream.reconfigure(errors="backslashreplace")
+    if sys.argv[1:2] != ["train"]:
+        sys.stdout, sys.stderr = _Shown(sys.stdout), _Shown(sys.stderr)
     try:
         code = app(prog_name="datagen", standalone_mode=False)
     except typer.exceptions.TyperException as exc:
@@ -173,5 +219,9 @@ def main() -> None:
         sys.exit(EXIT_BAD_INPUT)
     except typer.Abort:
         print("datagen: aborted", file=sys.stderr)
-        sys.exit(130)
+        sys.exit(EXIT_INTERRUPTED)
+    command = next((a for a in sys.argv[1:] if not a.startswith("-")), "")
+    if code == EXIT_INTERRUPTED and command != "build":  # Typer's answer to Ctrl-C; a build's summary says it
+        print(f"datagen {command}: interrupted; no file is left half-written (each is written whole, then renamed "
+              "into place)", file=sys.stderr)
     sys.exit(code if isinstance(code, int) else 0)

@@ -18,7 +18,6 @@ from __future__ import annotations
 import json
 import math
 import re
-import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
@@ -26,8 +25,9 @@ from typing import Any, Final
 import yaml
 
 from datagen.core.errors import ConfigError, Problem
+from datagen.paths import Unreadable, read_bytes
 
-__all__ = ["LIMITS", "InputLimits", "parse_json", "parse_yaml", "read_text"]
+__all__ = ["LIMITS", "InputLimits", "parse_json", "parse_yaml", "read_json", "read_text"]
 
 
 @dataclass(frozen=True)
@@ -52,34 +52,25 @@ LIMITS: Final = InputLimits()
 _INTEGER = re.compile(r"[-+]?(0|[1-9][0-9_]*|0o?[0-7_]+|0x[0-9a-fA-F_]+|0b[01_]+)")
 
 
-def read_text(path: Path, what: str, limits: InputLimits = LIMITS) -> str:
-    """The UTF-8 text of ``path``; one :class:`ConfigError` line for any reason it cannot be read."""
+def read_text(path: Path, what: str, limits: InputLimits = LIMITS, *, max_bytes: int | None = None) -> str:
+    """The UTF-8 text of ``path`` (at most ``max_bytes``, or ``limits.max_bytes``); one
+    :class:`ConfigError` line for any reason it cannot be read (:func:`datagen.paths.read_bytes`)."""
     path = Path(path)
-
-    def fail(message: str) -> ConfigError:
-        return ConfigError([Problem(path, "", message)])
-
+    limit = limits.max_bytes if max_bytes is None else max_bytes
     try:
-        info = path.stat()
-        size = info.st_size
-        if stat.S_ISDIR(info.st_mode):
-            raise fail(f"is a directory, expected a {what}")
-        if not stat.S_ISREG(info.st_mode):  # a FIFO would block, a device never end
-            raise fail(f"not a regular file, expected a {what}")
-        if size > limits.max_bytes:
-            raise fail(f"{size:,} bytes: larger than the {limits.max_bytes:,} bytes a {what} may have")
-        with open(path, "rb") as f:
-            data = f.read(limits.max_bytes + 1)
-    except FileNotFoundError:
-        raise fail("no such file") from None
-    except OSError as exc:
-        raise fail(f"cannot read: {exc.strerror or exc}") from None
-    if len(data) > limits.max_bytes:
-        raise fail(f"larger than the {limits.max_bytes:,} bytes a {what} may have")
+        data = read_bytes(path, f"a {what}", limit)
+    except Unreadable as exc:
+        raise ConfigError([Problem(path, "", exc.problem)]) from None
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise fail(f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+        raise ConfigError([Problem(path, "", f"not UTF-8 text ({exc.reason} at byte {exc.start})")]) from None
+
+
+def read_json(path: Path, what: str, max_bytes: int, limits: InputLimits = LIMITS) -> Any:
+    """The JSON data of ``path`` read with both bounds: its size (``max_bytes``) and what
+    :func:`parse_json` refuses (one :class:`ConfigError` line)."""
+    return parse_json(read_text(path, what, limits, max_bytes=max_bytes), path, limits)
 
 
 # --- YAML --------------------------------------------------------------------------------------

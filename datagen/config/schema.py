@@ -84,8 +84,23 @@ def _real(value: Any) -> Any:
 
 #: A finite number (an integer is a number too; booleans and strings are not).
 Number = Annotated[float, BeforeValidator(_real)]
+def _whole(value: Any) -> Any:
+    """A whole number written as text (YAML 1.1 reads ``1e4`` without a dot, and a quoted
+    number, as text) is refused saying so; anything else is left to the strict check."""
+    if isinstance(value, str):
+        try:
+            number = float(value)
+        except ValueError:
+            pass
+        else:
+            whole = f"{number:.0f}" if number.is_integer() and abs(number) < 1e18 else "the digits"
+            raise ValueError(f"must be a whole number, got the text {value!r} (YAML reads exponents without a dot, "
+                             f"and quoted numbers, as text: write {whole})")
+    return value
+
+
 #: An integer (not a boolean, not a float, not a string).
-Integer = Annotated[int, Strict()]
+Integer = Annotated[int, BeforeValidator(_whole), Strict()]
 #: true or false (not 0, 1 or a string).
 Flag = Annotated[bool, Strict()]
 

@@ -11,14 +11,26 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["ConfigError", "DatagenError", "Problem"]
+__all__ = ["ConfigError", "DatagenError", "Problem", "shown"]
+
+
+def shown(text: object) -> str:
+    """``text`` as it may be printed: every character a terminal would act on instead of
+    showing (escape sequences, carriage returns, newlines, bells, C1 controls, undecodable
+    bytes of a file name, unassigned code points) written as a Python escape, so that a
+    name taken from a dataset can neither draw over a report's lines nor add lines to it.
+    Printable text, non-ASCII letters included, is unchanged."""
+    text = str(text)
+    if text.isprintable():
+        return text
+    return "".join(ch if ch.isprintable() else ascii(ch)[1:-1] for ch in text)
 
 
 class DatagenError(Exception):
-    """Bad input: printed to the user as is, without a traceback."""
+    """Bad input: printed to the user as is (escaped: :func:`shown`), without a traceback."""
 
     def lines(self) -> list[str]:
-        return [str(self)]
+        return [shown(str(self))]
 
 
 @dataclass(frozen=True)
@@ -40,7 +52,7 @@ class Problem:
         if self.has_value:
             parts.append(f"value {_short_repr(self.value)}")
         parts.append(self.message)
-        return re.sub(r"\s*\n\s*", " ", ": ".join(parts))
+        return shown(re.sub(r"\s*\n\s*", " ", ": ".join(parts)))
 
 
 class ConfigError(DatagenError):

@@ -21,10 +21,20 @@ from typing import Final
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["FEATURE_VARIANTS", "SIZE_SCALE", "STORED_VARIANTS", "FeatureTable"]
+__all__ = ["FEATURE_VARIANTS", "MAX_NAME_CHARS", "SIZE_SCALE", "STORED_VARIANTS", "FeatureTable", "valid_name"]
 
 #: Feature sizes: the ring radius of a feature relative to its object's small radius,
 #: so that each size has four times the area of the one before (paper models J, K, L).
+#: Longest feature name, characters.
+MAX_NAME_CHARS: Final = 100
+
+
+def valid_name(name: object) -> bool:
+    """Whether ``name`` may name a feature: a non-empty printable string of at most
+    :data:`MAX_NAME_CHARS` characters (it is printed, drawn and written to data.yaml)."""
+    return isinstance(name, str) and 0 < len(name) <= MAX_NAME_CHARS and name.isprintable()
+
+
 SIZE_SCALE: Final[dict[str, float]] = {"small": 1.0, "medium": 2.0, "large": 4.0}
 #: Variants a feature file stores: the paper's baseline and the co-located size variants.
 STORED_VARIANTS: Final[tuple[str, ...]] = ("baseline", *SIZE_SCALE)

@@ -25,15 +25,19 @@ import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
 from datagen.atomic import write_parquet
-from datagen.core.features import FeatureTable
+from datagen.config.inputs import parse_json
+from datagen.core.errors import DatagenError
+from datagen.core.features import MAX_NAME_CHARS, FeatureTable, valid_name
 from datagen.core.keypoints import keypoint_flags
 from datagen.core.label_boxes import Exclusion
+from datagen.paths import read_bytes
 
 __all__ = [
     "APPEARANCE",
     "IMAGE_STATISTICS",
     "MANIFEST_VERSION",
     "MEASURED_COLUMNS",
+    "PIXEL_COLUMNS",
     "READABLE_MANIFEST_VERSIONS",
     "RUN_COLUMNS",
     "TEXEL_COLUMNS",
@@ -72,6 +76,14 @@ FILE_COLUMNS: Final = ("image_path", "label_path", "pose_label_path", "exr_path"
 #: Manifest columns that describe the run rather than the frame: they differ between
 #: two builds of the same config; every other column is identical.
 RUN_COLUMNS: Final = ("render_s", "denoise_s", "frame_s", "worker", "worker_rss_mib")
+#: Manifest columns measured on the rendered pixels, whose last bits depend on how many threads
+#: Mitsuba renders with (the order in which a pixel's samples are summed): the promise of a
+#: build is that the same config and seed give the same label files and the same manifests,
+#: :data:`RUN_COLUMNS` aside, for any worker count; these columns (and the images) too when
+#: every worker renders with the same number of threads (``--threads 1``: on any machine).
+#: With the default threads (the cores divided among the workers) they differ in the last
+#: bits, about 1e-7 relative.
+PIXEL_COLUMNS: Final = ("auto_exposure_ev", "image_mean_luminance", "image_rms_contrast")
 #: Manifest columns measured on the rendered frame (the camera model's metering and motion,
 #: the image statistics): null where the frame was not rendered (labels-only builds).
 MEASURED_COLUMNS: Final = ("auto_exposure_ev", "motion_blur_px", "sun_in_view", *IMAGE_STATISTICS, *TEXEL_COLUMNS)
@@ -250,10 +262,18 @@ def write_manifest(path: Path, rows: Sequence[dict], summary: dict) -> Path:
     return write_parquet(path, table.replace_schema_metadata(meta), compression="zstd")
 
 
-def read_manifest_summary(path: Path) -> dict:
-    """The label counts a shard's manifest carries in its metadata (no row is read)."""
-    meta = pq.read_schema(path).metadata or {}
-    return json.loads(meta.get(b"datagen.shard_summary", b"{}"))
+def read_manifest_summary(path: Path, max_bytes: int) -> dict:
+    """The label counts a shard's manifest carries in its metadata (no row is read; a file
+    over ``max_bytes`` is not read at all): a mapping, or one line saying why not."""
+    data = read_bytes(path, "a shard's manifest", max_bytes)
+    try:
+        meta = pq.read_schema(pa.BufferReader(data)).metadata or {}
+    except (OSError, pa.ArrowException) as exc:
+        raise DatagenError(f"{path}: unreadable manifest ({type(exc).__name__})") from None
+    summary = parse_json(meta.get(b"datagen.shard_summary", b"{}").decode("utf-8", "replace"), path)
+    if not isinstance(summary, dict):
+        raise DatagenError(f"{path}: datagen.shard_summary: expected a mapping of label counts")
+    return summary
 
 
 # --- features.parquet ----------------------------------------------------------------
@@ -284,16 +304,35 @@ def write_features(path: Path, features: FeatureTable) -> Path:
     return write_parquet(path, pa.Table.from_pylist(rows, schema=features_schema()))
 
 
-def read_features(path: Path) -> FeatureTable:
-    """The :class:`FeatureTable` a dataset was labeled with, from its ``features.parquet``."""
-    table = pq.read_table(path).to_pylist()
+#: The farthest a feature point or hull vertex may lie from its object's origin, metres.
+MAX_BODY_M: Final = 10_000.0
+
+
+def _body_points(values: object, what: str) -> NDArray[np.float64]:
+    """``(N, 3)`` points of an object's body frame, finite and within :data:`MAX_BODY_M`
+    (ValueError naming ``what`` otherwise)."""
+    points = np.asarray(values, dtype=np.float64).reshape(-1, 3)
+    if not len(points) or not (np.isfinite(points) & (np.abs(points) <= MAX_BODY_M)).all():
+        raise ValueError(f"{what}: expected points of finite metres within {MAX_BODY_M:g} of the object's origin")
+    return points
+
+
+def read_features(source) -> FeatureTable:
+    """The :class:`FeatureTable` a dataset was labeled with, from its ``features.parquet``
+    (a path or a buffer); ValueError for a point that is not finite metres."""
+    table = pq.read_table(source, use_threads=False).to_pylist()
     table.sort(key=lambda r: r["class_id"])
+    for r in table:
+        for key in ("name", "object"):
+            if not valid_name(r[key]):
+                raise ValueError(f"class {r['class_id']} {key}: not a name of 1 to {MAX_NAME_CHARS} printable "
+                                 "characters")
     return FeatureTable.from_point_sets(
-        [np.asarray(r["points_m"], dtype=np.float64) for r in table],
+        [_body_points(r["points_m"], f"class {r['class_id']} points_m") for r in table],
         objects=[r["object"] for r in table],
         class_ids=[r["class_id"] for r in table],
         names=[r["name"] for r in table],
-        centers=[np.asarray(r["center_m"], dtype=np.float64) for r in table],
+        centers=[_body_points(r["center_m"], f"class {r['class_id']} center_m")[0] for r in table],
         sizes=[r["size"] for r in table],
     )
 
@@ -315,10 +354,11 @@ def write_objects(path: Path, objects: Sequence[str], hulls: Mapping[str, NDArra
     return write_parquet(path, pa.Table.from_pylist(rows, schema=objects_schema()))
 
 
-def read_objects(path: Path) -> dict[str, NDArray[np.float64]]:
-    """Object name -> hull vertices ``(H, 3)``, in pose-class order, from ``objects.parquet``."""
-    rows = sorted(pq.read_table(path).to_pylist(), key=lambda r: r["class_id"])
-    return {r["object"]: np.asarray(r["hull_points_m"], dtype=np.float64).reshape(-1, 3) for r in rows}
+def read_objects(source) -> dict[str, NDArray[np.float64]]:
+    """Object name -> hull vertices ``(H, 3)``, in pose-class order, from ``objects.parquet``
+    (a path or a buffer); ValueError for a vertex that is not finite metres."""
+    rows = sorted(pq.read_table(source, use_threads=False).to_pylist(), key=lambda r: r["class_id"])
+    return {r["object"]: _body_points(r["hull_points_m"], f"object {r['object']} hull_points_m") for r in rows}
 
 
 def matrix_field(m: np.ndarray) -> list[list[float]]:

@@ -29,7 +29,8 @@ from typing import Final
 
 __all__ = [
     "DATA_YAML_KEYS",
-    "HYP_PATH_KEYS",
+    "FRAME_FILE",
+    "FRAME_TREES",
     "LOCK_NAME",
     "MANIFEST_NAME",
     "POSE_IMAGES_LINK",
@@ -50,12 +51,15 @@ POSE_IMAGES_LINK: Final = ("pose/images", "../images")
 #: The keys of a data.yaml datagen writes (Ultralytics' dataset file): no ``path``, no
 #: ``download`` (Ultralytics runs a ``download`` command when a split's images are missing).
 DATA_YAML_KEYS: Final = ("train", "val", "nc", "names", "kpt_shape", "flip_idx")
-#: Ultralytics settings that name files, folders, models or commands: never in a hyp.yaml datagen writes.
-HYP_PATH_KEYS: Final = ("data", "model", "project", "name", "source", "pretrained", "tracker", "cfg", "resume",
-                        "save_dir", "weights", "download")
-
 #: The name of a shard's manifest, ``{split}-{shard:05d}.parquet``; nothing else in manifests/ is one.
 MANIFEST_NAME: Final = re.compile(r"(train|val)-[0-9]{5}\.parquet")
+#: The path of a frame's file (relative to the root) in the form :class:`Layout` gives it:
+#: ``{tree}/{split}/{shard:05d}/{frame:08d}{ext}``, each tree with its own extensions.
+FRAME_FILE: Final = re.compile(r"(images/(train|val)/[0-9]{5}/[0-9]{8}\.(png|jpg)"
+                               r"|(pose/)?labels/(train|val)/[0-9]{5}/[0-9]{8}\.txt"
+                               r"|exr/(train|val)/[0-9]{5}/[0-9]{8}\.exr)")
+#: The folders that hold the frames' files.
+FRAME_TREES: Final = ("images", "labels", "pose/labels", "exr")
 
 
 # --- plan -------------------------------------------------------------------------------

@@ -21,10 +21,10 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
-from datagen.config.inputs import parse_json, parse_yaml, read_text
+from datagen.config.inputs import parse_yaml, read_json, read_text
 from datagen.core.camera import FOCAL_BOUNDS_PX, MAX_IMAGE_PX, Intrinsics
 from datagen.core.conventions import RIGID_OBJECTS
-from datagen.core.errors import DatagenError
+from datagen.core.errors import DatagenError, shown
 from datagen.core.features import FeatureTable
 from datagen.core.label_boxes import FrameLabels
 from datagen.core.labelling_context import Labelled, LabellingContext, LabelRules
@@ -38,7 +38,17 @@ from datagen.dataset.columns import (
     stored_schema,
 )
 from datagen.dataset.layout import MANIFEST_NAME, SPLITS
-from datagen.paths import NOT_INSIDE, DatasetFolder, named_inside
+from datagen.dataset.limits import (
+    DATA_YAML_BYTES,
+    DATASET_JSON_BYTES,
+    MAX_DISTANCE_M,
+    MAX_FRAMES,
+    MAX_WORLD_M,
+    TABLE_BYTES,
+    TABLE_ROWS,
+    ReadLimits,
+)
+from datagen.paths import NOT_INSIDE, DatasetFolder, named_inside, read_bytes
 
 __all__ = ["DatasetIndex", "DatasetMeta", "DatasetSource", "DatasetView", "image_size", "load_dataset", "open_dataset",
            "plan_gaps"]
@@ -69,6 +79,19 @@ class DatasetMeta(Labelled):
     @property
     def edge_margin_px(self) -> float:
         return float(self.doc["edge_margin_px"])
+
+    @functools.cached_property
+    def limits(self) -> ReadLimits:
+        """The largest file of each per-frame kind this dataset may hold
+        (:class:`~datagen.dataset.limits.ReadLimits`: from dataset.json's resolution and plan)."""
+        splits = self.doc.get("splits") if isinstance(self.doc.get("splits"), dict) else {}
+        frames = {s: v["frames"] for s, v in splits.items() if s in SPLITS and isinstance(v, dict)
+                  and isinstance(v.get("frames"), int)}
+        if len(frames) != len(splits):  # a plan the readers refuse in their own words (plan_gaps)
+            frames = {}
+        shard = self.doc.get("shard_size")
+        return ReadLimits.of(self.labelling, shard if isinstance(shard, int) else 100_000,
+                             frames or {"train": MAX_FRAMES})
 
     @property
     def label_format(self) -> str:
@@ -166,6 +189,7 @@ class DatasetIndex:
     approach_number: NDArray[np.int64]
     world_texel_px: list[float | None]  # the largest world texel the frame showed (schema.TEXEL_COLUMNS)
     rank: dict[str, NDArray[np.int64]]  # manifest -> each of its rows' position in frame order (its rows sorted)
+    limits: ReadLimits  # the dataset's (DatasetMeta.limits)
 
     def __len__(self) -> int:
         return len(self.frame_id)
@@ -226,19 +250,44 @@ class DatasetSource(DatasetMeta):
     def read_manifest(self, name: str, columns: tuple[str, ...] | None = None) -> pa.Table:
         """One manifest, checked against the schema (one line naming it when it is not a
         manifest this datagen reads)."""
-        return _read_manifest(self.root / name, columns)
+        return _read_manifest(self.root / name, self.limits, columns)
+
+    def read_manifests(self, columns: tuple[str, ...] | None = None) -> list[pa.Table]:
+        """Every manifest (its ``columns``, or all), in name order; one line once they hold
+        more rows than twice the frames dataset.json plans (a copied manifest or two the
+        audit names; thousands would grow a reader's memory without bound)."""
+        tables, rows = [], 0
+        for name in self.manifests:
+            tables.append(self.read_manifest(name, columns))
+            rows += tables[-1].num_rows
+            if rows > 2 * self.limits.frames:
+                raise DatagenError(f"{self.root / 'manifests'}: more rows than twice the {self.limits.frames:,} "
+                                   f"frames dataset.json plans (at {name}): manifests copied in from elsewhere")
+        return tables
 
     def read_shard(self, name: str, *, checked: bool = True) -> DatasetView:
         """One manifest's rows as a view; ``checked``: refuse (one line) rows whose camera is
         not dataset.json's (the audit, which reports them, reads them unchecked)."""
         return _view(self, [self.read_manifest(name)], [name], allow_duplicates=True, checked=checked)
 
+    def read_frames(self, frames: list[int], index: DatasetIndex) -> DatasetView:
+        """The rows of the frame ids ``frames`` as a view, read from the manifests that hold
+        them and no other (``index``: this source's); one line naming the first id that no
+        manifest holds."""
+        where = dict(zip(index.frame_id.tolist(), index.manifest_file, strict=True))
+        missing = [f for f in frames if f not in where]
+        if missing:
+            span = f"frames {int(index.frame_id.min())}-{int(index.frame_id.max())}" if len(index) else "no frames"
+            raise DatagenError(f"--frames: frame {missing[0]} is not in {self.root} ({span})")
+        names = sorted({where[f] for f in frames})
+        return _view(self, [self.read_manifest(n) for n in names], names, allow_duplicates=False, checked=True)
+
     def index(self, *, allow_duplicates: bool = True) -> DatasetIndex:
         """Every manifest's small columns (:data:`INDEX_COLUMNS`), rows in frame order.
 
         ``allow_duplicates``: keep rows of a frame that several manifests hold (the audit
         names them); otherwise they are refused in one line, as by :func:`load_dataset`."""
-        tables = [self.read_manifest(name, INDEX_COLUMNS) for name in self.manifests]
+        tables = self.read_manifests(INDEX_COLUMNS)
         names = [name for name, t in zip(self.manifests, tables, strict=True) for _ in range(t.num_rows)]
         _check_splits(self.root, [v for t in tables for v in t.column("split").to_pylist()], names,
                       [v for t in tables for v in t.column("frame_id").to_pylist()])
@@ -263,13 +312,13 @@ class DatasetSource(DatasetMeta):
 
         return DatasetIndex(self.root, self.doc, self.label_format, [names[i] for i in order], frame_ids[order],
                             column("split"), *(column(c) for c in FILE_COLUMNS), integers("approach_index"),
-                            integers("approach_number"), column("world_texel_px"), ranks)
+                            integers("approach_number"), column("world_texel_px"), ranks, self.limits)
 
 
 def _read_json(path: Path) -> dict:
     if not path.exists():
         raise DatagenError(f"{path}: no such file; not a datagen dataset folder")
-    data = parse_json(read_text(path, "dataset description"), path)  # ConfigError: one line, a DatagenError
+    data = read_json(path, "dataset description", DATASET_JSON_BYTES)  # ConfigError: one line, a DatagenError
     if not isinstance(data, dict):
         raise DatagenError(f"{path}: expected a JSON object")
     return data
@@ -304,6 +353,17 @@ def _check_document(doc: dict, path: Path) -> None:
     seed = doc.get("seed", 0)
     if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
         raise DatagenError(f"{path}: seed: value {str(seed)[:40]!r}: expected the dataset's seed, an integer from 0")
+    shard = doc.get("shard_size", 1)
+    if not isinstance(shard, int) or isinstance(shard, bool) or not 1 <= shard <= 100_000:
+        raise DatagenError(f"{path}: shard_size: value {str(shard)[:40]!r}: expected the frames of a shard, an "
+                           "integer from 1 to 100000")
+    splits = doc.get("splits", {})
+    for split, plan in (splits.items() if isinstance(splits, dict) else ()):
+        frames = plan.get("frames") if isinstance(plan, dict) else None  # other shapes: plan_gaps names them
+        if split in SPLITS and isinstance(frames, int) and not isinstance(frames, bool) \
+                and not 0 <= frames <= MAX_FRAMES:
+            raise DatagenError(f"{path}: splits.{split}.frames: value {str(frames)[:40]!r}: expected the frames "
+                               f"planned, an integer from 0 to {MAX_FRAMES}")
 
 
 def _floats(array: pa.Array, shape: tuple[int, ...]) -> NDArray[np.float64]:
@@ -335,7 +395,7 @@ def load_dataset(root: str | Path, *, allow_duplicates: bool = False, checked: b
         DatagenError: one line naming the file and what is wrong with it.
     """
     source = open_dataset(root)
-    tables = [source.read_manifest(name) for name in source.manifests]
+    tables = source.read_manifests()
     return _view(source, tables, list(source.manifests), allow_duplicates=allow_duplicates,
                  checked=checked)
 
@@ -354,7 +414,7 @@ def open_dataset(root: str | Path) -> DatasetSource:
     for name in ("dataset.json", "data.yaml", "features.parquet", "objects.parquet", "manifests"):
         folder.file(name)  # none of them may lead out of the dataset
     doc = _read_json(root / "dataset.json")
-    data_yaml = parse_yaml(read_text(root / "data.yaml", "data.yaml"), root / "data.yaml")
+    data_yaml = parse_yaml(read_text(root / "data.yaml", "data.yaml", max_bytes=DATA_YAML_BYTES), root / "data.yaml")
     _check_document(doc, root / "dataset.json")
     if not isinstance(data_yaml, dict):
         raise DatagenError(f"{root / 'data.yaml'}: expected a mapping with train, val, nc and names")
@@ -364,7 +424,8 @@ def open_dataset(root: str | Path) -> DatasetSource:
         raise DatagenError(f"{root / 'dataset.json'}: config.labels.{exc}") from None
     pose_yaml = data_yaml if rules.format == "pose" else None
     if rules.format == "both":
-        pose_yaml = parse_yaml(read_text(folder.file("pose/data.yaml"), "data.yaml"), root / "pose" / "data.yaml")
+        pose_yaml = parse_yaml(read_text(folder.file("pose/data.yaml"), "data.yaml", max_bytes=DATA_YAML_BYTES),
+                               root / "pose" / "data.yaml")
         if not isinstance(pose_yaml, dict):
             raise DatagenError(f"{root / 'pose' / 'data.yaml'}: expected a mapping with train, val, nc, names and "
                                "kpt_shape")
@@ -382,10 +443,14 @@ def _read_tables(root: Path) -> tuple[FeatureTable, dict[str, NDArray[np.float64
     when either is missing or wrong)."""
     tables = []
     for path, read in ((root / "features.parquet", read_features), (root / "objects.parquet", read_objects)):
-        if not path.is_file():
-            raise DatagenError(f"{path}: missing or not a regular file")
+        data = read_bytes(path, "a table of the dataset", TABLE_BYTES)
         try:
-            tables.append(read(path))
+            rows = pq.ParquetFile(pa.BufferReader(data)).metadata.num_rows
+            if not 0 < rows <= TABLE_ROWS:
+                raise DatagenError(f"{path}: {rows} rows; expected from 1 to {TABLE_ROWS:,}")
+            tables.append(read(pa.BufferReader(data)))
+        except DatagenError:
+            raise
         except Exception as exc:
             raise DatagenError(f"{path}: unreadable ({type(exc).__name__}: "
                                f"{' '.join(str(exc).split())[:120]})") from None
@@ -413,22 +478,37 @@ def _manifest_names(folder: DatasetFolder) -> tuple[str, ...]:
     return tuple(manifests)
 
 
-def _read_manifest(path: Path, columns: tuple[str, ...] | None = None) -> pa.Table:
+def _read_manifest(path: Path, limits: ReadLimits, columns: tuple[str, ...] | None = None) -> pa.Table:
     """A manifest checked against :func:`datagen.dataset.columns.manifest_schema` (its
-    ``columns``, or all)."""
+    ``columns``, or all): read once, within ``limits`` (its bytes, rows and uncompressed
+    size judged from its footer before any row is read), and its values in their ranges
+    (:func:`_check_values`)."""
     expected = manifest_schema()
     if columns is not None:
         expected = pa.schema([expected.field(c) for c in columns])
+    data = read_bytes(path, "a shard's manifest", limits.manifest_bytes)
     try:
-        schema = pq.read_schema(path)
-        table = pq.read_table(path, columns=[c for c in expected.names if c in schema.names])
+        footer = pq.ParquetFile(pa.BufferReader(data)).metadata
+        rows, schema = footer.num_rows, footer.schema.to_arrow_schema()
+        unpacked = sum(footer.row_group(i).total_byte_size for i in range(footer.num_row_groups))
         version = (schema.metadata or {}).get(b"datagen.manifest_version", b"?")
     except (OSError, pa.ArrowException) as exc:
         raise DatagenError(f"{path}: unreadable manifest ({type(exc).__name__})") from None
+    if not 0 < rows <= limits.shard_rows:
+        raise DatagenError(f"{path}: {rows} rows; a shard's manifest holds from 1 to {limits.shard_rows} frames "
+                           "(dataset.json's shard_size)")
+    if unpacked > limits.manifest_bytes:
+        raise DatagenError(f"{path}: {unpacked:,} bytes uncompressed, more than {rows} frames' rows may take "
+                           f"({limits.manifest_bytes:,})")
     version = version.decode(errors="replace")[:20]
     if version not in READABLE_MANIFEST_VERSIONS:
-        raise DatagenError(f"{path}: manifest version {version}, this datagen reads "
+        raise DatagenError(f"{path}: manifest version {shown(version)}, this datagen reads "
                            f"{' and '.join(READABLE_MANIFEST_VERSIONS)}")
+    try:
+        table = pq.read_table(pa.BufferReader(data), columns=[c for c in expected.names if c in schema.names],
+                              use_threads=False)  # a manifest is small; no thread outlives a refusal
+    except (OSError, pa.ArrowException) as exc:
+        raise DatagenError(f"{path}: unreadable manifest ({type(exc).__name__})") from None
     stored = expected if version == READABLE_MANIFEST_VERSIONS[0] else stored_schema(expected)
     for field in stored:
         have = table.schema.field(field.name) if field.name in table.schema.names else None
@@ -439,10 +519,85 @@ def _read_manifest(path: Path, columns: tuple[str, ...] | None = None) -> pa.Tab
         if not field.nullable and table.column(field.name).null_count:
             raise DatagenError(f"{path}: column {field.name}: null values, which it may not hold")
     try:
-        return table.select(expected.names).cast(expected)
+        table = table.select(expected.names).cast(expected)
     except (pa.ArrowException, ValueError) as exc:  # a list of the wrong length
         raise DatagenError(f"{path}: a column's lists are not the lengths its type fixes "
                            f"({' '.join(str(exc).split())[:120]})") from None
+    _check_values(table, path, limits)
+    return table
+
+
+def _check_values(table: pa.Table, path: Path, limits: ReadLimits) -> None:
+    """Every number a reader computes with lies in its range (one line naming the manifest,
+    the frame, the column and the value of the first that does not): frame ids below the
+    frames planned, approach counters from 0, distances and the PtD vector finite and within
+    :data:`~datagen.dataset.limits.MAX_DISTANCE_M`, poses rigid transforms within
+    :data:`~datagen.dataset.limits.MAX_WORLD_M`, keypoint flags 0, 1 or 2, visible
+    fractions from 0 to 1. ``table``'s columns that are checked are checked; others are not
+    there to check."""
+    names = set(table.column_names)
+    frame = np.asarray(table.column("frame_id"), dtype=np.int64) if "frame_id" in names else None
+
+    def refuse(column: str, bad: NDArray[np.bool_], value: list, expected: str) -> None:
+        b = int(np.flatnonzero(bad)[0])
+        where = f"frame {frame[b]}" if frame is not None and 0 <= frame[b] < limits.frames else f"row {b}"
+        shown_value = repr(value[b])
+        shown_value = shown_value if len(shown_value) <= 80 else shown_value[:77] + "..."
+        raise DatagenError(f"{path}: {where}: {column}: value {shown_value}: expected {expected}")
+
+    if frame is not None:
+        bad = (frame < 0) | (frame >= limits.frames)
+        if bad.any():
+            refuse("frame_id", bad, frame.tolist(), f"a frame id from 0 to {limits.frames - 1} (dataset.json's splits)")
+    for column in ("approach_index", "approach_number"):
+        if column in names:
+            values = np.asarray(table.column(column), dtype=np.int64)
+            if (values < 0).any():
+                refuse(column, values < 0, values.tolist(), "a count from 0")
+    if "distance_m" in names:
+        d = np.asarray(table.column("distance_m"), dtype=np.float64)
+        bad = ~(np.isfinite(d) & (d >= 0) & (d <= MAX_DISTANCE_M))
+        if bad.any():
+            refuse("distance_m", bad, d.tolist(), f"a distance from 0 to {MAX_DISTANCE_M:g} m")
+    if "ptd_receiver_m" in names:
+        v = _floats(table.column("ptd_receiver_m").combine_chunks(), (table.num_rows, 3))
+        bad = ~(np.isfinite(v) & (np.abs(v) <= MAX_DISTANCE_M)).all(axis=1)
+        if bad.any():
+            refuse("ptd_receiver_m", bad, v.tolist(), f"a vector of finite metres within {MAX_DISTANCE_M:g}")
+    for column in ("cam_from_world", *(f"world_from_{o}" for o in RIGID_OBJECTS)):
+        if column in names:
+            m = _floats(table.column(column).combine_chunks(), (table.num_rows, 4, 4))
+            bad = ~_rigid(m)
+            if bad.any():
+                refuse(column, bad, m.tolist(), f"a rigid transform (a rotation, a translation within "
+                       f"{MAX_WORLD_M:g} m, last row 0 0 0 1)")
+    if "features" in names:
+        flat = table.column("features").combine_chunks().flatten()
+        rows = np.repeat(np.arange(table.num_rows), np.asarray(pc.list_value_length(
+            table.column("features").combine_chunks())))
+        flags = np.asarray(flat.field("keypoint_flag").to_numpy(zero_copy_only=False), dtype=np.int64)
+        bad = ~np.isin(flags, (0, 1, 2))
+        if bad.any():
+            refuse("features.keypoint_flag", np.isin(np.arange(table.num_rows), rows[bad]),
+                   [flags[rows == r].tolist() for r in range(table.num_rows)], "Ultralytics' keypoint flags 0, 1 or 2")
+        seen = _flat_floats(flat.field("visible_fraction"))
+        bad = ~(np.isnan(seen) | ((seen >= 0) & (seen <= 1)))
+        if bad.any():
+            refuse("features.visible_fraction", np.isin(np.arange(table.num_rows), rows[bad]),
+                   [seen[rows == r].tolist() for r in range(table.num_rows)], "fractions from 0 to 1 (or null)")
+
+
+def _rigid(m: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """``(B,)`` whether each ``(4, 4)`` is a rigid transform: finite, a rotation (orthonormal
+    to 1e-6, determinant 1), a translation within :data:`MAX_WORLD_M`, last row 0 0 0 1."""
+    finite = np.isfinite(m).all(axis=(1, 2)) & (np.abs(m[:, :3, :3]) <= 1.0 + 1e-6).all(axis=(1, 2))
+    m = np.where(finite[:, None, None], m, 0.0)  # a rotation's entries lie in [-1, 1]
+    r = m[:, :3, :3]
+    orthonormal = np.abs(r @ np.swapaxes(r, 1, 2) - np.eye(3)).max(axis=(1, 2)) <= 1e-6
+    proper = np.linalg.det(r) > 0
+    near = (np.abs(m[:, :3, 3]) <= MAX_WORLD_M).all(axis=1)
+    last = (m[:, 3] == np.array([0.0, 0.0, 0.0, 1.0])).all(axis=1)
+    return finite & orthonormal & proper & near & last
 
 
 def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, allow_duplicates: bool,

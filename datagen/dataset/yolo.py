@@ -55,18 +55,20 @@ def parse_line(line: str, nc: int, *, columns: tuple[int, ...] = (5,)) -> tuple[
     not numbers, not finite, not ``columns`` many, or its class is not an integer in
     ``[0, nc)``. Whether the values lie in ``[0, 1]`` is the caller's rule."""
     tokens = line.split()
-    try:
-        values = [float(t) for t in tokens]
-    except ValueError:
-        return None, f"not numbers: {line.strip()[:80]!r}"
-    if not all(math.isfinite(v) for v in values):
-        return None, f"not finite: {line.strip()[:80]!r}"
+    values = []
+    for i, token in enumerate(tokens):  # the file's text is not quoted: it may be anyone's
+        try:
+            values.append(float(token))
+        except ValueError:
+            return None, f"value {i + 1} of {len(tokens)} is not a number"
+        if not math.isfinite(values[-1]):
+            return None, f"value {i + 1} of {len(tokens)} is not finite"
     if len(values) not in columns:
         want = " or ".join(str(c) for c in columns)
         return None, f"{len(values)} columns, expected {want}"
     cls = values[0]
     if cls != int(cls) or not 0 <= cls < nc:
-        return None, f"class {tokens[0][:20]} is not an integer in [0, {nc})"
+        return None, f"class {cls:.10g} is not an integer in [0, {nc})"
     return values, None
 
 

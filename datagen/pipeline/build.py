@@ -17,6 +17,7 @@ from datagen.console import NullProgress, Progress
 from datagen.core.errors import DatagenError
 from datagen.dataset.columns import read_manifest_summary
 from datagen.dataset.layout import LOCK_NAME, Layout
+from datagen.dataset.limits import ReadLimits
 from datagen.parallel import cpu_count
 from datagen.pipeline.dataset_card import write_dataset_card
 from datagen.pipeline.dataset_document import config_fingerprint
@@ -75,12 +76,17 @@ def build_dataset(config: Config, out: Path, *, workers: int | str | None = None
             resumed = prepare_folder(layout, fingerprint, scene, render=render, overwrite=overwrite)
             write_dataset_files(layout, scene, jobs, fingerprint, describe=not resumed, render=render)
             todo = []
+            limits = ReadLimits.of(scene.labelling, scene.config.frames_per_shard, {})
             for job in jobs:
                 manifest = layout.manifest(job)
                 if manifest.is_file():
                     try:
-                        summary = ShardSummary.from_counts(job.name, read_manifest_summary(manifest), len(job.frames))
-                    except Exception as exc:  # damaged outside datagen: manifests are written atomically
+                        counts = read_manifest_summary(manifest, limits.manifest_bytes)
+                        summary = ShardSummary.from_counts(job.name, counts, len(job.frames))
+                    except DatagenError as exc:  # damaged outside datagen: manifests are written atomically
+                        raise DatagenError(f"{' '.join(str(exc).split())}; delete it to render its shard again") \
+                            from None
+                    except Exception as exc:
                         raise DatagenError(f"{manifest}: unreadable manifest ({type(exc).__name__}); delete it to "
                                            "render its shard again") from None
                     report.shards[job.name] = summary
@@ -104,7 +110,7 @@ def build_dataset(config: Config, out: Path, *, workers: int | str | None = None
                     if render:
                         write_image_lists(layout, jobs)
                     write_dataset_card(layout, scene, jobs, render=render, labels=report.labels,
-                                       excluded=report.excluded)
+                                       excluded=report.excluded, never_labeled=report.never_labeled)
             except KeyboardInterrupt:
                 report.interrupted = True
                 sweep_temporaries(leftovers)
@@ -126,6 +132,6 @@ def _discard_new(layout: Layout, config: Config) -> None:
     """Remove a dataset folder this build created: every file it wrote (its own plan names
     them), its lock, and the folders left empty."""
     with contextlib.suppress(OSError, DatagenError):
-        remove_owned(layout, {"config": config.model_dump(mode="json")})
+        remove_owned(layout)
         (layout.root / LOCK_NAME).unlink(missing_ok=True)
         layout.root.rmdir()

@@ -32,7 +32,7 @@ CARD_MARK: Final = "<!-- datagen dataset card: rewritten by every finished build
 
 
 def dataset_card(scene: Scene, jobs: list[ShardJob], *, render: bool, labels: int,
-                 excluded: dict[str, int]) -> str:
+                 excluded: dict[str, int], never_labeled: list[int] | None = None) -> str:
     """``README.md``: the dataset card. Its front matter tells Hugging Face ``datasets``
     which parquet files hold each split (``load_dataset(DIR)`` returns the manifests);
     its text says what the dataset is and how it was made."""
@@ -66,13 +66,25 @@ cx = {k.cx:g}, cy = {k.cy:g}), {_rendered(config) if render else "labels only (n
   true 3D centre ({'corrected' if rules.corrected else 'tight (uncorrected)'} boxes, at least
   {config.labels.min_box_px:g} px at imgsz {config.labels.train_imgsz}, {rules.edge_margin_px:g} px edge
   margin); excluded feature-frames: {reasons}.
-{_pose_card(scene)}- **Tables**: `manifests/{{split}}-{{shard}}.parquet`, one row per frame (poses as 4x4 matrices, intrinsics,
+{_unseen_card(scene, never_labeled or [])}{_pose_card(scene)}- **Tables**: `manifests/{{split}}-{{shard}}.parquet`, one row per frame (poses as 4x4 matrices, intrinsics,
   seeds, every appearance draw, and per feature its true centre, boxes, exclusion and visibility; missing
   values are nulls), `features.parquet` (each class's 3D points and centre). The columns are documented in
   datagen's `manifests/README.md`; `datasets.load_dataset(this folder)` reads the manifests.
 - **Training**: `data.yaml` and `hyp.yaml` for Ultralytics YOLO; their comments give the train, predict and
   evaluate commands. `dataset.json` records the resolved config, the software versions and the asset hashes.
 """  # noqa: E501 (text the user reads, one line per sentence)
+
+
+def _unseen_card(scene: Scene, never: list[int]) -> str:
+    """The card's line on the classes no frame labeled (empty when every class was)."""
+    if not never:
+        return ""
+    names = ", ".join(scene.features.name[c] for c in never[:12]) + (", ..." if len(never) > 12 else "")
+    return (f"- **Never labeled**: {len(never)} of {len(scene.features)} classes ({names}). By design: a feature "
+            "set is its objects' (the same class ids in every scene of those objects), and this camera never sees "
+            "these features inside the image and its margins (a wing camera, say, sees little of its own aircraft). "
+            "They stay in `nc` without a positive; Ultralytics trains on the others, and `datagen evaluate` scores "
+            "only what was labeled.\n")
 
 
 def _pose_card(scene: Scene) -> str:
@@ -89,12 +101,13 @@ def _pose_card(scene: Scene) -> str:
 
 
 def write_dataset_card(layout: Layout, scene: Scene, jobs: list[ShardJob], *, render: bool, labels: int,
-                       excluded: dict[str, int]) -> Path | None:
+                       excluded: dict[str, int], never_labeled: list[int] | None = None) -> Path | None:
     """Write the card of a finished build, unless a README.md that datagen did not write is there."""
     path = layout.root / "README.md"
     if path.exists() and not is_dataset_card(path):
         return None
-    return write_text(path, dataset_card(scene, jobs, render=render, labels=labels, excluded=excluded))
+    return write_text(path, dataset_card(scene, jobs, render=render, labels=labels, excluded=excluded,
+                                         never_labeled=never_labeled))
 
 
 def is_dataset_card(path: Path) -> bool:

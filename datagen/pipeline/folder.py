@@ -3,7 +3,8 @@
 
 Nothing datagen did not write is ever removed or changed: a folder that is not a
 dataset is refused before anything (the lock included) is created in it, and
-``--overwrite`` removes exactly the files the dataset's own records name.
+``--overwrite`` removes exactly the files of the names datagen gives its own files
+(:func:`owned_files`), found on disk, never by a path a file of the dataset names.
 """
 
 from __future__ import annotations
@@ -19,18 +20,17 @@ from pathlib import Path
 from typing import Final
 
 from datagen.atomic import is_temporary
-from datagen.config.load import stored_config
-from datagen.core.errors import DatagenError
-from datagen.dataset.columns import FILE_COLUMNS
-from datagen.dataset.layout import LOCK_NAME, MANIFEST_NAME, POSE_IMAGES_LINK, Layout
-from datagen.paths import DatasetFolder, regular_file
+from datagen.config.inputs import read_json
+from datagen.core.errors import ConfigError, DatagenError, shown
+from datagen.dataset.layout import FRAME_FILE, FRAME_TREES, LOCK_NAME, MANIFEST_NAME, POSE_IMAGES_LINK, Layout
+from datagen.dataset.limits import DATASET_JSON_BYTES
+from datagen.dataset.reports import REPORTS, record_of
+from datagen.paths import DatasetFolder, read_bytes
 from datagen.pipeline.dataset_card import is_dataset_card
-from datagen.pipeline.plan import dataset_layout, plan_shards
 from datagen.scene.resolved import Scene
 
 __all__ = [
     "METADATA",
-    "REPORT_RECORDS",
     "DatasetLock",
     "check_folder",
     "owned_files",
@@ -55,16 +55,20 @@ class DatasetLock:
         except OSError as exc:
             raise DatagenError(f"{exc.filename or self.path.parent}: cannot create the dataset folder's lock "
                                f"({exc.strerror})") from None
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode) or info.st_nlink != 1:
             os.close(fd)
-            raise DatagenError(f"{self.path}: not a regular file; a build locks its folder with it (remove it)")
+            what = "not a regular file" if not stat.S_ISREG(info.st_mode) else \
+                f"a file of {info.st_nlink} names (a hard link: another name of it may be outside the folder)"
+            raise DatagenError(f"{self.path}: {what}; a build locks its folder with a file of its own and writes "
+                               "nothing into this one (remove it)")
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as exc:
             os.close(fd)
             if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
                 raise
-            holder = self.path.read_text().strip() or "another process"
+            holder = _holder(self.path)
             raise DatagenError(f"{self.path.parent}: another datagen build ({holder}) is writing this "
                                "dataset; wait for it to finish or choose another --out") from None
         os.ftruncate(fd, 0)
@@ -82,6 +86,15 @@ class DatasetLock:
 
     def __exit__(self, *exc) -> None:
         self.release()
+
+
+def _holder(path: Path) -> str:
+    """Who holds the lock, as its file says (``pid N on HOST``), escaped and short."""
+    try:
+        text = read_bytes(path, "a lock", 256).decode("utf-8", "replace").strip()
+    except DatagenError:
+        text = ""
+    return shown(text[:80]) or "another process"
 
 
 def _differences(old: object, new: object, key: str = "") -> Iterator[str]:
@@ -129,12 +142,14 @@ def prepare_folder(layout: Layout, fingerprint: str, scene: Scene, *, render: bo
         return False
     path = layout.dataset_json
     try:
-        existing = json.loads(path.read_text())
+        existing = read_json(path, "dataset description", DATASET_JSON_BYTES)
         old_fingerprint, old_config = existing["fingerprint"], existing["config"]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+    except (DatagenError, KeyError, TypeError) as exc:
         if not overwrite:
-            raise DatagenError(f"{path}: unreadable dataset description ({type(exc).__name__}); use --overwrite "
-                               "to replace the dataset") from None
+            single = isinstance(exc, ConfigError) and len(exc.problems) == 1
+            why = exc.problems[0].message if single else type(exc).__name__
+            raise DatagenError(f"{path}: unreadable dataset description ({shown(why)}); use --overwrite to replace "
+                               "the dataset") from None
         existing, old_fingerprint, old_config = {}, None, {}
     if old_fingerprint == fingerprint:
         return True
@@ -153,13 +168,8 @@ def prepare_folder(layout: Layout, fingerprint: str, scene: Scene, *, render: bo
         raise DatagenError(f"{path}: this folder holds a dataset of another config, assets or build "
                            f"({what or 'made by another datagen version'}); use --overwrite to replace it, or "
                            "choose another --out")
-    remove_owned(layout, existing)
+    remove_owned(layout)
     return False
-
-
-#: Report folders inside a dataset and the record each one's writer keeps of its files
-#: (``files``: paths relative to the folder): what ``--overwrite`` may remove there.
-REPORT_RECORDS: Final = {"audit": "report.json", "evaluation": "evaluation.json", "preview": "preview.json"}
 
 
 #: Metadata files at the top of a dataset, in the order ``--overwrite`` removes them (dataset.json last).
@@ -167,68 +177,46 @@ METADATA: Final = ("pose/data.yaml", "pose/hyp.yaml", "pose/train.txt", "pose/va
                    "train.txt", "val.txt", "features.parquet", "objects.parquet", "dataset.json")
 
 
-def _inside(root: Path, rel: object) -> Path | None:
-    """``root / rel`` for a relative path that stays inside ``root``, else None."""
-    if not isinstance(rel, str) or not rel or rel.startswith("/") or "\0" in rel:
-        return None
-    parts = Path(rel).parts
-    if ".." in parts:
-        return None
-    return root.joinpath(*parts)
+def owned_files(layout: Layout) -> list[Path]:
+    """Every file in ``layout.root`` that datagen writes there by its own plan, in the order
+    ``--overwrite`` removes them: manifests first (so that no shard counts as done if this
+    is interrupted), then the frames' images, labels and EXRs, the reports, the metadata,
+    and dataset.json last (so that the folder stays recognisable as a dataset until the end).
 
-
-def owned_files(layout: Layout, doc: dict) -> list[Path]:
-    """Every file the dataset's own records say datagen wrote into ``layout.root``, in the
-    order ``--overwrite`` removes them: manifests first (so that no shard counts as done
-    if this is interrupted), then images, labels and EXRs, reports, metadata, and
-    dataset.json last (so that the folder stays recognisable as a dataset until the end).
-
-    The records: the shard plan of the config in dataset.json (every path a build of
-    it writes), the paths each readable manifest names, and the ``files`` list of each
-    report's own record (:data:`REPORT_RECORDS`)."""
-    import pyarrow.parquet as pq
-
+    Found by walking the folder (never following a link), never from a path a file of the
+    dataset names: a manifest's name (:data:`~datagen.dataset.layout.MANIFEST_NAME`), a
+    frame's file of the layout's own form (:data:`~datagen.dataset.layout.FRAME_FILE`), the
+    files each report's record lists of its writer's own form
+    (:data:`~datagen.dataset.reports.REPORTS`), the dataset card and the metadata. A
+    user's file among them, of another name, stays."""
     root = layout.root
-    manifests: list[Path] = []
-    frames: list[str] = []
-    try:
-        config = stored_config(doc.get("config", {}))
-    except (ValueError, TypeError):
-        config = None
-    if config is not None:
-        old = dataset_layout(root, config)
-        for job in plan_shards(config):
-            manifests.append(old.manifest(job))
-            for i in job.frames:
-                frames += [p for p in (old.image_rel(job.split, job.shard, i), old.label_rel(job.split, job.shard, i),
-                                       old.pose_label_rel(job.split, job.shard, i),
-                                       old.exr_rel(job.split, job.shard, i)) if p]
-    named = sorted((root / "manifests").glob("*.parquet")) if (root / "manifests").is_dir() else []
-    for path in named:
-        if not MANIFEST_NAME.fullmatch(path.name):
+    manifests = [root / "manifests" / name for name in _names(root / "manifests") if MANIFEST_NAME.fullmatch(name)]
+    frames: list[Path] = []
+    for tree in FRAME_TREES:
+        top = root / tree
+        if top.is_symlink() or not top.is_dir():
             continue
-        manifests.append(path)
-        if not regular_file(path):
-            continue
-        try:
-            table = pq.read_table(path, columns=[c for c in FILE_COLUMNS if c in pq.read_schema(path).names])
-        except Exception:
-            continue
-        for column in table.columns:
-            frames += [p for p in column.to_pylist() if p]
+        for dirpath, dirnames, filenames in os.walk(top):
+            dirnames[:] = sorted(d for d in dirnames if not os.path.islink(os.path.join(dirpath, d)))
+            for name in sorted(filenames):
+                path = Path(dirpath) / name
+                if FRAME_FILE.fullmatch(path.relative_to(root).as_posix()):
+                    frames.append(path)
     reports: list[Path] = []
-    for folder, record in REPORT_RECORDS.items():
-        path = root / folder / record
-        try:
-            listed = json.loads(path.read_text()).get("files", []) if regular_file(path) else []
-        except (OSError, ValueError, AttributeError):
-            listed = []
-        reports += [p for rel in listed if isinstance(listed, list) and (p := _inside(root / folder, rel))]
-        reports.append(path)
+    for kind in REPORTS.values():
+        folder = root / kind.folder
+        listed = record_of(kind, folder)
+        if listed is not None:  # a record of datagen's: its files and itself
+            reports += [folder / rel for rel in listed] + [folder / kind.record]
     card = [root / "README.md"] if is_dataset_card(root / "README.md") else []  # a user's README stays
-    ordered = (manifests + [p for rel in frames if (p := _inside(root, rel))] + reports + card
-               + [root / m for m in METADATA])
-    return list(dict.fromkeys(ordered))
+    return list(dict.fromkeys(manifests + frames + reports + card + [root / m for m in METADATA]))
+
+
+def _names(folder: Path) -> list[str]:
+    """The names in ``folder``, sorted; none where it is missing or a link."""
+    if folder.is_symlink() or not folder.is_dir():
+        return []
+    return sorted(os.listdir(folder))
 
 
 def _links_on_the_way(root: Path, paths: list[Path]) -> Path | None:
@@ -244,13 +232,13 @@ def _links_on_the_way(root: Path, paths: list[Path]) -> Path | None:
     return None
 
 
-def remove_owned(layout: Layout, doc: dict) -> int:
+def remove_owned(layout: Layout) -> int:
     """Delete exactly the files :func:`owned_files` names (and datagen's temporaries beside
     them), never a folder with something else in it and never through a symbolic link:
     a linked folder on the way refuses the whole removal before anything is deleted.
     Folders left empty are removed. Returns how many files were deleted."""
     root = layout.root
-    files = owned_files(layout, doc)
+    files = owned_files(layout)
     link = _links_on_the_way(root, files)
     if link is not None:
         raise DatagenError(f"{link}: a symbolic link; --overwrite does not delete through links (remove the link "

@@ -35,7 +35,7 @@ def write_dataset_files(layout: Layout, scene: Scene, jobs: list[ShardJob], fing
     imgsz = scene.config.labels.train_imgsz
     if layout.detect:
         write_text(root / "data.yaml", data_yaml(root, names, splits, imgsz=imgsz))
-        write_text(root / "hyp.yaml", hyp_yaml(scene, root))
+        write_text(root / "hyp.yaml", hyp_yaml(scene, root, splits))
     if layout.pose:
         pose_root = layout.pose_root
         if pose_root != root:
@@ -49,6 +49,6 @@ def write_dataset_files(layout: Layout, scene: Scene, jobs: list[ShardJob], fing
                 symlink_folder(link, target)
         write_text(pose_root / "data.yaml", data_yaml(pose_root, list(scene.features.objects), splits, imgsz=imgsz,
                                                       pose=scene.pose_layout, dataset=root))
-        write_text(pose_root / "hyp.yaml", pose_hyp_yaml(scene, pose_root, root))
+        write_text(pose_root / "hyp.yaml", pose_hyp_yaml(scene, pose_root, root, splits))
     write_features(root / "features.parquet", scene.features)
     write_objects(root / "objects.parquet", scene.features.objects, scene.hulls)

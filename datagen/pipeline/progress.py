@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from datagen.core.label_boxes import Exclusion
-from datagen.dataset.layout import ShardJob
+from datagen.dataset.layout import SPLITS, ShardJob
 from datagen.render.timing import rest_of_frame
 
 __all__ = ["BuildReport", "ShardSummary"]
@@ -116,6 +116,11 @@ class BuildReport:
         done = len(self.shards)
         out = [f"{self.name}: {self.frames} frames ({self.split_frames('train')} train, "
                f"{self.split_frames('val')} val) in {len(self.jobs)} shards -> {self.root}"]
+        empty = [s for s in SPLITS if not self.split_frames(s)]
+        if len(empty) == 1:
+            other = "val" if empty[0] == "train" else "train"
+            out.append(f"  no {empty[0]} frames: Ultralytics uses the {other} frames for both (data.yaml lists "
+                       f"{other}.txt as {empty[0]}); dataset.val_fraction and the frames drawn decide the split")
         if self.resumed:
             out.append(f"  resumed: {len(self.resumed)} of {len(self.jobs)} shards were done by an earlier run")
         n, wall = self.frames_this_run, self.wall_s

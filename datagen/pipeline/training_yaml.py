@@ -18,14 +18,25 @@ __all__ = [
     "data_yaml",
     "hyp_yaml",
     "pose_hyp_yaml",
+    "split_lists",
 ]
 
 
-def _commands(root: Path, imgsz: int, task: str = "detect", dataset: Path | None = None) -> str:
+def split_lists(splits: tuple[str, ...]) -> dict[str, str]:
+    """The image list Ultralytics reads for each split: ``train.txt`` and ``val.txt``, where
+    a split without frames (``val_fraction: 0``, or a small build) borrows the other's
+    (Ultralytics needs both). ``splits``: the splits that have frames."""
+    have = [s for s in SPLITS if s in splits] or ["train"]
+    return {s: f"{s if s in have else have[0]}.txt" for s in SPLITS}
+
+
+def _commands(root: Path, imgsz: int, splits: tuple[str, ...], task: str = "detect",
+              dataset: Path | None = None) -> str:
     """Train, predict and evaluate commands that work offline from any shell. ``root``: the
-    folder of the set's data.yaml; ``dataset``: the dataset's root, when that is another."""
+    folder of the set's data.yaml; ``dataset``: the dataset's root, when that is another;
+    ``splits``: those with frames (the predictions are of the validation list)."""
     run = TrainingRun(root, dataset or root, task)
-    train, predict = run.yolo_commands(imgsz)
+    train, predict = run.yolo_commands(imgsz, split_lists(splits)["val"])
     return f"""\
 # Train {run.network} from scratch (offline) and predict the validation frames, keeping
 # low-confidence detections (needs the train extra: pip install 'datagen[train]'):
@@ -47,9 +58,8 @@ def data_yaml(root: Path, class_names: list[str], splits: tuple[str, ...] = SPLI
     without frames (``val_fraction: 0``, or a tiny build) borrows the other's.
     With ``pose`` (then ``class_names`` are the objects) it is the pose set's file:
     ``kpt_shape`` and, where one exists, ``flip_idx``."""
-    have = [s for s in SPLITS if s in splits] or ["train"]
-    lists = {s: f"{s if s in have else have[0]}.txt" for s in SPLITS}
-    note = "".join(f"# no {s} frames in this build: {s} uses {lists[s]}\n" for s in SPLITS if s not in have)
+    lists = split_lists(splits)
+    note = "".join(f"# no {s} frames in this build: {s} uses {lists[s]}\n" for s in SPLITS if lists[s] != f"{s}.txt")
     doc = {"train": lists["train"], "val": lists["val"],
            "nc": len(class_names), "names": dict(enumerate(class_names))}
     task = "detect"
@@ -61,7 +71,7 @@ def data_yaml(root: Path, class_names: list[str], splits: tuple[str, ...] = SPLI
         else:
             note += f"# no flip_idx: {pose.flip_problem} (hyp.yaml keeps fliplr off)\n"
     return (f"# Ultralytics {task} dataset (datagen); train.txt and val.txt list the images of each split.\n"
-            + _commands(root, imgsz, task, dataset) + note + yaml.safe_dump(doc, sort_keys=False))
+            + _commands(root, imgsz, splits, task, dataset) + note + yaml.safe_dump(doc, sort_keys=False))
 
 
 #: The optimizer lines of both recipes (detect and pose).
@@ -79,7 +89,7 @@ nbs: {TRAIN_BATCH}  # keep equal to batch when you change it
 """
 
 
-def hyp_yaml(scene: Scene, root: Path) -> str:
+def hyp_yaml(scene: Scene, root: Path, splits: tuple[str, ...] = SPLITS) -> str:
     """The training recipe: an optimizer that steps on small datasets too, and augmentations
     that keep corrected centres and left/right classes intact."""
     config = scene.config
@@ -88,7 +98,7 @@ def hyp_yaml(scene: Scene, root: Path) -> str:
     margin = config.labels.edge_margin_px * scale
     return f"""\
 # Ultralytics training recipe for a datagen dataset ({config.name}).
-{_commands(root, imgsz)}# Corrected boxes are centred on the projection of a feature's true 3D centre, and
+{_commands(root, imgsz, splits)}# Corrected boxes are centred on the projection of a feature's true 3D centre, and
 # many classes come in left/right pairs. Augmentations that clip boxes at a crop
 # border (mosaic, translate, scale) move the box centre off the true centre, and a
 # horizontal flip turns a left-wing feature into a right-wing one without changing
@@ -116,7 +126,7 @@ hsv_v: 0.4
 """  # noqa: E501 (text the user reads, one line per sentence)
 
 
-def pose_hyp_yaml(scene: Scene, root: Path, dataset: Path | None = None) -> str:
+def pose_hyp_yaml(scene: Scene, root: Path, dataset: Path | None = None, splits: tuple[str, ...] = SPLITS) -> str:
     """The pose set's training recipe: keypoints move exactly with every geometric
     augmentation, so mosaic, translate and scale are on, and fliplr where a flip_idx exists."""
     config = scene.config
@@ -130,7 +140,7 @@ def pose_hyp_yaml(scene: Scene, root: Path, dataset: Path | None = None) -> str:
                 "fliplr: 0.0\n")
     return f"""\
 # Ultralytics pose training recipe for a datagen dataset ({config.name}).
-{_commands(root, imgsz, "pose", dataset)}# Each object is an instance whose keypoints are its features' true centre projections
+{_commands(root, imgsz, splits, "pose", dataset)}# Each object is an instance whose keypoints are its features' true centre projections
 # (datagen.core.keypoints). Ultralytics moves keypoints exactly with mosaic, translation and
 # scaling (a keypoint leaving the crop becomes invisible), so these stay on. Rotation, shear
 # and perspective also move keypoints exactly but loosen the object boxes: off.

@@ -20,7 +20,8 @@ from datagen.analysis.audit import AuditResult
 from datagen.atomic import write_image, write_text
 from datagen.core.label_boxes import FrameLabels
 from datagen.dataset.reader import DatasetMeta, DatasetView
-from datagen.paths import real_folder, recorded_files, report_folder
+from datagen.dataset.reports import REPORTS, claim_report_folder, recorded_files
+from datagen.paths import real_folder
 
 __all__ = ["report_document", "write_report"]
 
@@ -63,7 +64,7 @@ def write_report(result: AuditResult, dataset: DatasetMeta, out: Path, *,
     from datagen.report.overlays import draw_sheet
     from datagen.report.plots import plot_audit
 
-    out = report_folder(out, dataset.root)
+    out = claim_report_folder(REPORTS["audit"], out, dataset.root)
     plots = plot_audit(result.stats, result.plot, real_folder(out / "plots"))
 
     def data_uri(data: bytes, kind: str) -> str:
@@ -171,7 +172,7 @@ def _earlier_sheets(out: Path) -> list[str]:
     """The sheets an earlier report.json in ``out`` lists (an audit of other frames leaves
     them, and the record keeps naming them so that --overwrite removes them): names of the
     sheet form only."""
-    return [f for f in recorded_files(out / "report.json") if _SHEET.fullmatch(f)]
+    return [f for f in recorded_files(REPORTS["audit"], out) if _SHEET.fullmatch(f)]
 
 
 def _appearance_html(stats: dict, frames: int, esc) -> str:

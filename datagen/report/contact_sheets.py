@@ -24,6 +24,7 @@ from datagen.core.camera import Intrinsics, project_points
 from datagen.core.conventions import drawing_px
 from datagen.core.transforms import apply_transform, invert_rigid
 from datagen.render.views import render_views
+from datagen.report.overlays import INK, draw_text
 
 __all__ = ["VIEWS", "contact_sheet", "write_contact_sheet"]
 
@@ -67,13 +68,12 @@ def contact_sheet(mesh: ObjectMesh, features: Sequence[Feature], *, spp: int = 6
     for (title, _, _), world_from_cam, (image, seen) in zip(VIEWS, poses, rendered, strict=True):
         uv = project_points(apply_transform(invert_rigid(world_from_cam), centers), intrinsics)
         _mark(image, uv, seen, [f.class_id for f in features])
-        cv2.putText(image, title, (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 1, cv2.LINE_AA)
+        draw_text(image, title, (8, 20), INK, 0.55)
         tiles.append(image)
     rows = [np.concatenate(tiles[i : i + 3], axis=1) for i in range(0, len(tiles), 3)]
     sheet = np.concatenate(rows, axis=0)
     label = f"{mesh.name}: {len(features)} features (filled: centre visible, hollow: hidden); {mesh.path.name}"
-    cv2.putText(sheet, label, (8, sheet.shape[0] - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 1,
-                cv2.LINE_AA)
+    draw_text(sheet, label, (8, sheet.shape[0] - 10), INK, 0.55)
     return sheet
 
 
@@ -86,9 +86,8 @@ def _mark(image: NDArray[np.uint8], uv: NDArray, seen: NDArray[np.bool_], ids: S
         point = (round(x * 16), round(y * 16))
         color = (40, 220, 40) if ok else (60, 60, 255)
         cv2.circle(image, point, 4 * 16, color, -1 if ok else 1, cv2.LINE_AA, shift=4)
-        if ok:
-            cv2.putText(image, str(cid), (round(u) + 5, round(v) - 4), cv2.FONT_HERSHEY_SIMPLEX, 0.35,
-                        (255, 255, 0), 1, cv2.LINE_AA)
+        if ok:  # light text outlined in black: legible on the light grey hull and the dark sky alike
+            draw_text(image, str(cid), (round(u) + 5, round(v) - 4), INK, 0.4)
 
 
 def write_contact_sheet(path: Path, mesh: ObjectMesh, features: Sequence[Feature], **kwargs) -> Path:

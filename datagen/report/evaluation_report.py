@@ -20,7 +20,8 @@ from datagen.analysis.detections import DetectionScores, summarize_detections
 from datagen.analysis.evaluate import DISTANCE_EDGES, REASONS, PnPSettings, summarize
 from datagen.atomic import write_parquet, write_text
 from datagen.dataset.reader import DatasetIndex, DatasetView
-from datagen.paths import real_folder, report_folder
+from datagen.dataset.reports import REPORTS, claim_report_folder
+from datagen.paths import real_folder
 
 __all__ = ["write_evaluation"]
 
@@ -40,7 +41,8 @@ def write_evaluation(view: DatasetIndex | DatasetView, runs: list[tuple[dict, di
     """
     from datagen.report.plots import plot_detector, plot_evaluation
 
-    out = report_folder(out, view.root)
+    kind = REPORTS["evaluate" if detector is None else "evaluate --predictions"]
+    out = claim_report_folder(kind, out, view.root)
     real_folder(out / "plots")
     summaries = [{**source, **summarize(result, settings)} for source, result in runs]
     doc = {"dataset": str(view.root), "name": view.doc.get("name"), "frames": len(view),

@@ -42,8 +42,9 @@ from datagen.atomic import link_or_copy, write_image, write_text
 from datagen.core.conventions import index_px, object_id
 from datagen.core.errors import DatagenError
 from datagen.core.label_boxes import FrameLabels
+from datagen.dataset.limits import ReadLimits
 from datagen.dataset.reader import DatasetView
-from datagen.paths import regular_file
+from datagen.paths import opened_file, read_bytes, regular_file
 
 __all__ = ["EXPORT_FORMATS", "export_bop", "export_coco", "export_dataset"]
 
@@ -68,10 +69,11 @@ def export_dataset(view: DatasetView, out: Path, fmt: str, progress: Callable[[i
             b = int(np.flatnonzero(view.distortion.any(axis=1))[0])
             raise DatagenError(f"{view.root / view.manifest_file[b]}: frame {view.frame_id[b]} has lens distortion; "
                                "BOP's cameras are pinholes (build with randomization.sensor.distortion off)")
-    for paths in (view.image_path, view.exr_path if fmt == "bop" else []):
-        for rel in paths:
-            if not regular_file(view.folder.file(rel)):  # nothing outside the dataset, nothing but files
-                raise DatagenError(f"{view.root / rel}: missing or not a regular file")
+    for rel in view.image_path:  # nothing outside the dataset, nothing but the dataset's images
+        _check_image(view, rel)
+    for rel in view.exr_path if fmt == "bop" else []:
+        if not regular_file(view.folder.file(rel)):
+            raise DatagenError(f"{view.root / rel}: missing or not a regular file")
     out = Path(os.path.abspath(out))
     if out.is_symlink():
         raise DatagenError(f"--out: {out}: a symbolic link; an export is written only into a new real folder")
@@ -92,12 +94,12 @@ def export_dataset(view: DatasetView, out: Path, fmt: str, progress: Callable[[i
     try:
         tmp.mkdir()
         (export_coco if fmt == "coco" else export_bop)(view, tmp, progress or (lambda n: None))
-        mode = out.stat().st_mode if out.exists() else None
-        if mode is not None:
-            out.rmdir()  # empty (checked above)
-        tmp.rename(out)
-        if mode is not None:
-            out.chmod(stat.S_IMODE(mode))  # the folder the user made keeps its permissions
+        if out.exists():  # the user's empty folder (checked above) stays, the export moves into it
+            for entry in sorted(tmp.iterdir()):
+                entry.rename(out / entry.name)
+            tmp.rmdir()
+        else:
+            tmp.rename(out)
     except OSError as exc:  # the file it is about, named in the export, not in the hidden folder it is written in
         shutil.rmtree(tmp, ignore_errors=True)
         where = os.fsdecode(exc.filename) if exc.filename is not None else str(out)
@@ -108,6 +110,30 @@ def export_dataset(view: DatasetView, out: Path, fmt: str, progress: Callable[[i
         shutil.rmtree(tmp, ignore_errors=True)  # only the temporary folder this export made
         raise
     return out
+
+
+def _check_image(view: DatasetView, rel: str) -> Path:
+    """The dataset's image ``rel``, once it is a regular file inside the dataset of at most
+    :attr:`~datagen.dataset.limits.ReadLimits.image_bytes`, whose header says it is a PNG or
+    JPEG (as its suffix says) of the dataset's size: an export links only the dataset's own
+    frames beside annotations that state their size."""
+    from datagen.analysis.audit.dataset_files import HEADER_BYTES, image_header_problem
+
+    path = view.folder.file(rel)
+    head = read_bytes(path, "an image", view.limits.image_bytes, head=HEADER_BYTES)
+    problem = image_header_problem(head, path, view.limits)
+    if problem:
+        raise DatagenError(f"{path}: {problem}")
+    return path
+
+
+def _json(doc: object, **options) -> str:
+    """``doc`` as strict JSON (a value that is not a finite number is refused: other
+    tools' readers take no ``NaN``)."""
+    try:
+        return json.dumps(doc, allow_nan=False, **options)
+    except ValueError as exc:
+        raise DatagenError(f"a value of the export is not a finite number ({exc})") from None
 
 
 def _xywh(xyxy: NDArray[np.float64]) -> list[float]:
@@ -154,10 +180,10 @@ def export_coco(view: DatasetView, out: Path, progress: Callable[[int], None]) -
         if not rows:
             continue
         for b in rows:
-            link_or_copy(view.folder.file(view.image_path[b]), out / view.image_path[b])
+            link_or_copy(_check_image(view, view.image_path[b]), out / view.image_path[b])
             progress(1)
         doc = coco_document(view, rows, objects)
-        write_text(out / "annotations" / f"{split}.json", json.dumps(doc))
+        write_text(out / "annotations" / f"{split}.json", _json(doc))
 
 
 # --- BOP -----------------------------------------------------------------------------------------
@@ -191,7 +217,7 @@ def _models(view: DatasetView, out: Path) -> dict[str, tuple[NDArray, NDArray]]:
         info[str(obj)] = {"diameter": diameter, "min_x": lo[0], "min_y": lo[1], "min_z": lo[2],
                           "size_x": hi[0] - lo[0], "size_y": hi[1] - lo[1], "size_z": hi[2] - lo[2]}
     write_text(out / "models" / "models_info.json",
-               json.dumps({k: {f: float(v) for f, v in d.items()} for k, d in info.items()}, indent=1))
+               _json({k: {f: float(v) for f, v in d.items()} for k, d in info.items()}, indent=1))
     return meshes
 
 
@@ -245,18 +271,27 @@ def _bbox_of_box(xyxy: NDArray[np.float64]) -> list[int]:
     return [x0, y0, x1 - x0 + 1, y1 - y0 + 1]
 
 
-def read_object_ids(path: Path, shape: tuple[int, int]) -> NDArray[np.uint32]:
+def read_object_ids(path: Path, limits: ReadLimits) -> NDArray[np.uint32]:
     """The ``object_id`` channel of a datagen EXR (:func:`datagen.atomic.write_exr`), which
-    must be a regular file of the image's ``(height, width)``."""
+    must be a regular file of at most :attr:`~datagen.dataset.limits.ReadLimits.exr_bytes`
+    whose header states the dataset's image size (read before any pixel is decoded)."""
     import OpenEXR
 
-    if not regular_file(path):
-        raise DatagenError(f"{path}: not a regular file; expected the frame's EXR")
-    try:
-        with OpenEXR.File(str(path), separate_channels=True) as exr:
-            ids = np.asarray(exr.channels()["object_id"].pixels, dtype=np.uint32)
-    except Exception as exc:
-        raise DatagenError(f"{path}: unreadable EXR or no object_id channel ({type(exc).__name__})") from None
+    shape = (limits.height, limits.width)
+    with opened_file(path, "a frame's EXR", limits.exr_bytes) as name:
+        try:
+            low, high = OpenEXR.File(name, header_only=True).header()["dataWindow"]
+            size = (int(high[1]) - int(low[1]) + 1, int(high[0]) - int(low[0]) + 1)
+        except Exception as exc:
+            raise DatagenError(f"{path}: unreadable EXR header ({type(exc).__name__})") from None
+        if size != shape:
+            raise DatagenError(f"{path}: an EXR of {size[1]}x{size[0]} px, the dataset's images are "
+                               f"{shape[1]}x{shape[0]}")
+        try:
+            with OpenEXR.File(name, separate_channels=True) as exr:
+                ids = np.asarray(exr.channels()["object_id"].pixels, dtype=np.uint32)
+        except Exception as exc:
+            raise DatagenError(f"{path}: unreadable EXR or no object_id channel ({type(exc).__name__})") from None
     if ids.shape != tuple(shape):
         raise DatagenError(f"{path}: object ids of {ids.shape[1::-1]} px, the dataset's images are "
                            f"{shape[1]}x{shape[0]}")
@@ -283,9 +318,9 @@ def export_bop(view: DatasetView, out: Path, progress: Callable[[int], None]) ->
         camera, gt, gt_info = {}, {}, {}
         for b in rows:
             im = int(view.frame_id[b])
-            source = view.folder.file(view.image_path[b])
+            source = _check_image(view, view.image_path[b])
             link_or_copy(source, folder / "rgb" / f"{im:06d}{source.suffix}")
-            ids = read_object_ids(view.folder.file(view.exr_path[b]), (k.height, k.width))
+            ids = read_object_ids(view.folder.file(view.exr_path[b]), view.limits)
             camera[str(im)] = {"cam_K": cam_k, "depth_scale": 1.0}
             gt[str(im)], gt_info[str(im)] = [], []
             for o, name in enumerate(view.features.objects):
@@ -310,6 +345,6 @@ def export_bop(view: DatasetView, out: Path, progress: Callable[[int], None]) ->
                     write_image(path, (mask * np.uint8(255)))
             progress(1)
         for name, doc in (("scene_camera", camera), ("scene_gt", gt), ("scene_gt_info", gt_info)):
-            write_text(folder / f"{name}.json", json.dumps(doc, indent=1))
-    write_text(out / "camera.json", json.dumps({"cx": cam_k[2], "cy": cam_k[5], "fx": k.fx, "fy": k.fy,
+            write_text(folder / f"{name}.json", _json(doc, indent=1))
+    write_text(out / "camera.json", _json({"cx": cam_k[2], "cy": cam_k[5], "fx": k.fx, "fy": k.fy,
                                                 "width": k.width, "height": k.height, "depth_scale": 1.0}))

@@ -9,7 +9,8 @@ block of pixels) in the three panels of Fig. 11:
 - *labels*: the corrected box (centred on the true centre), the box written to the label
   file where it was grown to the minimum training size, and the true centres.
 
-Each feature has a number, the same in the three panels; the numbers stand in columns
+Each feature is numbered by its class id, the number its label lines begin with, in the
+three panels and the key, in every frame; the numbers stand in columns
 beside each panel, joined to their features by leader lines, so that no two overlap
 however close the features are, and a key beside the panels names them (excluded
 features that are still in view, by edge margin or occlusion, in grey with their reason).
@@ -21,6 +22,7 @@ convention (:func:`datagen.core.conventions.drawing_px`).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final
@@ -29,10 +31,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.core.conventions import drawing_px
+from datagen.core.errors import shown
 from datagen.core.label_boxes import Exclusion, FrameLabels
 from datagen.dataset.reader import DatasetView
 
-__all__ = ["COLOURS", "PANELS", "Sheet", "draw_crosshair", "draw_sheet", "draw_text", "write_previews"]
+__all__ = ["COLOURS", "INK", "PANELS", "Sheet", "draw_crosshair", "draw_sheet", "draw_text", "write_previews"]
 
 # Okabe-Ito colours (BGR).
 TIGHT: Final = (0, 159, 230)  # orange: the tight box
@@ -123,20 +126,32 @@ class Sheet:
     keys: list[tuple[str, int, tuple[int, int, int, int]]] = field(default_factory=list)
     #: ``(panel index, feature index, (x0, y0, x1, y1))``: the leader from a feature to its tag in the margin.
     leaders: list[tuple[int, int, tuple[float, float, float, float]]] = field(default_factory=list)
+    #: Why the frame is drawn without its image (:func:`frame_image`), or None.
+    problem: str | None = None
+    #: The number drawn for each feature (its class id), by feature index.
+    numbers: dict[int, int] = field(default_factory=dict)
+    #: Where each region's title stands on the whole frame: ``(x0, y0, x1, y1)``, in row order.
+    titles: list[tuple[float, float, float, float]] = field(default_factory=list)
 
 
-def _frame_image(view: DatasetView, b: int) -> NDArray[np.uint8]:
-    """The frame's image (a black canvas when it has none, it leads outside the dataset or it
-    does not match the camera)."""
+def frame_image(view: DatasetView, b: int) -> tuple[NDArray[np.uint8], str | None]:
+    """The frame's image and None, or a black canvas and why it is not the image: the
+    frame has none (a labels-only build: no reason given), or its file is missing, leads
+    outside the dataset, is not an image of the camera's size or does not decode."""
     from datagen.analysis.audit.dataset_files import decode_image, quiet_stderr
 
     k = view.intrinsics
-    image = None
+    image, problem = None, None
     rel = view.image_path[b]
-    if rel and not view.folder.problem(rel):
-        with quiet_stderr():
-            image, _ = decode_image(view.root / rel, k)  # its size read from its header before it is decoded
-    return image if image is not None else np.zeros((k.height, k.width, 3), np.uint8)
+    if rel:
+        problem = view.folder.problem(rel)
+        if not problem:
+            with quiet_stderr():
+                image, problem = decode_image(view.root / rel, view.limits)  # its header read before it is decoded
+            problem = problem if image is not None or problem else "missing"
+    if image is None:
+        return np.zeros((k.height, k.width, 3), np.uint8), problem
+    return image, None
 
 
 def _in_view(exclusion: NDArray) -> NDArray[np.bool_]:
@@ -262,8 +277,8 @@ def _draw_panel(sheet: Sheet, crop: NDArray[np.uint8], panel: Panel, frame: Fram
     for f, mark, (rect, leader) in zip(features, marks, placed, strict=True):
         excluded = Exclusion(int(frame.exclusion[f])) != Exclusion.NONE
         colour = EXCLUDED if excluded else INK
-        if leader:  # a tag in the margin: a faint line from the feature to it
-            end = (float(rect[0]), (rect[1] + rect[3] + 1) / 2)
+        if leader:  # a tag away from its feature: a faint line from the feature to the tag's nearest point
+            end = (float(np.clip(mark[0], rect[0], rect[2] + 1)), float(np.clip(mark[1], rect[1], rect[3] + 1)))
             cv2.line(image, _fixed(*mark), _fixed(*end), LEADER, 1, cv2.LINE_AA, _SHIFT)
             sheet.leaders.append((index, int(f), (float(mark[0]), float(mark[1]), *end)))
         draw_text(image, str(numbers[f]), (rect[0] + 2, rect[3] - 3), colour)
@@ -302,6 +317,21 @@ def _place_tags(marks: NDArray[np.float64], widths: list[int], bounds: tuple[int
                 taken.append(r)
                 out[i] = (r, False)
                 break
+    for i in np.argsort(marks[:, 1], kind="stable"):  # then nearby, with a short leader (never across the panel)
+        if out[i] is not None:
+            continue
+        (u, v), w, h = marks[i], widths[i], TAG_H
+        for radius in range(2 * arm, NEAR_TAG_PX + 1, arm):
+            for angle in np.linspace(0.0, 2 * np.pi, 16, endpoint=False):
+                cx, cy = u + radius * np.cos(angle), v + radius * np.sin(angle)
+                x, y = round(cx - (w if np.cos(angle) < 0 else 0)), round(cy - h / 2)
+                r = (x, y, x + w - 1, y + h - 1)
+                if free(r):
+                    taken.append(r)
+                    out[i] = (r, True)
+                    break
+            if out[i] is not None:
+                break
     rest = [i for i in range(len(marks)) if out[i] is None]
     if rest:
         columns, tops = _slots(marks[rest, 1], y0b, y1b)
@@ -310,6 +340,55 @@ def _place_tags(marks: NDArray[np.float64], widths: list[int], bounds: tuple[int
             y = round(top)
             out[i] = ((x, y, x + widths[i] - 1, y + TAG_H - 1), True)
     return out
+
+
+#: The font scale of the regions' titles on the whole frame.
+TITLE_FONT: Final = 1.0
+
+
+def _baseline(title: str, rect: tuple[float, float, float, float]) -> tuple[int, int]:
+    """The left end of a title's baseline in its rectangle (:func:`_place_titles`)."""
+    import cv2
+
+    base = cv2.getTextSize(title, _FONT, TITLE_FONT, 1)[1]
+    return round(rect[0]), round(rect[3] - base)
+
+
+def _place_titles(regions: list[tuple[float, float, float, float]], titles: list[str],
+                  bounds: tuple[int, int, int, int]) -> list[tuple[float, float, float, float]]:
+    """Where each region's title stands, ``(x0, y0, x1, y1)``: above the region's
+    outline, inside its top, below it, inside its bottom, a line further out (left-aligned,
+    right-aligned, or along the edge; then beside the region), the first place that stays in
+    ``bounds``, overlaps no title placed before it and crosses no region's outline; where
+    none is free, the place with the fewest such conflicts (another title counting most)."""
+    import cv2
+
+    x0b, y0b, x1b, y1b = bounds
+    edges = [e for a0, b0, a1, b1 in regions
+             for e in ((a0 - 2, b0 - 2, a1 + 2, b0 + 2), (a0 - 2, b1 - 2, a1 + 2, b1 + 2),
+                       (a0 - 2, b0 - 2, a0 + 2, b1 + 2), (a1 - 2, b0 - 2, a1 + 2, b1 + 2))]
+    taken: list[tuple[float, float, float, float]] = []
+    out = []
+    for (a0, b0, a1, b1), title in zip(regions, titles, strict=True):
+        (w, h), base = cv2.getTextSize(title, _FONT, TITLE_FONT, 1)
+        h += base
+        tops = (b0 - 6 - h, b0 + 6, b1 + 6, b1 - 6 - h, b0 - 10 - 2 * h, b1 + 10 + h)
+        lefts = [a0 + 4, a1 - 4 - w, *np.arange(a0 + 4, a1 - w, max(w / 2, 8.0)), a0 - w - 8, a1 + 8]
+        candidates = [(x, y) for y in tops for x in lefts]
+        inside = [(x, y) for x, y in candidates
+                  if x >= x0b + 2 and y >= y0b + 2 and x + w <= x1b - 2 and y + h <= y1b - 2]
+        inside = inside or [(min(max(x0b + 4, a0), x1b - w - 4), max(y0b + 4, min(b0 + 6, y1b - h - 4)))]
+        # The first free place, or the least crowded one (another title weighs more than an outline).
+        x, y = min(inside, key=lambda xy, w=w, h=h: 10 * sum(_overlap((*xy, xy[0] + w, xy[1] + h), t) for t in taken)
+                   + sum(_overlap((*xy, xy[0] + w, xy[1] + h), e) for e in edges))
+        taken.append((x - 2, y - 2, x + w + 2, y + h + 2))
+        out.append((x, y, x + w, y + h))
+    return out
+
+
+#: How far from its mark a tag that cannot stand beside it may stand inside the panel (sheet
+#: pixels) before it goes to the columns beside the panel.
+NEAR_TAG_PX: Final = 72
 
 
 def _overlap(a, b) -> bool:
@@ -374,13 +453,15 @@ def draw_sheet(view: DatasetView, b: int, labels: FrameLabels, image: NDArray[np
     """The label sheet of row ``b`` of ``view`` (``image``: the frame's, default its file)."""
     import cv2
 
-    image = _frame_image(view, b) if image is None else image
+    problem = None
+    if image is None:
+        image, problem = frame_image(view, b)
     frame = labels.frame(b)
-    shown = _in_view(frame.exclusion)
-    objects = [(o, np.flatnonzero(shown & (view.features.object_index == i)))
+    in_view = _in_view(frame.exclusion)
+    objects = [(o, np.flatnonzero(in_view & (view.features.object_index == i)))
                for i, o in enumerate(view.features.objects)]
     objects = [(o, f) for o, f in objects if len(f)]
-    numbering = {o: {int(f): n + 1 for n, f in enumerate(fs)} for o, fs in objects}
+    numbers = {int(f): int(view.features.class_id[f]) for _, fs in objects for f in fs}  # as the label lines say
     # Rows of panels first (their widths set the sheet's), then the whole frame above them:
     # an object in one row, or in several crops (a row each) where one would not magnify it.
     rows = []
@@ -388,7 +469,7 @@ def draw_sheet(view: DatasetView, b: int, labels: FrameLabels, image: NDArray[np
         groups = _groups(frame, fs)
         for part, group in enumerate(groups):
             title = o if len(groups) == 1 else f"{o} ({part + 1} of {len(groups)})"
-            rows.append((o, title, group, _crop(_feature_boxes(frame, group)), numbering[o]))
+            rows.append((o, title, group, _crop(_feature_boxes(frame, group)), numbers))
     tag_room = [TAG_W * _columns(len(fs)) + 12 for _, _, fs, _, _ in rows]
     key_room = [_key_width(_key_lines(view, frame, fs, numbers)) * _columns(len(fs))
                 for _, _, fs, _, numbers in rows]
@@ -396,20 +477,28 @@ def draw_sheet(view: DatasetView, b: int, labels: FrameLabels, image: NDArray[np
     k = view.intrinsics
     scale = width / k.width
     overview = cv2.resize(image, (width, round(k.height * scale)), interpolation=cv2.INTER_AREA)
+    missing = f"  NO IMAGE: {shown(view.image_path[b])[:80]}: {problem}" if problem else ""
     caption = (f"frame {view.frame_id[b]}  ({view.split[b]})  PtD {view.distance_m[b]:.1f} m  "
-               f"{k.width}x{k.height}")
+               f"{k.width}x{k.height}{missing}")
     legend = _legend(width, caption)
     row_h = PANEL_H + 40
-    sheet = Sheet(np.concatenate([legend, overview, np.full((row_h * len(rows), width, 3), PAPER, np.uint8)]))
+    sheet = Sheet(np.concatenate([legend, overview, np.full((row_h * len(rows), width, 3), PAPER, np.uint8)]),
+                  problem=problem, numbers=numbers)
     top = legend.shape[0]
-    for o, (x0, y0, s) in ((title, c) for _, title, _, c, _ in rows):  # each region in the whole frame
+    regions = []
+    for x0, y0, s in (c for _, _, _, c, _ in rows):  # each region in the whole frame
         a = (np.array([x0, y0]) * scale) + (0, top)
         z = (np.array([x0 + PANEL_W / s, y0 + PANEL_H / s]) * scale) + (0, top)
         cv2.rectangle(sheet.image, _fixed(*a), _fixed(*z), REGION, 2, cv2.LINE_AA, _SHIFT)
-        draw_text(sheet.image, o, (int(max(a[0], 4)), int(max(a[1] - 6, top + 16))), REGION, 0.7)
+        regions.append((float(a[0]), float(a[1]), float(z[0]), float(z[1])))
+    titles = [title for _, title, _, _, _ in rows]
+    for title, rect in zip(titles, _place_titles(regions, titles, (0, top, width, top + overview.shape[0])),
+                           strict=True):
+        draw_text(sheet.image, title, _baseline(title, rect), REGION, TITLE_FONT)
+        sheet.titles.append(rect)
     y = top + overview.shape[0]
     for o, title, fs, (x0, y0, s), numbers in rows:
-        draw_text(sheet.image, f"{title}: {len(fs)} features in view, x{s:.1f}", (12, y + 26), REGION, 0.6)
+        draw_text(sheet.image, f"{title}: {len(fs)} features in view, x{s:.1f}", (12, y + 28), REGION, 0.8)
         x = 12
         for kind in PANELS:
             panel = Panel(o, kind, (x, y + 36), (x0, y0), s)
@@ -422,13 +511,15 @@ def draw_sheet(view: DatasetView, b: int, labels: FrameLabels, image: NDArray[np
 
 
 def write_previews(view: DatasetView, frames: list[int] | None, out: Path, labels: FrameLabels | None = None,
-                   *, limit: int = 4) -> list[Path]:
-    """Write ``out/{frame:08d}.jpg`` sheets for the given frame ids (default: the first ``limit``)."""
+                   *, limit: int = 4, warn: Callable[[str], None] | None = None) -> list[Path]:
+    """Write ``out/{frame:08d}.jpg`` sheets for the given frame ids (default: the first
+    ``limit``); ``warn``: told one line for each frame drawn without its image (missing,
+    damaged or not the camera's size: the sheet says so too)."""
     import json
 
     from datagen.atomic import write_image, write_text
     from datagen.core.errors import DatagenError
-    from datagen.paths import recorded_files, report_folder
+    from datagen.dataset.reports import REPORTS, claim_report_folder, recorded_files
 
     labels = labels if labels is not None else view.recompute()
     index = {int(fid): b for b, fid in enumerate(view.frame_id)}
@@ -440,12 +531,16 @@ def write_previews(view: DatasetView, frames: list[int] | None, out: Path, label
     for f in wanted:  # a sheet shows nothing from outside the dataset
         if view.image_path[index[f]]:
             view.folder.file(view.image_path[index[f]])
-    out = report_folder(out, view.root)
-    written = [write_image(out / f"{f:08d}.jpg", draw_sheet(view, index[f], labels).image, jpeg_quality=92)
-               for f in wanted]
+    out = claim_report_folder(REPORTS["preview"], out, view.root)
+    written = []
+    for f in wanted:
+        sheet = draw_sheet(view, index[f], labels)
+        if sheet.problem and warn is not None:
+            warn(f"{view.root / view.image_path[index[f]]}: {sheet.problem}; frame {f} drawn without its image")
+        written.append(write_image(out / f"{f:08d}.jpg", sheet.image, jpeg_quality=92))
     # preview.json: the record of every sheet written here (``files``, relative to the folder),
     # which --overwrite removes and nothing else.
     record = out / "preview.json"
-    files = sorted({*recorded_files(record), *(p.name for p in written)})
+    files = sorted({*recorded_files(REPORTS["preview"], out), *(p.name for p in written)})
     write_text(record, json.dumps({"dataset": str(view.root), "files": files}, indent=2) + "\n")
     return written

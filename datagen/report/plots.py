@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from datagen.analysis.audit.check import DriftPlot
 from datagen.atomic import write_figure
@@ -124,13 +125,24 @@ def plot_audit(stats: dict, plot: DriftPlot, folder: Path) -> dict[str, Path]:
     edges = np.asarray(cov["edges_m"])
     axes[0].bar(edges[:-1] + 2.5, cov["frames"], width=4.5)
     axes[0].set(xlabel="probe-to-drogue distance (m)", ylabel="frames", title="Distance coverage")
+    axes[0].yaxis.set_major_locator(MaxNLocator(integer=True))  # frames are counted whole
     pnp = stats["pnp_below_3_features"]
-    axes[1].bar(list(pnp), [100 * v["share_below_3"] for v in pnp.values()], color="C3")
-    axes[1].set(ylabel="% of frames", title="Frames where an object has < 3 labeled features (no PnP)")
+    shares = [100 * v["share_below_3"] for v in pnp.values()]
+    axes[1].bar(list(pnp), shares, color="C3")
+    axes[1].set(ylabel="% of frames", ylim=(0, max(10.0, 1.1 * max(shares, default=0.0))),
+                title="Frames where an object has < 3 labeled features (no PnP)")
+    for x, share in enumerate(shares):  # a bar of 0 is drawn as its number, not as nothing
+        axes[1].annotate(f"{share:.1f}%", (x, share), ha="center", va="bottom", xytext=(0, 3),
+                         textcoords="offset points")
     for ax in axes:
         ax.grid(True, axis="y", alpha=0.3)
     save(fig, "coverage_and_pnp")
     return out
+
+
+#: The smallest PtD error the error plot's log axis shows, metres (the same floor for the
+#: points and the lines: a noise-free run's errors of ~1e-10 m are drawn on it, and said so).
+ERROR_FLOOR_M = 1e-6
 
 
 def _label(source: dict) -> str:
@@ -151,11 +163,14 @@ def plot_evaluation(runs, summaries, folder: Path, *, name: str = "") -> dict[st
     for ax, (source, result), summary in zip(axes.ravel(), runs, summaries):
         ok = result["success"]
         d, e = result["distance_m"], result["error_m"]
-        ax.scatter(d[ok], np.maximum(e[ok], 1e-6), s=2, alpha=0.3, color="C0", label="prediction error")
+        floor = ERROR_FLOOR_M  # a log axis shows no 0: errors below it (noise-free points) are drawn on it
+        below = int((e[ok] < floor).sum())
+        ax.scatter(d[ok], np.maximum(e[ok], floor), s=2, alpha=0.3, color="C0",
+                   label="prediction error" + (f" ({below} below {floor:g} m drawn at it)" if below else ""))
         bins = [b for b in summary["by_distance"] if b["mean_m"] is not None]
         mid = [(b["lo_m"] + b["hi_m"]) / 2 for b in bins]
-        ax.plot(mid, [b["mean_m"] for b in bins], "-", color="C3", label="mean")
-        ax.plot(mid, [b["plus_2sigma_m"] for b in bins], "--", color="C1", label="mean + 2 sigma")
+        ax.plot(mid, [max(b["mean_m"], floor) for b in bins], "-", color="C3", label="mean")
+        ax.plot(mid, [max(b["plus_2sigma_m"], floor) for b in bins], "--", color="C1", label="mean + 2 sigma")
         ax.axhline(0.07, color="k", lw=0.8, ls=":", label="7 cm (acceptable at contact)")
         ax.set(xscale="symlog", xlim=(0, 125), yscale="log", xlabel="probe-to-drogue distance (m)",
                ylabel="PtD error magnitude (m)", title=f"{_label(source)}: target {summary['target']}")

@@ -14,9 +14,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.analysis.exact import Spill
+from datagen.core.errors import shown
 from datagen.core.label_boxes import Exclusion, FrameLabels
 from datagen.dataset.reader import DatasetMeta, DatasetView
 from datagen.dataset.yolo import YOLO_DECIMALS
+from datagen.paths import Unreadable, read_bytes
 
 #: The corrected-box centre of a label line may lie this far from the true centre projection.
 DRIFT_LIMIT_PX: Final = 1e-3
@@ -73,7 +75,7 @@ class Check:
         score are listed in frame order, then in the order they failed, or of ``seq``)."""
         self.failures += 1
         self._scored.append((-score, 0 if row is None else int(row), self._seq if seq is None else seq,
-                             f"{where}: {what}"))
+                             shown(f"{where}: {what}")))  # names from the dataset: printed and written escaped
         self._seq += 1
 
     def ranked(self, rank: NDArray[np.int64]) -> Check:
@@ -178,16 +180,15 @@ class AuditResult:
 
 
 # --- label files --------------------------------------------------------------------------
-def read_label_file(path: Path) -> tuple[list[str], str | None]:
-    """The non-blank lines of a label file, or why there are none."""
-    if path.exists() and not path.is_file():
-        return [], "not a regular file"
+def read_label_file(path: Path, max_bytes: int) -> tuple[list[str], str | None]:
+    """The non-blank lines of a label file, or why there are none (a file over ``max_bytes``,
+    :attr:`~datagen.dataset.limits.ReadLimits.label_bytes`, is not read)."""
     try:
-        text = path.read_text()
-    except FileNotFoundError:
-        return [], "missing"
-    except (OSError, UnicodeDecodeError) as exc:
-        return [], f"unreadable ({exc})"
+        text = read_bytes(path, "a label file", max_bytes).decode("utf-8")
+    except Unreadable as exc:
+        return [], "missing" if exc.problem == "no such file" else exc.problem
+    except UnicodeDecodeError as exc:
+        return [], f"unreadable (not UTF-8 text at byte {exc.start})"
     return [line for line in text.splitlines() if line.strip()], None
 
 
@@ -200,7 +201,7 @@ def label_files(view: DatasetView, paths: list[str | None], check: Check,
             check.fail(f"{view.manifest_file[b]} frame {view.frame_id[b]}", f"no {kind} named", row=b)
             continue
         problem = view.folder.problem(rel)
-        rows, problem = ([], problem) if problem else read_label_file(view.root / rel)
+        rows, problem = ([], problem) if problem else read_label_file(view.root / rel, view.limits.label_bytes)
         if problem:
             check.fail(rel, problem, row=b)
             continue

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import stat
 from pathlib import Path
 from typing import Final
 
@@ -14,10 +13,12 @@ import numpy as np
 from datagen.analysis.audit.check import MAX_OFFENDERS, Check
 from datagen.atomic import is_temporary
 from datagen.config.inputs import parse_yaml, read_text
-from datagen.core.camera import Intrinsics
-from datagen.core.errors import DatagenError
-from datagen.dataset.layout import DATA_YAML_KEYS, HYP_PATH_KEYS, MANIFEST_NAME
+from datagen.core.errors import DatagenError, shown
+from datagen.dataset.layout import DATA_YAML_KEYS, MANIFEST_NAME, SPLITS
+from datagen.dataset.limits import HYP_YAML_BYTES, ReadLimits
 from datagen.dataset.reader import DatasetIndex, DatasetMeta, DatasetView, image_size, plan_gaps
+from datagen.dataset.training_run import recipe_problems
+from datagen.paths import Unreadable, read_bytes, regular_file
 
 #: Files Ultralytics writes into a dataset it trains on: label caches beside the label
 #: folders (``labels/train/00000.cache``, and ``.cache.npy`` while it writes one) and
@@ -37,15 +38,20 @@ def check_files(view: DatasetIndex | DatasetView) -> Check:
         problem = folder.problem(rel)
         if problem:
             check.fail(rel, problem)
-        elif not (root / rel).is_file():
-            check.fail(rel, "named in a manifest but missing")
+        elif not regular_file(root / rel):
+            check.fail(rel, "named in a manifest but missing" if not os.path.lexists(root / rel)
+                       else "named in a manifest but not a regular file, or in a folder that cannot be read")
     for rel in folder.links_out():
         check.checked += 1
         check.fail(rel, "a symbolic link that leads outside the dataset: no reader follows it")
     for tree in ("images", "labels", "exr", *(("pose/labels",) if view.label_format == "both" else ())):
-        if folder.problem(tree):
-            continue  # a link out of the dataset: named above, not walked
-        for dirpath, _, files in os.walk(root / tree):
+        if folder.problem(tree) or not os.path.isdir(root / tree):
+            continue  # a link out of the dataset (named above, not walked), or no such tree
+        def unreadable(exc: OSError) -> None:
+            check.fail(os.path.relpath(os.fsdecode(exc.filename), root), f"a folder that cannot be read "
+                       f"({exc.strerror}): its files are not checked")
+
+        for dirpath, _, files in os.walk(root / tree, onerror=unreadable):
             for name in files:
                 rel = str((Path(dirpath) / name).relative_to(root))
                 check.checked += 1
@@ -53,31 +59,11 @@ def check_files(view: DatasetIndex | DatasetView) -> Check:
                     check.fail(rel, "temporary file left by an interrupted writer")
                 elif rel not in referenced and not name.endswith(ULTRALYTICS_SUFFIXES):
                     check.fail(rel, "orphan: no manifest names it")
-    for name in sorted(os.listdir(root / "manifests")):
+    for name in sorted(os.listdir(root / "manifests")):  # read by open_dataset already
         if is_temporary(name):
             check.fail(f"manifests/{name}", "temporary file left by an interrupted writer")
         elif not MANIFEST_NAME.fullmatch(name):
             check.fail(f"manifests/{name}", "not a shard manifest ({split}-{shard:05d}.parquet): an orphan")
-    rows = sorted(zip(view.frame_id.tolist(), view.split, view.image_path, strict=True))
-    prefixes = ("", "pose/") if view.label_format == "both" else ("",)
-    for split, prefix in ((s, p) for s in ("train", "val") for p in prefixes):  # what Ultralytics trains on
-        want = [f"./{rel}" for _, s, rel in rows if s == split and rel]
-        if not want:
-            continue
-        name = f"{prefix}{split}.txt"
-        listed = root / name
-        check.checked += 1
-        try:
-            have = listed.read_text().splitlines() if listed.is_file() and not folder.problem(name) else None
-        except (OSError, UnicodeDecodeError):
-            have = None
-        if have is None:
-            check.fail(name, f"missing or unreadable; it lists the {split} images for Ultralytics")
-        elif have != want:
-            extra = sorted(set(have) - set(want))[:1]
-            what = (f"names {extra[0]!r}, which no manifest does" if extra
-                    else "misses images or lists them out of order")
-            check.fail(name, f"{what} ({len(have)} lines, {len(want)} {split} images)")
     ids, counts = np.unique(view.frame_id, return_counts=True)
     for frame in ids[counts > 1][:MAX_OFFENDERS]:
         rows = [view.manifest_file[b] for b in np.flatnonzero(view.frame_id == frame)]
@@ -90,43 +76,84 @@ def check_files(view: DatasetIndex | DatasetView) -> Check:
     return check
 
 
-def check_recipe(meta: DatasetMeta) -> Check:
-    """data.yaml and hyp.yaml (and the pose set's) hold only what datagen writes there: the
-    image lists of this dataset, no ``path`` or ``download`` (Ultralytics resolves the one
-    and runs the other), and no setting that names a file, model or command."""
-    check = Check("training_recipe", "data.yaml and hyp.yaml name only this dataset's image lists and no other "
-                  "file, folder, model or command (what Ultralytics reads and runs when it trains)")
+def image_list_problems(index: DatasetIndex | DatasetView) -> list[tuple[str, str]]:
+    """``(file, problem)`` of the image lists Ultralytics trains on (``train.txt``,
+    ``val.txt``, and the pose set's): each must list exactly the manifests' images of its
+    split, in frame order, and each image listed must be a regular file inside the dataset
+    (a line naming a file elsewhere would make Ultralytics read it and write its caches
+    beside it; a FIFO would block it). Each list is read within
+    :meth:`~datagen.dataset.limits.ReadLimits.image_list_bytes`."""
+    root, folder = index.root, index.folder
+    rows = sorted(zip(index.frame_id.tolist(), index.split, index.image_path, strict=True))
+    prefixes = ("", "pose/") if index.label_format == "both" else ("",)
+    problems = []
+    limits = index.limits
+    for split, prefix in ((s, p) for s in SPLITS for p in prefixes):
+        want = [f"./{rel}" for _, s, rel in rows if s == split and rel]
+        if not want:
+            continue
+        name = f"{prefix}{split}.txt"
+        try:
+            have = read_bytes(folder.file(name), "an image list", limits.image_list_bytes(split)) \
+                .decode("utf-8").splitlines()
+        except (DatagenError, UnicodeDecodeError) as exc:
+            why = exc.problem if isinstance(exc, Unreadable) else "not UTF-8 text" \
+                if isinstance(exc, UnicodeDecodeError) else str(exc)
+            problems.append((name, f"{why}; it lists the {split} images for Ultralytics"))
+            continue
+        if have != want:
+            extra = sorted(set(have) - set(want))[:1]
+            what = (f"names {shown(extra[0][:120])!r}, which no manifest does" if extra
+                    else "misses images or lists them out of order")
+            problems.append((name, f"{what} ({len(have)} lines, {len(want)} {split} images)"))
+            continue
+        for line in have:
+            rel = line.removeprefix("./")
+            why = folder.problem(rel) or (None if regular_file(root / rel) else "missing or not a regular file")
+            if why:
+                problems.append((name, f"{shown(line[:120])}: {why}"))
+                break
+    return problems
+
+
+def check_recipe(meta: DatasetMeta, index: DatasetIndex | DatasetView) -> Check:
+    """What Ultralytics reads and runs when it trains: data.yaml and hyp.yaml (and the pose
+    set's) hold only what datagen writes there, the image lists of this dataset (no ``path``
+    or ``download``: Ultralytics resolves the one and runs the other), and settings of the
+    recipe's table in their ranges (:data:`~datagen.dataset.training_run.RECIPE_SETTINGS`:
+    none that names a file, model or command, or writes without bound); and the image lists
+    themselves (:func:`image_list_problems`)."""
+    check = Check("training_recipe", "data.yaml, hyp.yaml and the image lists name only this dataset's images and "
+                  "settings of datagen's recipe in their ranges: no other file, folder, model or command, and "
+                  "nothing that writes without bound (what Ultralytics reads and runs when it trains)")
     sets = ["", "pose/"] if meta.label_format == "both" else [""]
     for prefix in sets:
         data = meta.pose_yaml if prefix else meta.data_yaml
         name = f"{prefix}data.yaml"
         check.checked += 1
         for key in sorted(set(map(str, data)) - set(DATA_YAML_KEYS)):
-            check.fail(name, f"{key[:40]!r}: not a key datagen writes ({', '.join(DATA_YAML_KEYS)})")
+            check.fail(name, f"{shown(key[:40])!r}: not a key datagen writes ({', '.join(DATA_YAML_KEYS)})")
         for key in ("train", "val"):
             if data.get(key) not in ("train.txt", "val.txt"):
-                check.fail(name, f"{key}: {str(data.get(key))[:60]!r}; expected train.txt or val.txt, the image "
-                           "lists beside it")
+                check.fail(name, f"{key}: {shown(str(data.get(key))[:60])!r}; expected train.txt or val.txt, the "
+                           "image lists beside it")
         hyp = f"{prefix}hyp.yaml"
         check.checked += 1
         try:
-            doc = parse_yaml(read_text(meta.folder.file(hyp), "hyp.yaml"), meta.root / hyp)
+            doc = parse_yaml(read_text(meta.folder.file(hyp), "hyp.yaml", max_bytes=HYP_YAML_BYTES), meta.root / hyp)
         except DatagenError as exc:
             check.fail(hyp, " ".join(str(exc).split())[:160])
             continue
-        if not isinstance(doc, dict):
-            check.fail(hyp, "expected a mapping of Ultralytics settings")
-            continue
-        for key, value in doc.items():
-            if str(key) in HYP_PATH_KEYS:
-                check.fail(hyp, f"{str(key)[:40]!r}: names a file, folder, model or command; datagen writes none")
-            elif not isinstance(value, (int, float, bool)) and not (isinstance(value, str) and value.isalnum()):
-                check.fail(hyp, f"{str(key)[:40]!r}: {str(value)[:40]!r} is not a number, a flag or a word")
+        for problem in recipe_problems(doc):
+            check.fail(hyp, problem)
+    check.checked += len(sets) * len(SPLITS)
+    for name, problem in image_list_problems(index):
+        check.fail(name, problem)
     return check
 
 
 #: Bytes read to find an image's size in its header (a JPEG's frame header may follow its EXIF).
-_HEADER_BYTES: Final = 65536
+HEADER_BYTES: Final = 65536
 #: The largest on-screen footprint a world texel may have (px): above about 1.5 px a texture's
 #: grid starts to show.
 MAX_WORLD_TEXEL_PX: Final = 1.5
@@ -149,36 +176,41 @@ def check_texels(view: DatasetIndex | DatasetView) -> Check:
 
 
 
-def decode_image(path: Path, k: Intrinsics) -> tuple[np.ndarray | None, str | None]:
-    """The image at ``path`` decoded (BGR, uint8), or why not: its header must state the
-    dataset's size (``k``) before anything is decoded, and it must decode fully to 8-bit
-    colour. A missing file is ``(None, None)``: the files check names it. Call it inside
-    :func:`quiet_stderr` (libpng speaks of a damaged file on the process's stderr)."""
+def image_header_problem(data: bytes, path: Path, limits: ReadLimits) -> str | None:
+    """Why the first bytes of an image file are not those of a frame of the dataset, or
+    None: a PNG or JPEG (as its suffix says) whose header states the dataset's size."""
+    found = image_size(data[:HEADER_BYTES])
+    if found is None:
+        return "not a PNG or JPEG image"
+    kind = "png" if data[:4] == b"\x89PNG" else "jpg"
+    if path.suffix.lower().lstrip(".").replace("jpeg", "jpg") != kind:
+        return f"a {kind.upper()} image named {path.suffix or 'without a suffix'}"
+    if found != (limits.width, limits.height):
+        return f"{found[0]}x{found[1]} px, dataset.json says {limits.width}x{limits.height}"
+    return None
+
+
+def decode_image(path: Path, limits: ReadLimits) -> tuple[np.ndarray | None, str | None]:
+    """The image at ``path`` decoded (BGR, uint8), or why not: at most
+    :attr:`~datagen.dataset.limits.ReadLimits.image_bytes`, its header must state the
+    dataset's size before anything is decoded (:func:`image_header_problem`), and it must
+    decode fully to 8-bit colour. A missing file is ``(None, None)``: the files check names
+    it. Call it inside :func:`quiet_stderr` (libpng speaks of a damaged file on the
+    process's stderr)."""
     import cv2
 
-    # A decoded frame is at most its raw size; a file far larger than that is not one.
-    max_bytes = 4 * k.width * k.height * 3 + (1 << 20)
     try:
-        info = path.stat()
-        if not stat.S_ISREG(info.st_mode):
-            return None, "not a regular file"
-        if info.st_size > max_bytes:
-            return None, f"{info.st_size:,} bytes, more than a {k.width}x{k.height} image can take"
-        data = path.read_bytes()
-    except FileNotFoundError:
-        return None, None
-    except OSError as exc:
-        return None, f"unreadable ({exc.strerror})"
-    found = image_size(data[:_HEADER_BYTES])
-    if found is None:
-        return None, "not a PNG or JPEG image"
-    if found != (k.width, k.height):
-        return None, f"{found[0]}x{found[1]} px, dataset.json says {k.width}x{k.height}"
+        data = read_bytes(path, "an image", limits.image_bytes)
+    except Unreadable as exc:
+        return None, None if exc.problem == "no such file" else exc.problem
+    problem = image_header_problem(data, path, limits)
+    if problem:
+        return None, problem
     image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
     if image is None:
         return None, "does not decode (truncated or corrupt)"
-    if image.dtype != np.uint8 or image.shape != (k.height, k.width, 3):
-        return None, f"decodes to {image.dtype} {image.shape}, expected uint8 ({k.height}, {k.width}, 3)"
+    if image.dtype != np.uint8 or image.shape != (limits.height, limits.width, 3):
+        return None, f"decodes to {image.dtype} {image.shape}, expected uint8 ({limits.height}, {limits.width}, 3)"
     return image, None
 
 

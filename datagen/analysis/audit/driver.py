@@ -104,6 +104,6 @@ def audit(dataset: DatasetView | DatasetSource, *, min_learnable: float = MIN_LE
             if section is not None:
                 stats[section[0]] = section[1]
         stats["appearance"] = appearance_finish(spill, totals.appearance)
-    checks += [check_files(index), check_recipe(dataset), check_texels(index)]
+    checks += [check_files(index), check_recipe(dataset, index), check_texels(index)]
     return AuditResult(dataset.root, str(dataset.doc.get("name", dataset.root.name)), len(index),
                        [c.finish() for c in checks], stats, found_stats.plot)

@@ -33,7 +33,7 @@ def check_images(view: DatasetView) -> list[Check]:
     rows = [b for b, rel in enumerate(view.image_path) if rel and not view.folder.problem(rel)]
 
     def one(b: int) -> tuple[str | None, np.ndarray | None]:
-        image, problem = decode_image(view.root / view.image_path[b], k)
+        image, problem = decode_image(view.root / view.image_path[b], view.limits)
         if image is None:
             return problem, None
         return None, blank_boxes(image, view.label_xyxy[b][view.labeled[b]])  # only the codes come back
