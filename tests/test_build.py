@@ -242,6 +242,30 @@ def test_labels_only_build_and_its_metadata(tmp_path: Path) -> None:
     assert not temporaries(root)
 
 
+def test_a_version_8_manifest_reads_with_the_columns_added_since_as_nulls(tmp_path: Path) -> None:
+    """A dataset built before a column was added (``COLUMNS_SINCE``) stays readable: its
+    rows read with that column null, every other value as written."""
+    from datagen.dataset.columns import COLUMNS_SINCE
+    from datagen.dataset.reader import load_dataset, open_dataset
+
+    config = tiny_config(tmp_path)
+    build_dataset(config, tmp_path / "ds", render=False)
+    before = manifest_rows(tmp_path / "ds")
+    for path in (tmp_path / "ds" / "manifests").glob("*.parquet"):
+        table = pq.read_table(path)
+        old = table.drop_columns([c for c in COLUMNS_SINCE if c in table.column_names])
+        meta = {**table.schema.metadata, b"datagen.manifest_version": b"8"}
+        pq.write_table(old.replace_schema_metadata(meta), path)
+    tables = open_dataset(tmp_path / "ds").read_manifests()
+    after = {row["frame_id"]: row for table in tables for row in table.to_pylist()}
+    assert sorted(after) == sorted(before) and len(load_dataset(tmp_path / "ds")) == len(before)
+    assert all(row[c] is None for row in after.values() for c in COLUMNS_SINCE)
+    for frame, row in before.items():
+        for column, value in row.items():
+            if column not in COLUMNS_SINCE:
+                assert after[frame][column] == value, column
+
+
 def test_a_folder_that_is_not_a_dataset_is_never_touched(tmp_path: Path) -> None:
     config = tiny_config(tmp_path)
     (tmp_path / "ds").mkdir()

@@ -22,12 +22,13 @@ from datagen.atomic import write_exr
 from datagen.config import load_config, override_config
 from datagen.config.schema import RenderConfig, world_off
 from datagen.core.camera import Intrinsics, project_points, project_xyz
-from datagen.core.conventions import frame_rng, object_id, render_seed
+from datagen.core.conventions import EARTH_RADIUS_M, frame_rng, object_id, render_seed
 from datagen.core.errors import DatagenError
 from datagen.core.transforms import apply_transform, invert_rigid, make_transform, rotation_from_ypr
+from datagen.render.atmosphere import dip_rad
 from datagen.render.raycast import visibility_tolerance_m
 from datagen.render.renderer import Renderer
-from datagen.render.tonemap import haze, to_srgb8
+from datagen.render.tonemap import to_srgb8
 from datagen.render.world import SURFACES
 from datagen.scene.approach import FrameStates, frame_state
 from datagen.scene.look import draw_look, frame_look
@@ -287,8 +288,11 @@ def test_depth_is_camera_z_on_the_tanker_and_the_sea_and_infinite_on_the_sky() -
     mesh = load_mesh(object_paths(config, "tanker")[0], "tanker").combined
     z = apply_transform(cam_from_tanker, mesh.vertices)[:, 2]
     assert tanker.sum() > 100 and z.min() - 0.5 <= depth[tanker].min() and depth[tanker].max() <= z.max() + 0.5
-    # The sea (world z = 0): a pixel centre's ray from the camera at height h meets it at
-    # distance h / (-d_z), whose camera z-depth is that distance times the ray's own z.
+    # The sea (the earth's sphere, its top at world z = 0 under the camera): a pixel
+    # centre's ray from the camera at height h meets it where |o + t d| = R, o = (0, 0, R + h);
+    # its camera z-depth is that distance times the ray's own z (within 0.1%), and the
+    # point at the measured depth lies on the sphere (within the mesh's 0.8 m sag, which
+    # moves a hit along a ray grazing the sea at the horizon by hundreds of metres).
     k = renderer.intrinsics
     uu, vv = np.meshgrid(np.arange(k.width) + 0.5, np.arange(k.height) + 0.5)
     d_cam = np.stack([(uu - k.cx) / k.fx, (vv - k.cy) / k.fy, np.ones_like(uu)], axis=-1)
@@ -297,12 +301,18 @@ def test_depth_is_camera_z_on_the_tanker_and_the_sea_and_infinite_on_the_sky() -
     height = state.world_from_cam[2, 3]
     sea = surface == SURFACES.index("sea")
     assert sea.sum() > 1000, "this frame looks down on the sea"
-    expected = height / -d_world[..., 2] * d_cam[..., 2]
-    np.testing.assert_allclose(depth[sea], expected[sea], rtol=1e-3)
-    # Rays that rise above the horizon and miss the aircraft and the clouds hit nothing:
-    # infinite depth; cloud pixels have the depth of their layer's plane.
+    b = (EARTH_RADIUS_M + height) * d_world[..., 2]
+    c = (EARTH_RADIUS_M + height) ** 2 - EARTH_RADIUS_M**2
+    t = -b - np.sqrt(np.maximum(b * b - c, 0.0))
+    steep = sea & (d_world[..., 2] < -0.1)  # 6 degrees or more below the horizontal
+    np.testing.assert_allclose(depth[steep], (t * d_cam[..., 2])[steep], rtol=1e-3)
+    hit = np.array([0.0, 0.0, EARTH_RADIUS_M + height]) + (depth / d_cam[..., 2])[..., None] * d_world
+    assert np.abs(np.linalg.norm(hit[sea], axis=-1) - EARTH_RADIUS_M).max() < 1.0
+    # Rays that pass above the horizon (the earth's dip below the horizontal) and miss the
+    # aircraft and the clouds hit nothing: infinite depth; cloud pixels have their layer's depth.
     sky = surface == SURFACES.index("sky")
-    assert sky.sum() > 1000 and np.isinf(depth[sky]).all() and (d_world[..., 2][sky] > -1e-3).all()
+    assert sky.sum() > 1000 and np.isinf(depth[sky]).all()
+    assert (d_world[..., 2][sky] > -np.sin(dip_rad(height)) - 1e-3).all()
     cloud = surface == SURFACES.index("cloud")
     assert np.isfinite(depth[cloud]).all() and (depth[cloud] > 0).all()
 
@@ -577,18 +587,6 @@ def test_scalar_fallback_agrees_with_the_vectorized_variant() -> None:
     np.testing.assert_allclose(f_s, f_v)
 
 
-def test_haze_fades_distance_towards_the_sky() -> None:
-    rgb = np.zeros((2, 3, 3), dtype=np.float32)
-    rgb[0, :] = [1.0, 0.5, 0.25]  # sky row (nothing hit)
-    rgb[1, :] = [0.1, 0.1, 0.1]
-    depth = np.array([[np.inf] * 3, [0.0, 20_000.0, 1e9]], dtype=np.float32)
-    out = haze(rgb, depth, np.zeros((2, 3), np.uint32), 20_000.0)
-    np.testing.assert_allclose(out[0], rgb[0])  # the sky itself is the airlight
-    np.testing.assert_allclose(out[1, 0], rgb[1, 0])  # nothing in between at zero depth
-    np.testing.assert_allclose(out[1, 1], rgb[1, 1] * np.exp(-1) + rgb[0, 0] * (1 - np.exp(-1)), rtol=1e-6)
-    np.testing.assert_allclose(out[1, 2], rgb[0, 0], rtol=1e-6)  # far away: all haze
-
-
 def test_denoise_off_leaves_the_path_tracers_image_unchanged(one_thread) -> None:
     """With render.denoise off a frame is Mitsuba's own render times the exposure, bit for
     bit (what every build wrote before denoising existed)."""
@@ -671,10 +669,11 @@ def test_the_sun_glint_on_a_cox_munk_sea_is_still_there() -> None:
     from datagen.analysis.image_quality import luminance
     from datagen.scene.look import sun_direction_world
 
-    # Clouds could shade the sun and the sensor would rescale the image: off; the waves stay.
+    # Clouds could shade the sun, the sensor would rescale the image and the air veil the
+    # glint's far end (a low sun's mirror lies tens of kilometres out): off; the waves stay.
     config = override_config(load_config("dashcam75"), {"camera.width": 256, "camera.height": 135,
                                                         "render.spp": 16, "render.denoise": "off",
-                                                        **world_off("clouds", "sensor", "backlit sun")})
+                                                        **world_off("clouds", "sensor", "backlit sun", "haze")})
     assert config.randomization.sea.model == "cox_munk" and config.randomization.sea.waves
     frame, seed = 209, config.dataset.seed  # a low sun ahead: its mirror image lies in the view
     state = frame_state(config, frame)

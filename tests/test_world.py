@@ -31,6 +31,7 @@ DRAWS = {
     "livery": ["receiver_livery", "tanker_livery", "livery_weathering", "livery_seed"],
     "sensor": [f for f in _FIELDS if f.startswith("sensor_")],
     "backlit sun": ["sun_backlit"],
+    "haze": ["haze_visibility_m", "haze_scale_height_m"],
 }
 #: Draws a randomizer replaces when on: the sea's approach wind replaces the frame's own
 #: wind draw (waves, whitecaps and glint then agree); a backlit sun moves the sun's azimuth.
@@ -48,7 +49,7 @@ def looks(config, frames) -> list[FrameLook]:
 
 
 def test_the_draw_table_covers_every_world_field_of_the_look() -> None:
-    world = set(_FIELDS[_FIELDS.index("sun_backlit"):])
+    world = set(_FIELDS[_FIELDS.index("sun_backlit"):]) | {"haze_visibility_m"}
     assert set().union(*map(set, DRAWS.values())) == world and set(DRAWS) == set(WORLD_RANDOMIZERS)
 
 
@@ -75,7 +76,7 @@ def test_weather_and_liveries_belong_to_the_approach_and_the_sensor_to_the_frame
     a0, a1, b0 = (frame_look(config, states(i)) for i in (0, 1, per_approach))
     assert states(0).approach_index == states(1).approach_index != states(per_approach).approach_index
     for field in ("cloud_seed", "cloud_deck_coverage", "sea_seed", "sea_wind_speed_mps", "receiver_livery",
-                  "livery_seed"):
+                  "livery_seed", "haze_visibility_m", "haze_scale_height_m"):
         assert getattr(a0, field) == getattr(a1, field), field
     assert (a0.cloud_seed, a0.sea_seed, a0.livery_seed) != (b0.cloud_seed, b0.sea_seed, b0.livery_seed)
     assert a0.sensor_seed != a1.sensor_seed and a0.sensor_distortion != a1.sensor_distortion
@@ -98,6 +99,8 @@ def test_the_draws_lie_within_the_configured_ranges() -> None:
         assert look.receiver_livery in r.livery.schemes and look.tanker_livery in r.livery.schemes
         assert 0.0 <= look.sea_whitecap_fraction < 0.1 and look.sea_wave_slope_variance > 0
         assert r.sky.sun_elevation_deg[0] <= look.sun_elevation_deg <= r.sky.sun_elevation_deg[1]
+        assert r.haze.visibility_m[0] <= look.haze_visibility_m <= r.haze.visibility_m[1]
+        assert r.haze.aerosol_scale_height_m[0] <= look.haze_scale_height_m <= r.haze.aerosol_scale_height_m[1]
 
 
 @pytest.fixture(scope="module")

@@ -52,6 +52,10 @@ class Ops:
     param_u32: object
     sin: object
     sqrt: object
+    exp: object = np.exp
+    log: object = np.log
+    abs: object = np.abs
+    select: object = np.where  # (condition, then, else)
     #: Sums a :func:`series` at a footprint, term by term until the rest are filtered away
     #: in every lane (None: every term, in a Python loop).
     series_loop: object = None

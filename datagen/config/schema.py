@@ -133,6 +133,7 @@ CLOUD_CLEARANCE_M = 200.0
 #: off: the ablation switches a user flips, bench/bench_render.py times and the tests check.
 WORLD_RANDOMIZERS: Final[dict[str, dict[str, Any]]] = {
     "clouds": {"randomization.clouds.enabled": False},
+    "haze": {"randomization.haze.enabled": False},
     "sea": {"randomization.sea.waves": False, "randomization.sea.whitecaps": False,
             "randomization.sea.colour": False},
     "livery": {"randomization.livery.enabled": False},
@@ -499,6 +500,25 @@ def _unit_range(bounds: tuple[float, float]) -> tuple[float, float]:
 UnitRange = Annotated[Range, AfterValidator(_unit_range)]
 
 
+class HazeConfig(_Section):
+    """Aerial perspective (:mod:`datagen.render.atmosphere`): the air between the camera and
+    every surface (sea, clouds, aircraft) dims it and adds the sky's own light in its
+    direction, by the path's optical depth over a round earth, the air thinning with
+    altitude (molecules over 8 km, the aerosol over the scale height drawn). Visibility and
+    scale height are drawn per approach (one weather an approach)."""
+
+    enabled: Flag = True
+    """Render aerial perspective; off: surfaces as if seen through a vacuum (the sea's
+    horizon a hard step under the sky)."""
+
+    visibility_m: Annotated[Range, _within(1_000.0, 280_000.0)] = (15_000.0, 150_000.0)
+    """Meteorological visibility at sea level, metres (Koschmieder: 2% contrast at 550 nm;
+    the air's molecules alone give 288 km), drawn log-uniform."""
+
+    aerosol_scale_height_m: Annotated[Range, _within(200.0, 5_000.0)] = (800.0, 2_000.0)
+    """Height over which the aerosol's density falls by e, metres (the boundary layer's haze)."""
+
+
 class CloudsConfig(_Section):
     """Cloud layers: a deck below the aircraft and a scattered layer above or below them.
 
@@ -628,8 +648,13 @@ class RandomizationConfig(_Section):
     exposure_ev: Annotated[Range, _within(-20.0, 20.0)] = (-0.5, 0.5)
     """Exposure compensation in stops applied before the sRGB transform."""
 
-    haze: Flag = False
-    """Add a homogeneous haze between the camera and the scene."""
+    haze: HazeConfig = HazeConfig()
+    """Aerial perspective (``haze: false`` or ``true`` switches it as ``haze.enabled`` does)."""
+
+    @field_validator("haze", mode="before")
+    @classmethod
+    def _haze_switch(cls, value: Any) -> Any:
+        return {"enabled": value} if isinstance(value, bool) else value
 
     clouds: CloudsConfig = CloudsConfig()
     """Cloud deck and scattered layer."""

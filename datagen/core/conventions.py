@@ -18,6 +18,10 @@ World frame
     An inertial frame with the same axis sense as the body frames: z up,
     x along the tanker's initial heading, y to its left. The approach model's
     drogue-centred local frame (paper Fig. 7) is a translation of it.
+    z is the altitude above the sea at the camera's nadir: the sea is the
+    sphere of radius :data:`EARTH_RADIUS_M` whose top is the world's z = 0
+    directly below the camera (a local-level frame; the aircraft fly in it
+    as on a flat earth, the earth's surface and the horizon are round).
 
 Camera frame (OpenCV)
     x right, y down, z forward (along the optical axis). A point is in front of
@@ -94,6 +98,7 @@ __all__ = [
     "CV_DOWN",
     "CV_FORWARD",
     "CV_RIGHT",
+    "EARTH_RADIUS_M",
     "GRAVITY_MPS2",
     "GUST_STREAM",
     "MICAM_FROM_CVCAM",
@@ -119,6 +124,10 @@ __all__ = [
     "texture_rng",
     "world_rng",
 ]
+
+# --- the earth ------------------------------------------------------------------
+#: The earth's mean radius, metres (IUGG): the sea's sphere (see World frame).
+EARTH_RADIUS_M: Final[float] = 6_371_008.8
 
 # --- body frames -------------------------------------------------------------
 BODY_FORWARD: Final = np.array([1.0, 0.0, 0.0])
@@ -276,8 +285,9 @@ def evaluation_rng(seed: int, frame_index: int, run: int) -> np.random.Generator
 WORLD_STREAM: Final[int] = 5
 #: The world's randomization dimensions, each with its own stream (third spawn-key element: the
 #: index here), so that switching one on or off changes no draw of another, nor of the look.
-#: The sun and the sensor are drawn per frame; clouds, sea and liveries per approach chain.
-WORLD_DIMENSIONS: Final[tuple[str, ...]] = ("sun", "clouds", "sea", "livery", "sensor")
+#: The sun and the sensor are drawn per frame; clouds, sea, liveries and the atmosphere per
+#: approach chain.
+WORLD_DIMENSIONS: Final[tuple[str, ...]] = ("sun", "clouds", "sea", "livery", "sensor", "atmosphere")
 
 
 def world_rng(seed: int, index: int, dimension: str) -> np.random.Generator:

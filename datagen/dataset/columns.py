@@ -34,6 +34,7 @@ from datagen.paths import read_bytes
 
 __all__ = [
     "APPEARANCE",
+    "COLUMNS_SINCE",
     "IMAGE_STATISTICS",
     "MANIFEST_VERSION",
     "MEASURED_COLUMNS",
@@ -58,10 +59,13 @@ __all__ = [
 ]
 
 #: Version of the manifest and feature-table schemas (bumped on any incompatible change).
-MANIFEST_VERSION: Final = "8"
+MANIFEST_VERSION: Final = "9"
 #: The manifest versions this datagen reads: 7 stored fixed-size lists as they are
-#: (:func:`stored_type`).
-READABLE_MANIFEST_VERSIONS: Final = ("7", MANIFEST_VERSION)
+#: (:func:`stored_type`); a column added since a version is read as nulls from it
+#: (:data:`COLUMNS_SINCE`).
+READABLE_MANIFEST_VERSIONS: Final = ("7", "8", MANIFEST_VERSION)
+#: Columns added after version 7, with the version that added them.
+COLUMNS_SINCE: Final = {"haze_scale_height_m": "9"}
 
 #: The image statistics a manifest records per rendered frame
 #: (:func:`datagen.render.tonemap.image_statistics` measures them).
@@ -91,7 +95,8 @@ MEASURED_COLUMNS: Final = ("auto_exposure_ev", "motion_blur_px", "sun_in_view", 
 #: section shows their coverage (a column is null in every row where its randomizer is off).
 APPEARANCE: Final[dict[str, tuple[str, ...]]] = {
     "sun and sky": ("sun_elevation_deg", "sun_azimuth_deg", "sun_backlit", "turbidity", "sun_scale", "sky_scale",
-                    "exposure_ev", "haze_visibility_m"),
+                    "exposure_ev"),
+    "atmosphere": ("haze_visibility_m", "haze_scale_height_m"),
     "clouds": ("cloud_deck_coverage", "cloud_deck_altitude_m", "cloud_layer_coverage", "cloud_layer_altitude_m",
                "cloud_opacity", "cloud_albedo"),
     "sea": ("sea_wind_speed_mps", "sea_roughness", "sea_wind_direction_deg", "sea_wave_slope_variance",
@@ -190,6 +195,7 @@ def manifest_schema() -> pa.Schema:
         pa.field("sea_roughness", _F64, nullable=False),
         pa.field("sea_wind_speed_mps", _F64),
         pa.field("haze_visibility_m", _F64),
+        pa.field("haze_scale_height_m", _F64),
         pa.field("materials", pa.list_(MATERIAL_RECORD), nullable=False),
         pa.field("sun_backlit", pa.bool_()),
         pa.field("cloud_deck_coverage", _F64),

@@ -30,6 +30,7 @@ from datagen.core.label_boxes import FrameLabels
 from datagen.core.labelling_context import Labelled, LabellingContext, LabelRules
 from datagen.dataset.columns import (
     APPEARANCE,
+    COLUMNS_SINCE,
     FILE_COLUMNS,
     READABLE_MANIFEST_VERSIONS,
     manifest_schema,
@@ -510,6 +511,9 @@ def _read_manifest(path: Path, limits: ReadLimits, columns: tuple[str, ...] | No
     except (OSError, pa.ArrowException) as exc:
         raise DatagenError(f"{path}: unreadable manifest ({type(exc).__name__})") from None
     stored = expected if version == READABLE_MANIFEST_VERSIONS[0] else stored_schema(expected)
+    for field in stored:  # a column added since the shard's version: nulls
+        if field.name not in table.schema.names and int(COLUMNS_SINCE.get(field.name, "0")) > int(version):
+            table = table.append_column(field, pa.nulls(rows, field.type))
     for field in stored:
         have = table.schema.field(field.name) if field.name in table.schema.names else None
         if have is None or not have.type.equals(field.type):

@@ -66,6 +66,7 @@ cx = {k.cx:g}, cy = {k.cy:g}), {_rendered(config) if render else "labels only (n
   true 3D centre ({'corrected' if rules.corrected else 'tight (uncorrected)'} boxes, at least
   {config.labels.min_box_px:g} px at imgsz {config.labels.train_imgsz}, {rules.edge_margin_px:g} px edge
   margin); excluded feature-frames: {reasons}.
+- **World**: {_world_card(config)}; every draw is recorded per frame in the manifests.
 {_unseen_card(scene, never_labeled or [])}{_pose_card(scene)}- **Tables**: `manifests/{{split}}-{{shard}}.parquet`, one row per frame (poses as 4x4 matrices, intrinsics,
   seeds, every appearance draw, and per feature its true centre, boxes, exclusion and visibility; missing
   values are nulls), `features.parquet` (each class's 3D points and centre). The columns are documented in
@@ -73,6 +74,21 @@ cx = {k.cx:g}, cy = {k.cy:g}), {_rendered(config) if render else "labels only (n
 - **Training**: `data.yaml` and `hyp.yaml` for Ultralytics YOLO; their comments give the train, predict and
   evaluate commands. `dataset.json` records the resolved config, the software versions and the asset hashes.
 """  # noqa: E501 (text the user reads, one line per sentence)
+
+
+def _world_card(config) -> str:
+    """What the world's randomizers draw, as the config switches them."""
+    r = config.randomization
+    h = r.haze
+    air = (f"the sea on a round earth seen through the air (sea-level visibility {h.visibility_m[0] / 1000:g}-"
+           f"{h.visibility_m[1] / 1000:g} km, aerosol scale height {h.aerosol_scale_height_m[0]:g}-"
+           f"{h.aerosol_scale_height_m[1]:g} m, per approach)" if h.enabled
+           else "the sea on a round earth, no aerial perspective")
+    pieces = [air, "cloud deck and layer" if r.clouds.enabled else "no clouds",
+              "waves, whitecaps and sea colour from the wind" if r.sea.waves or r.sea.whitecaps or r.sea.colour
+              else "a uniform sea", "generated liveries" if r.livery.enabled else "plain paint",
+              "a camera model (blur, noise, glare, JPEG)" if r.sensor.enabled else "a pinhole camera"]
+    return ", ".join(pieces)
 
 
 def _unseen_card(scene: Scene, never: list[int]) -> str:

@@ -55,9 +55,9 @@ def guided_integrator(integrator: dict) -> dict:
     return {"type": "aov", "aovs": "albedo:albedo,normal:sh_normal", "integrator": integrator}
 
 
-def denoise_render(image, *, guides: bool, quality: str = "high"):
-    """:func:`denoise` of a render's ``(H, W, C)`` tensor: its first three channels,
-    guided by the albedo and normal of :func:`guided_integrator` when ``guides``. Slices
-    of a Dr.Jit tensor stay on its device."""
+def denoise_render(image, *, guides: bool, quality: str = "high", beauty=None):
+    """:func:`denoise` of a render's ``(H, W, C)`` tensor: its first three channels (or
+    ``beauty`` in their place), guided by the albedo and normal of
+    :func:`guided_integrator` when ``guides``. Slices of a Dr.Jit tensor stay on its device."""
     extra = [image[..., 3:6], image[..., 6:9]] if guides else []
-    return denoise(image[..., 0:3], *extra, quality=quality)
+    return denoise(image[..., 0:3] if beauty is None else beauty, *extra, quality=quality)

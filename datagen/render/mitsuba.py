@@ -28,9 +28,10 @@ __all__ = [
 
 
 def mitsuba_mesh(name: str, vertices: ArrayLike, faces: ArrayLike, bsdf=None, texcoords: ArrayLike | None = None,
-                 emitter=None):
+                 emitter=None, normals: ArrayLike | None = None):
     """A ``mi.Mesh`` from ``(V, 3)`` vertices and ``(F, 3)`` faces (current variant), with
-    ``(V, 2)`` texture coordinates and an area ``emitter`` when given."""
+    ``(V, 2)`` texture coordinates, ``(V, 3)`` vertex normals and an area ``emitter`` when
+    given."""
     import mitsuba as mi
 
     v = np.ascontiguousarray(vertices, dtype=np.float32)
@@ -41,13 +42,15 @@ def mitsuba_mesh(name: str, vertices: ArrayLike, faces: ArrayLike, bsdf=None, te
         props["bsdf"] = bsdf
     if emitter is not None:
         props["emitter"] = emitter
-    mesh = mi.Mesh(name, len(v), len(f), props=props, has_vertex_normals=False,
+    mesh = mi.Mesh(name, len(v), len(f), props=props, has_vertex_normals=normals is not None,
                    has_vertex_texcoords=texcoords is not None)
     params = mi.traverse(mesh)
     set_buffer(params, "vertex_positions", v)
     set_buffer(params, "faces", f)
     if texcoords is not None:
         set_buffer(params, "vertex_texcoords", np.asarray(texcoords, dtype=np.float32))
+    if normals is not None:
+        set_buffer(params, "vertex_normals", np.asarray(normals, dtype=np.float32))
     params.update()
     return mesh
 
@@ -109,7 +112,7 @@ def sensor_dict(intrinsics: Intrinsics, world_from_cam: ArrayLike, spp: int, *,
         "fov": float(np.degrees(intrinsics.hfov_rad)),
         "fov_axis": "x",
         "near_clip": 0.01,
-        "far_clip": 1.0e8,  # beyond the sea plane's edge (see datagen.render.renderer.SEA_SIZE_M)
+        "far_clip": 1.0e8,  # beyond the sea's edge (datagen.render.world.EARTH_CAP_M)
         "to_world": mi.ScalarTransform4f(world_from_micam(world_from_cam).tolist()),
         "sampler": {"type": "independent", "sample_count": int(spp)},
         "film": {

@@ -64,6 +64,10 @@ def _ops(variant: str) -> Ops:
         param_u32=lambda v: dr.opaque(mi.UInt32, int(v)),
         sin=dr.sin,
         sqrt=dr.sqrt,
+        exp=dr.exp,
+        log=dr.log,
+        abs=dr.abs,
+        select=dr.select,
     )
     return dataclasses.replace(ops, series_loop=functools.partial(_series_loop, ops))
 

@@ -70,7 +70,7 @@ class RayCasting:
         if not self.variant.startswith("scalar"):  # on the variant's device
             mi = self._mi
             d = jit_vectors(mi.Vector3f, np.resize(directions, (max(n, 2), 3)))  # one ray is cast as two
-            t, ids, surface = self._cast_on_device(d)
+            t, ids, surface = self._cast_on_device(d)[:3]
             return tuple(np.asarray(a)[:n] for a in (t, ids, surface))
         origins = np.broadcast_to(np.asarray(origin_render, dtype=np.float32), (n, 3)).copy()
         t = np.full(n, np.inf)
@@ -125,10 +125,14 @@ class RayCasting:
                 background[i] = codes.get(shape, -1)
         return valid, hit_t, ids, background
 
-    def geometry_pass(self, stride: int = 1) -> tuple[NDArray[np.float32], NDArray[np.uint32], NDArray[np.uint8]]:
+    def geometry_pass(self, stride: int = 1, *, opacity: bool = False) -> tuple[NDArray, ...]:
         """Camera z-depth, object id and surface (:data:`~datagen.render.world.SURFACES`)
         at every pixel centre; with ``stride`` 2, one ray per 2 x 2 block (at its centre),
-        repeated over the block (what the camera model and the image statistics need)."""
+        repeated over the block (what the camera model and the image statistics need).
+
+        ``opacity``: also the opacity of the cloud a pixel's ray stops at (1 elsewhere),
+        which the aerial perspective weighs a cloud's edge by (a scalar variant gives 1
+        everywhere)."""
         k = self.intrinsics
         d_cam, z_per_t = self._pixel_rays(stride)
         w, h = -(-k.width // stride), -(-k.height // stride)
@@ -136,17 +140,20 @@ class RayCasting:
         if self.variant.startswith("scalar"):
             t, ids, surface = self.cast(self._camera_render, d_cam @ r.T)
             depth = t * z_per_t
+            alpha = np.ones_like(depth)
         else:  # the rays made and rotated on the device
             mi, dr = self._mi, self._dr
             d_dev, z_dev = self._device_rays(stride)
             m = [[dr.opaque(mi.Float, float(r[i, j])) for j in range(3)] for i in range(3)]
             d = mi.Vector3f(*(m[i][0] * d_dev.x + m[i][1] * d_dev.y + m[i][2] * d_dev.z for i in range(3)))
-            t, ids, surface = self._cast_on_device(d)
+            t, ids, surface, alpha = self._cast_on_device(d)
             depth = t * z_dev
             dr.eval(depth)
-            depth, ids, surface = (np.asarray(a) for a in (depth, ids, surface))
+            depth, ids, surface, alpha = (np.asarray(a) for a in (depth, ids, surface, alpha))
         out = (depth.reshape(h, w).astype(np.float32), ids.reshape(h, w).astype(np.uint32),
                surface.reshape(h, w).astype(np.uint8))
+        if opacity:
+            out += (alpha.reshape(h, w).astype(np.float32),)
         if stride == 1:
             return out
         return tuple(np.repeat(np.repeat(a, stride, axis=0), stride, axis=1)[:k.height, :k.width] for a in out)
@@ -162,9 +169,10 @@ class RayCasting:
 
     def _cast_on_device(self, d):
         """:meth:`cast` of rays ``d`` (``mi.Vector3f``, render frame) from the posed camera, as
-        Dr.Jit work on the variant's device: (t, object id, surface), evaluated there. The
-        same as the scalar loop but for float32 rounding of the distance travelled through
-        cloud layers (a pixel or two of 2 million at a cloud's edge)."""
+        Dr.Jit work on the variant's device: (t, object id, surface, the opacity of the cloud
+        a ray stops at (1 elsewhere)), evaluated there. The same as the scalar loop but for
+        float32 rounding of the distance travelled through cloud layers (a pixel or two of
+        2 million at a cloud's edge)."""
         mi, dr = self._mi, self._dr
         n = dr.width(d)
         o = mi.Point3f(*(dr.zeros(mi.Float, n) + dr.opaque(mi.Float, float(c)) for c in self._camera_render))
@@ -173,6 +181,7 @@ class RayCasting:
         t_out = dr.opaque(mi.Float, dr.inf, n)
         ids_out = dr.opaque(mi.UInt32, 0, n)
         surface_out = dr.opaque(mi.UInt32, 0, n)
+        alpha_out = dr.opaque(mi.Float, 1.0, n)
         active = dr.opaque(mi.Bool, True, n)
         dr.make_opaque(d, o)
         # Each step is evaluated on its own, so that every kernel is the same whichever
@@ -193,6 +202,7 @@ class RayCasting:
             hit_t = si.t
             dr.eval(hit_t, ids, code, surface)
             passing = dr.opaque(mi.Bool, False, n)
+            alpha = dr.opaque(mi.Float, 1.0, n)
             for c, name in enumerate(layers[1:], start=1):
                 layer = self.world.cloud_layer(name)
                 if layer is None:
@@ -206,19 +216,21 @@ class RayCasting:
                 p = dr.gather(mi.Point3f, o, at) + dr.gather(mi.Vector3f, d, at) * t
                 opacity = layer(p.x, p.y, (dr.gather(mi.Float, travelled, at) + t) * self.world.pixel_rad, ops)
                 dr.scatter(passing, opacity < CLOUD_PASS_OPACITY, at, real)
-                dr.eval(passing)
+                dr.scatter(alpha, opacity, at, real)
+                dr.eval(passing, alpha)
             done = active & ~passing
             t_out = dr.select(done, travelled + hit_t, t_out)
             ids_out = dr.select(done, ids, ids_out)
             surface_out = dr.select(done, surface, surface_out)
+            alpha_out = dr.select(done, alpha, alpha_out)
             active = passing
             step = _past(hit_t, dr.maximum)
             travelled = dr.select(passing, travelled + step, travelled)
             o = dr.select(passing, o + d * step, o)
-            dr.eval(t_out, ids_out, surface_out, active, travelled, o)
+            dr.eval(t_out, ids_out, surface_out, alpha_out, active, travelled, o)
             if not dr.any(active)[0]:
                 break
-        return t_out, ids_out, surface_out
+        return t_out, ids_out, surface_out, alpha_out
 
     def feature_visibility(self, state: FrameState, features: FeatureTable
                            ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:

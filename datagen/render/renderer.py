@@ -3,7 +3,9 @@
 :class:`Renderer` loads the meshes once and builds one scene: each rigid object
 is a ``shapegroup`` of its parts (one principled BSDF per part) placed by an
 ``instance``; the hose is a mesh of fixed topology; the sun and sky
-(:mod:`datagen.render.sky`) light a sea plane far below. Per frame only parameters
+(:mod:`datagen.render.sky`) light the sea far below, the earth's round surface
+(:func:`~datagen.render.world.earth_cap`, a shape group an instance places under the
+camera). Per frame only parameters
 change, as kernel inputs (``mi.traverse``, opaque values): instance transforms, hose
 vertices, sensor pose, sun and sky, sea height and the materials of the frame's
 :class:`~datagen.scene.look.FrameLook`. The scene is rendered in a camera-centred
@@ -13,7 +15,8 @@ objects when first posed and holds the process's only scene while it does
 (:func:`datagen.render.runtime.hold_scene`).
 
 Besides the image, the geometry pass and feature visibility cast rays in the posed scene
-(:class:`~datagen.render.raycast.RayCasting`).
+(:class:`~datagen.render.raycast.RayCasting`); the geometry pass's distances give the
+aerial perspective (:mod:`datagen.render.atmosphere`).
 """
 
 from __future__ import annotations
@@ -30,6 +33,8 @@ from datagen.assets.models.drogue import hose_faces, hose_placeholder, hose_vert
 from datagen.core.camera import Intrinsics, distortion_margin_px
 from datagen.core.conventions import RIGID_OBJECTS, object_id
 from datagen.core.transforms import make_transform
+from datagen.render.aerial import AIRLIGHT_STEP_PX
+from datagen.render.atmosphere import Atmosphere
 from datagen.render.mitsuba import (
     jit_array,
     mitsuba_mesh,
@@ -41,8 +46,8 @@ from datagen.render.raycast import RayCasting
 from datagen.render.runtime import hold_scene, use_variant
 from datagen.render.sky import sky_class
 from datagen.render.timing import DENOISE, PATH_TRACING, StageClock
-from datagen.render.tonemap import exposure_scale, haze
-from datagen.render.world import CLOUD_LAYERS, SEA_COLOUR, World
+from datagen.render.tonemap import exposure_scale
+from datagen.render.world import CLOUD_LAYERS, SEA_COLOUR, World, earth_cap
 from datagen.scene.look import FrameLook, Material, neutral_look, sun_direction_world
 
 if TYPE_CHECKING:
@@ -52,9 +57,8 @@ if TYPE_CHECKING:
 
 __all__ = ["FrameRenderer", "RenderResult", "Renderer"]
 
-#: Sea level is world z = 0; the sea plane is a square this many metres across (its edge
-#: then lies under 0.04 degrees below the horizon, where sunsky is black, seen from 8 km).
-SEA_SIZE_M: Final = 2.0e7
+#: The stage that sees the frame through the air.
+AERIAL_PERSPECTIVE: Final = "aerial perspective"
 #: With clouds, the render frame's origin is at a multiple of this altitude (see Renderer._render_origin).
 CLOUD_REFERENCE_STEP_M: Final = 50.0
 
@@ -136,7 +140,7 @@ class Renderer(RayCasting):
     def release(self) -> None:
         """Drop every Mitsuba object of the scene (:func:`datagen.render.runtime.hold_scene`);
         the next :meth:`pose` builds them again."""
-        self.scene = self.params = self.sky = None
+        self.scene = self.params = self.sky = self.aerial = self._sea = None
         self._meshes: dict = {}
         self._parts: dict[str, list[tuple[str, str]]] = {}  # object -> [(param key prefix, material class)]
         self._sky_probe_inputs = None
@@ -148,6 +152,13 @@ class Renderer(RayCasting):
         mi, config, first = self._mi, self.config, self._first
         sea_bsdf = self.world.sea_bsdf(_principled(Material(SEA_COLOUR, 0.1, 0.0, 0.5)))
         integrator: dict = {"type": self.world.integrator, "max_depth": config.render.max_depth}
+        if config.randomization.haze.enabled and not self.variant.startswith("scalar"):
+            from datagen.render.aerial import aerial_class
+
+            # Each camera sample seen through the air (the path tracer wrapped; scalar
+            # variants see the finished image through it: aerial_perspective).
+            self.aerial = aerial_class(self.variant)(mi.load_dict(integrator))
+            integrator = self.aerial
         if self.guides:  # the beauty channels are the path tracer's own (same samples, same bytes)
             from datagen.render.denoise import guided_integrator
 
@@ -159,7 +170,8 @@ class Renderer(RayCasting):
             "sensor": sensor_dict(self.intrinsics, np.eye(4), self.spp),
             # Mitsuba 3.9's sunsky is z-up, like our world frame (it is black below z = 0).
             "sky": self.sky,
-            "sea": {"type": "rectangle", "bsdf": sea_bsdf},
+            "sea_group": {"type": "shapegroup", "sea": self._sea_mesh(sea_bsdf)},
+            "earth": {"type": "instance", "shapegroup": {"type": "ref", "id": "sea_group"}},
             **self.world.cloud_shapes(),
         }
         for obj, mesh in self._meshes_loaded.items():
@@ -184,6 +196,12 @@ class Renderer(RayCasting):
             description[obj] = {"type": "instance", "shapegroup": {"type": "ref", "id": f"{obj}_group"}}
         return description
 
+    def _sea_mesh(self, bsdf: dict):
+        """The sea: the earth's cap (:func:`~datagen.render.world.earth_cap`) under ``bsdf``."""
+        vertices, faces, uv, normals = earth_cap()
+        self._sea = mitsuba_mesh("sea", vertices, faces, self._mi.load_dict(bsdf), texcoords=uv, normals=normals)
+        return self._sea
+
     def _build(self, hose_points: int) -> None:
         mi, dr = self._mi, self._dr
         hold_scene(self)
@@ -204,10 +222,9 @@ class Renderer(RayCasting):
         # ("sea", *CLOUD_LAYERS), -1 for the other shapes. Tables on the device (_cast_on_device).
         objects = {registry_id(shape): object_id(obj) for (obj, _), shape in self._meshes.items()}
         objects[registry_id(hose)] = object_id("hose")
-        sea = next(shape for shape in self.scene.shapes() if str(shape.id()) == "sea")
         layers = ("sea", *CLOUD_LAYERS)
         backgrounds = {registry_id(shape): layers.index(name)
-                       for name, shape in (("sea", sea), *self.world.cloud_meshes.items())}
+                       for name, shape in (("sea", self._sea), *self.world.cloud_meshes.items())}
         ids = np.zeros(max(objects) + 1, dtype=np.uint32)
         ids[list(objects)] = list(objects.values())
         codes = np.full(max(backgrounds) + 2, -1, dtype=np.int32)
@@ -257,8 +274,8 @@ class Renderer(RayCasting):
         set_buffer(p, "hose.vertex_positions", hose.astype(np.float32))
         sensor = world_from_micam(render_from_world @ state.world_from_cam)
         p["sensor.to_world"] = mi.Transform4f(sensor.tolist())
-        sea = make_transform(np.eye(3), [0.0, 0.0, -origin[2]]) @ np.diag([SEA_SIZE_M / 2, SEA_SIZE_M / 2, 1.0, 1.0])
-        p["sea.to_world"] = mi.Transform4f(sea.tolist())
+        # The earth's top under the camera (the render frame's origin is over the camera's nadir).
+        p["earth.to_world"] = mi.Transform4f(make_transform(np.eye(3), [0.0, 0.0, -origin[2]]).tolist())
         self.world.apply(p, look, float(origin[2]), irradiance, camera_render=self._camera_render)
         p.update()
 
@@ -326,42 +343,45 @@ class Renderer(RayCasting):
         p[f"{prefix}.specular"] = m.specular
 
     def render(self, state: FrameState, look: FrameLook, seed: int, *, geometry: bool = False) -> RenderResult:
-        """Pose the scene and render it: exposure-scaled linear RGB, plus the geometry
-        pass (depth, object ids) when ``geometry`` is asked for or haze needs it. The
-        result's ``stages`` says where the time went."""
+        """Pose the scene and render it: exposure-scaled linear RGB seen through the air,
+        plus the geometry pass (depth, object ids) when ``geometry`` is asked for or the
+        aerial perspective needs it. The result's ``stages`` says where the time went."""
         mi, clock = self._mi, StageClock()
         with clock.stage("pose"):  # the cloud-lighting probe inside it is a stage of its own
             self.pose(state, look, clock)
+        haze = look.haze_visibility_m is not None
+        with clock.stage("geometry pass"):  # before the render: the air's kernel inputs come from it
+            stride = 1 if geometry else 2
+            if haze or geometry or self.always_geometry:  # the camera model and the statistics: half resolution will do
+                depth, ids, surface, alpha = self.geometry_pass(stride, opacity=True)
+            else:
+                depth = ids = surface = alpha = None
+            texels = self.world.texel_footprint_px(depth, ids, surface, self.intrinsics.fx)
+        if self.aerial is not None:
+            with clock.stage(AERIAL_PERSPECTIVE):
+                self._set_air(state, look, alpha, stride)
         with clock.stage(PATH_TRACING):
             image = mi.render(self.scene, seed=seed, spp=self.spp)
             self._dr.eval(image)  # the render happens here (Dr.Jit evaluates lazily)
             self._dr.sync_thread()
         render_s = clock.seconds[PATH_TRACING]
+        beauty = None
+        if haze and self.aerial is None:  # a scalar variant: the finished image through the air
+            with clock.stage(AERIAL_PERSPECTIVE):
+                beauty = self.aerial_perspective(np.array(image, dtype=np.float32)[..., :3], state, look)
         denoise_s = None
         if self.denoise == "off":
-            rgb = np.array(image, dtype=np.float32)[..., :3]
+            rgb = beauty if beauty is not None else np.array(image, dtype=np.float32)[..., :3]
         else:
             with clock.stage(DENOISE):
-                rgb = self._denoised(image)
+                rgb = self._denoised(image, beauty)
             denoise_s = clock.seconds[DENOISE]
-        depth = ids = surface = None
-        with clock.stage("geometry pass"):
-            if geometry or look.haze_visibility_m is not None:
-                depth, ids, surface = self.geometry_pass()
-            elif self.always_geometry:  # the camera model and the statistics: half resolution will do
-                depth, ids, surface = self.geometry_pass(2)
-            texels = self.world.texel_footprint_px(depth, ids, surface, self.intrinsics.fx)
         if self.sensor is None:
-            with clock.stage("haze, exposure"):
+            with clock.stage("exposure"):
                 rgb *= exposure_scale(look.exposure_ev)
-                if look.haze_visibility_m is not None:
-                    rgb = haze(rgb, depth, ids, look.haze_visibility_m)
             return RenderResult(rgb, depth, ids, render_s, denoise_s, surface, texels, stages=clock.seconds)
         from datagen.render.sensor import apply_sensor
 
-        with clock.stage("haze, exposure"):
-            if look.haze_visibility_m is not None:  # the atmosphere comes before the lens
-                rgb = haze(rgb, depth, ids, look.haze_visibility_m)
         with clock.stage("geometry pass"):
             sun_world = sun_direction_world(state, look)
             t_sun, _, _ = self.cast(self._camera_render, sun_world[None, :].astype(np.float32))
@@ -374,11 +394,62 @@ class Renderer(RayCasting):
         return RenderResult(out.rgb, out.depth, out.object_id, render_s, denoise_s, out.surface,
                             {**out.measured, **texels}, clock.seconds)
 
-    def _denoised(self, image) -> NDArray[np.float32]:
-        """OIDN on the render's linear RGB, guided by its albedo and normal channels when
-        the aov integrator made them. The channels are sliced as Dr.Jit tensors, so that
-        the filter runs on the variant's device (the GPU with cuda_ad_rgb)."""
+    def _set_air(self, state: FrameState, look: FrameLook, alpha: NDArray[np.float32], stride: int) -> None:
+        """The frame's air as the render's kernel inputs (:mod:`datagen.render.aerial`); a
+        look without it (a config drawn with haze off): air that dims nothing."""
+        from datagen.render.aerial import airlight_grid
+
+        if look.haze_visibility_m is None:
+            air = Atmosphere(0.0, 1e9, 1.0)
+            air.rayleigh = air.aerosol = np.zeros(3)
+        else:
+            air = Atmosphere(float(state.world_from_cam[2, 3]), look.haze_visibility_m, look.haze_scale_height_m)
+        grid = airlight_grid(self.sky, air, self.intrinsics, state.world_from_cam)
+        if alpha is None:  # no geometry pass: no cloud's edge to weigh
+            alpha, stride = np.ones((1, 1), np.float32), max(self.intrinsics.width, self.intrinsics.height)
+        self.aerial.set_frame(air=air, grid=grid, alpha=alpha, stride=stride, intrinsics=self.intrinsics,
+                              cam_from_render=state.world_from_cam[:3, :3].T, codes=self._background_codes)
+
+    def aerial_perspective(self, rgb: NDArray[np.float32], state: FrameState, look: FrameLook) -> NDArray[np.float32]:
+        """``rgb`` (the finished render's linear radiance) seen through the frame's air, per
+        pixel along its centre's ray (:class:`~datagen.render.atmosphere.Atmosphere`): what
+        a scalar variant does instead of :mod:`datagen.render.aerial`'s per-sample air."""
+        from datagen.render.aerial import airlight_grid
+
+        k = self.intrinsics
+        air = Atmosphere(float(state.world_from_cam[2, 3]), look.haze_visibility_m, look.haze_scale_height_m)
+        depth, _, _ = self.geometry_pass()
+        grid = airlight_grid(self.sky, air, k, state.world_from_cam, step=4 * AIRLIGHT_STEP_PX)
+        pixels = _upsampled(grid, k.width, k.height)
+        unit, z_per_t = self._pixel_rays()
+        sin_elevation = (unit @ state.world_from_cam[2, :3]).reshape(k.height, k.width)
+        distance = np.where(np.isfinite(depth), depth / z_per_t.reshape(k.height, k.width), 0.0)
+        out = air.seen_through([rgb[..., c] for c in range(3)], [pixels[..., c] for c in range(3)],
+                               [pixels[..., 3 + c] for c in range(3)], sin_elevation, [distance])
+        return np.stack(out, axis=-1).astype(np.float32)
+
+    def _denoised(self, image, beauty: NDArray[np.float32] | None = None) -> NDArray[np.float32]:
+        """OIDN on the render's linear RGB (or ``beauty``, the same seen through the air),
+        guided by its albedo and normal channels when the aov integrator made them. The
+        channels are sliced as Dr.Jit tensors, so that the filter runs on the variant's
+        device (the GPU with cuda_ad_rgb)."""
         from datagen.render.denoise import denoise_render
 
-        out = denoise_render(image, guides=self.guides, quality=self.config.render.denoise_quality)
+        if beauty is not None and not self.variant.startswith("scalar"):
+            beauty = self._mi.TensorXf(np.ascontiguousarray(beauty))
+        out = denoise_render(image, guides=self.guides, quality=self.config.render.denoise_quality, beauty=beauty)
         return np.maximum(np.array(out, dtype=np.float32), np.float32(0.0))
+
+
+def _upsampled(grid: NDArray[np.float32], width: int, height: int) -> NDArray[np.float32]:
+    """``grid`` (gh, gw, C) of values at pixel centres spread evenly from the first pixel's
+    to the last's, interpolated bilinearly to every pixel centre: (height, width, C)."""
+    import cv2
+
+    gh, gw = grid.shape[:2]
+    x = np.arange(width, dtype=np.float32) * np.float32((gw - 1) / max(width - 1, 1))
+    y = np.arange(height, dtype=np.float32) * np.float32((gh - 1) / max(height - 1, 1))
+    map_x, map_y = np.broadcast_to(x, (height, width)), np.broadcast_to(y[:, None], (height, width))
+    out = cv2.remap(grid, np.ascontiguousarray(map_x), np.ascontiguousarray(map_y), cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_REPLICATE)
+    return out.reshape(height, width, -1)

@@ -11,6 +11,12 @@ instead of its own (the images of both ways agree within their sampling noise fo
 scales 0 to 1.2: CHANGELOG.md). Sampling is ``sunsky``'s own; a sample's weight takes its
 direction's scale. Turbidity and the sun's direction go to the wrapped ``sunsky`` through
 ``mi.traverse`` (kernel inputs already).
+
+The earth is round (:mod:`datagen.core.conventions`): from altitude the sea's horizon lies
+below the horizontal, and a ray between the two sees the sky just above the horizon
+(``sunsky``, made for an observer on the ground, is black below it):
+:meth:`SunSky.eval` lifts such directions to :data:`~datagen.render.atmosphere.HORIZON_ELEVATION_DEG`.
+:meth:`SunSky.radiance` looks the sky up for the aerial perspective.
 """
 
 from __future__ import annotations
@@ -37,8 +43,22 @@ def sky_class(variant: str):
     import drjit as dr
     import mitsuba as mi
 
+    from datagen.render.atmosphere import HORIZON_ELEVATION_DEG, airlight_directions
+
     scalar = variant.startswith("scalar")
     cos_half = math.cos(math.radians(SUN_APERTURE_DEG / 2.0))
+    low = math.sin(math.radians(HORIZON_ELEVATION_DEG))
+    low_horizontal = math.sqrt(1.0 - low * low)
+
+    def lifted(d):
+        """``d`` (towards the sky), or below the horizon the direction of its azimuth at
+        :data:`HORIZON_ELEVATION_DEG` (:func:`~datagen.render.atmosphere.airlight_directions`'
+        rule)."""
+        level = d.x * d.x + d.y * d.y > 1e-18  # straight down: the horizon along +x
+        x, y = dr.select(level, d.x, 1.0), dr.select(level, d.y, 0.0)
+        k = low_horizontal / dr.sqrt(x * x + y * y)
+        below = d.z < low
+        return mi.Vector3f(dr.select(below, x * k, d.x), dr.select(below, y * k, d.y), dr.select(below, low, d.z))
 
     def opaque(value: float):
         return float(value) if scalar else dr.opaque(mi.Float, float(value))
@@ -51,6 +71,7 @@ def sky_class(variant: str):
             self._params = mi.traverse(self.inner)
             self.m_flags = mi.EmitterFlags.Infinite | mi.EmitterFlags.SpatiallyVarying
             self.sun = mi.Vector3f(*_FIRST_SUN)
+            self.sun_direction = np.array(_FIRST_SUN)  # the same, on the host
             self.sun_scale = self.sky_scale = opaque(1.0)
 
         def set(self, sun_direction: ArrayLike, turbidity: float, sun_scale: float, sky_scale: float) -> None:
@@ -62,6 +83,7 @@ def sky_class(variant: str):
             self._params["turbidity"] = float(turbidity)
             self._params.update()
             self.sun = mi.Vector3f(*(opaque(c) for c in d))
+            self.sun_direction = np.array(d)
             self.sun_scale, self.sky_scale = opaque(sun_scale), opaque(sky_scale)
 
         def _scale(self, d):
@@ -69,7 +91,30 @@ def sky_class(variant: str):
             return dr.select(dr.dot(d, self.sun) >= cos_half, self.sun_scale, self.sky_scale)
 
         def eval(self, si, active=True):
-            return self.inner.eval(si, active) * self._scale(-si.wi)
+            d = lifted(-si.wi)
+            si = mi.SurfaceInteraction3f(si)
+            si.wi = -d
+            return self.inner.eval(si, active) * self._scale(d)
+
+        def radiance(self, directions) -> np.ndarray:
+            """(N, 3) linear RGB of the sky (the sun's disc excluded: the sky just outside
+            it) in ``directions`` (N, 3), world frame, lifted above the horizon as
+            :meth:`eval` does: the airlight of :mod:`datagen.render.atmosphere`."""
+            d = airlight_directions(directions, self.sun_direction, SUN_APERTURE_DEG)
+            if scalar:
+                out = np.zeros((len(d), 3))
+                for i, v in enumerate(d):
+                    si = dr.zeros(mi.SurfaceInteraction3f)
+                    si.wi = mi.Vector3f(*(-float(c) for c in v))
+                    value = self.inner.eval(si)
+                    out[i] = [float(value[c]) for c in range(3)]
+                return out * float(self.sky_scale)
+            from datagen.render.mitsuba import jit_vectors
+
+            si = dr.zeros(mi.SurfaceInteraction3f, max(len(d), 2))
+            si.wi = -jit_vectors(mi.Vector3f, np.resize(d.astype(np.float32), (max(len(d), 2), 3)))
+            value = self.inner.eval(si) * self.sky_scale
+            return np.stack([np.asarray(value[c], dtype=np.float64) for c in range(3)], axis=-1)[: len(d)]
 
         def sample_direction(self, it, sample, active=True):
             ds, weight = self.inner.sample_direction(it, sample, active)

@@ -1,4 +1,4 @@
-"""From linear radiance to the 8-bit sRGB training image: exposure, haze, the sRGB transfer.
+"""From linear radiance to the 8-bit sRGB training image: exposure, the sRGB transfer.
 
 Everything here is image arithmetic on numpy arrays (no Mitsuba).
 """
@@ -11,7 +11,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["WHITE_RADIANCE", "exposure_scale", "haze", "image_statistics", "to_srgb8"]
+__all__ = ["WHITE_RADIANCE", "exposure_scale", "image_statistics", "to_srgb8"]
 
 #: Linear radiance that maps to sRGB white at 0 EV (sunsky radiance is in W/(m^2 sr nm)-like units).
 WHITE_RADIANCE: Final = 0.7
@@ -39,17 +39,6 @@ def exposure_scale(exposure_ev: float) -> np.float32:
     """The factor that maps linear radiance to display-linear values at ``exposure_ev``
     stops (:data:`WHITE_RADIANCE` becomes white at 0 EV)."""
     return np.float32(2.0 ** exposure_ev / WHITE_RADIANCE)
-
-
-def haze(rgb: NDArray[np.float32], depth: NDArray[np.float32], ids: NDArray[np.uint32],
-          visibility_m: float) -> NDArray[np.float32]:
-    """Atmospheric perspective: blend towards the sky's own colour with distance."""
-    sky = ~np.isfinite(depth)
-    airlight = rgb[sky].mean(axis=0) if sky.any() else rgb.reshape(-1, 3).mean(axis=0)
-    transmittance = np.exp(-np.where(np.isfinite(depth), depth, np.inf) / visibility_m)[..., None]
-    return (rgb * transmittance + airlight * (1 - transmittance)).astype(np.float32)
-
-
 
 
 def image_statistics(srgb8: NDArray[np.uint8], surface: NDArray[np.uint8] | None,

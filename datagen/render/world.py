@@ -6,7 +6,9 @@ Each piece exists in the scene only when its randomizer is on: with it off, the 
 holds nothing of it (no mesh, texture or kernel). Texture contents change per frame
 (data updates and opaque kernel inputs: no new kernel).
 
-- Clouds: two horizontal sheets of cells (deck and scattered layer) whose ``mask`` opacity
+- The sea's shape, always there: the earth's round surface under the camera (:func:`earth_cap`).
+- Clouds: two sheets of cells (deck and scattered layer) on the spheres of their altitudes,
+  curving down with the earth, whose ``mask`` opacity
   is a :class:`datagen.assets.clouds.CloudLayer`, procedural noise evaluated at each
   shading point and filtered to the pixel there (:mod:`datagen.render.procedural`), each
   emitting the light its tops or bases send back (:meth:`World.cloud_shapes`).
@@ -32,14 +34,15 @@ from numpy.typing import NDArray
 from datagen.assets.clouds import CloudLayer
 from datagen.assets.liveries import LIVERY_TEXELS, livery, triplanar_uv
 from datagen.assets.sea import SeaSurface, SeaWaves
-from datagen.core.conventions import texture_rng
+from datagen.core.conventions import EARTH_RADIUS_M, texture_rng
 from datagen.render.mitsuba import jit_array
 from datagen.scene.look import FrameLook
 
 if TYPE_CHECKING:
     from datagen.config.schema import Config
 
-__all__ = ["CLOUD_LAYERS", "CLOUD_SIZE_M", "LIVERY_OBJECTS", "SEA_COLOUR", "SURFACES", "World"]
+__all__ = ["CLOUD_LAYERS", "CLOUD_SIZE_M", "EARTH_CAP_M", "LIVERY_OBJECTS", "SEA_COLOUR", "SURFACES", "World",
+           "earth_cap", "sphere_drop"]
 
 #: The cloud layers' shape names (in the scene) and the FrameLook fields that place them.
 CLOUD_LAYERS: Final = {"cloud_deck": ("cloud_deck_coverage", "cloud_deck_altitude_m"),
@@ -62,10 +65,66 @@ CULL_SAMPLES: Final = 32
 NOISE_SLOPE_BOUND: Final = 3.0
 #: The objects that wear a livery (on their painted parts).
 LIVERY_OBJECTS: Final = ("receiver", "tanker")
+#: The sea mesh's parameter prefix (the mesh in its shape group, which an instance places).
+SEA_KEY: Final = "sea_group.sea"
 #: What a pixel's ray meets first, as the geometry pass classifies it (index = code).
 SURFACES: Final = ("sky", "sea", "cloud", "object")
 #: The sea's body colour when it is not drawn (linear RGB).
 SEA_COLOUR: Final = (0.01, 0.03, 0.05)
+#: The sea is the part of the earth's sphere within EARTH_CAP_M metres (horizontally) of the
+#: camera's nadir: beyond the horizon from any altitude a config allows (505 km at 20 km).
+EARTH_CAP_M: Final = 600_000.0
+#: The cap's mesh: rings of EARTH_CAP_AZIMUTHS vertices at radii growing geometrically by
+#: EARTH_CAP_GROWTH from EARTH_CAP_FIRST_M to EARTH_CAP_STEP_M apart, then every
+#: EARTH_CAP_STEP_M: no edge longer than 6.4 km, so that the flat triangles lie within
+#: 0.8 m of the sphere (an edge L sags L^2 / 8R), which moves the horizon by less than
+#: 1e-5 degrees; 133,000 vertices, built once (an instance moves it with the camera).
+EARTH_CAP_AZIMUTHS: Final = 768
+EARTH_CAP_FIRST_M: Final = 50.0
+EARTH_CAP_GROWTH: Final = 1.25
+EARTH_CAP_STEP_M: Final = 4_000.0
+
+
+def sphere_drop(r_m, radius_m: float = EARTH_RADIUS_M):
+    """How far below its top a sphere of ``radius_m`` lies at horizontal distance ``r_m``
+    from it (``R - sqrt(R^2 - r^2)``, computed as ``r^2 / (R + sqrt(R^2 - r^2))``)."""
+    r2 = np.square(np.asarray(r_m, dtype=np.float64))
+    return r2 / (radius_m + np.sqrt(radius_m * radius_m - r2))
+
+
+@functools.cache
+def earth_cap() -> tuple[NDArray[np.float32], NDArray[np.uint32], NDArray[np.float32], NDArray[np.float32]]:
+    """The sea's mesh, its top at the origin: vertices, faces (facing up), texture
+    coordinates (linear in x and y: the waves' normal map keeps its frame along x) and
+    vertex normals (the sphere's)."""
+    radii = [0.0, EARTH_CAP_FIRST_M]
+    while radii[-1] * (EARTH_CAP_GROWTH - 1.0) < EARTH_CAP_STEP_M:
+        radii.append(radii[-1] * EARTH_CAP_GROWTH)
+    radii += list(np.arange(radii[-1] + EARTH_CAP_STEP_M, EARTH_CAP_M + EARTH_CAP_STEP_M, EARTH_CAP_STEP_M))
+    radii = np.asarray(radii)
+    step = 2.0 * np.pi / EARTH_CAP_AZIMUTHS
+    phi = np.arange(EARTH_CAP_AZIMUTHS) * step
+    # The rings' centre lies off the top, in a direction between two spokes: no spoke's
+    # vertical plane holds the camera's nadir, so no ray from the camera runs along an edge
+    # (Embree's triangle test is not watertight there: one pixel of a podcam frame saw the
+    # sky through the sea where every spoke passed under the camera).
+    centre = EARTH_CAP_FIRST_M * np.array([np.cos(22.5 * step), np.sin(22.5 * step)])
+    ring_r = radii[1:, None]
+    x, y = centre[0] + ring_r * np.cos(phi), centre[1] + ring_r * np.sin(phi)
+    xy = np.concatenate([centre[None], np.stack([x, y], -1).reshape(-1, 2)])
+    verts = np.concatenate([xy, -sphere_drop(np.hypot(xy[:, 0], xy[:, 1]))[:, None]], axis=1)
+    normals = verts + np.array([0.0, 0.0, EARTH_RADIUS_M])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    n, rings = EARTH_CAP_AZIMUTHS, len(radii) - 1
+    j = np.arange(n)
+    fan = np.stack([np.zeros(n, int), 1 + j, 1 + (j + 1) % n], -1)
+    k = np.arange(rings - 1)[:, None]
+    a, b = 1 + k * n + j, 1 + k * n + (j + 1) % n  # ring k
+    c, d = a + n, b + n  # ring k + 1
+    quads = np.concatenate([np.stack([a, c, d], -1), np.stack([a, d, b], -1)], axis=1).reshape(-1, 3)
+    faces = np.concatenate([fan, quads]).astype(np.uint32)
+    uv = verts[:, :2] / (2.0 * EARTH_CAP_M) + 0.5
+    return verts.astype(np.float32), faces, uv.astype(np.float32), normals.astype(np.float32)
 
 
 class World:
@@ -247,7 +306,8 @@ class World:
                 opacity.cover = layer.covers
                 radiance.shade = functools.partial(_layer_radiance, layer, tuple(float(c) for c in light), above)
                 if fresh or self._cloud_height.get(name) != height:  # the mesh moves only when it must
-                    set_buffer(params, f"{name}.vertex_positions", _cloud_cells(self._cloudy[name], height))
+                    set_buffer(params, f"{name}.vertex_positions",
+                               _cloud_cells(self._cloudy[name], height, height + camera_z_m))
                     self._cloud_height[name] = height
                 if self._cloud_down.get(name) != above:  # the emitting side faces the camera
                     set_buffer(params, f"{name}.faces", _cloud_faces(above))
@@ -257,7 +317,7 @@ class World:
         for texture in sea_textures:
             texture.camera = tuple(float(c) for c in camera_render)
         if self._wave_textures is None:
-            params["sea.bsdf.roughness.value"] = look.sea_roughness
+            params[f"{SEA_KEY}.bsdf.roughness.value"] = look.sea_roughness
         if not (self.waves or self.whitecaps or self.sea_colour):
             return
         key = (look.sea_seed, look.sea_wind_speed_mps, look.sea_wind_direction_deg, look.sea_whitecap_fraction,
@@ -421,10 +481,12 @@ def _cloudy_cells(layer: CloudLayer) -> NDArray[np.bool_]:
     return (value + slack > layer.threshold).reshape(-1)
 
 
-def _cloud_cells(cloudy: NDArray[np.bool_], height: float) -> NDArray[np.float32]:
-    """Vertex positions of a cloud layer at ``height`` over the camera: cells that may hold
-    cloud keep their quad, the others collapse to their centre (no area: no ray meets them)."""
-    out = _cloud_grid()[0].reshape(-1, 4, 3).copy()
+def _cloud_cells(cloudy: NDArray[np.bool_], height: float, altitude: float) -> NDArray[np.float32]:
+    """Vertex positions of a cloud layer ``height`` over the render frame's origin, at
+    ``altitude`` above the sea, on the sphere of that altitude (its top over the origin, as
+    the sea's): cells that may hold cloud keep their quad, the others collapse to their
+    centre (no area: no ray meets them)."""
+    out = _cloud_grid()[0].reshape(-1, 4, 3).astype(np.float64)
     out[~cloudy] = out[~cloudy].mean(axis=1, keepdims=True)
-    out[..., 2] = height
-    return out.reshape(-1)
+    out[..., 2] = height - sphere_drop(np.hypot(out[..., 0], out[..., 1]), EARTH_RADIUS_M + max(altitude, 0.0))
+    return out.astype(np.float32).reshape(-1)

@@ -1,4 +1,4 @@
-"""A frame's appearance: sky, sun, exposure, haze and per-part materials, drawn from
+"""A frame's appearance: sky, sun, exposure and per-part materials, drawn from
 the frame's own RNG stream (pure numpy; the renderer only applies them).
 
 :func:`draw_look` draws every randomized appearance parameter of a frame in a
@@ -27,7 +27,6 @@ if TYPE_CHECKING:
     from datagen.scene.approach import FrameState
 
 __all__ = [
-    "HAZE_VISIBILITY_M",
     "FrameLook",
     "Material",
     "draw_look",
@@ -37,10 +36,6 @@ __all__ = [
     "neutral_look",
     "sun_direction_world",
 ]
-
-#: Haze visibility (distance at which contrast falls to 1/e), metres, when haze is on.
-HAZE_VISIBILITY_M: Final = (15_000.0, 60_000.0)
-
 
 @dataclass(frozen=True)
 class Material:
@@ -62,10 +57,11 @@ class FrameLook:
     exposure_ev: float
     sea_roughness: float
     sea_wind_speed_mps: float | None  # the wind the roughness follows (None: drawn uniformly)
-    haze_visibility_m: float | None
+    haze_visibility_m: float | None  # sea-level meteorological visibility (None: no aerial perspective)
     materials: dict[str, dict[str, Material]] = field(default_factory=dict)  # object -> class -> material
     # The world (each None where its randomizer is off; see draw_world).
     sun_backlit: bool | None = None  # the sun was put near the camera's forward azimuth
+    haze_scale_height_m: float | None = None  # the aerosol's scale height
     cloud_deck_coverage: float | None = None
     cloud_deck_altitude_m: float | None = None  # above sea level
     cloud_layer_coverage: float | None = None
@@ -128,7 +124,7 @@ MATERIAL_DRAWS: Final = 7 * 4
 
 
 def draw_look(config: Config, rng: np.random.Generator) -> FrameLook:
-    """Draw a frame's sky, sun, exposure, haze and per-part materials, in a fixed order."""
+    """Draw a frame's sky, sun, exposure and per-part materials, in a fixed order."""
     r = config.randomization
     sky, mat = r.sky, r.materials
     look = dict(
@@ -144,7 +140,6 @@ def draw_look(config: Config, rng: np.random.Generator) -> FrameLook:
         look.update(sea_roughness=cox_munk_roughness(wind), sea_wind_speed_mps=wind)
     else:
         look.update(sea_roughness=_uniform(rng, r.sea.roughness), sea_wind_speed_mps=None)
-    haze = _uniform(rng, HAZE_VISIBILITY_M) if r.haze else None
     materials: dict[str, dict[str, Material]] = {}
     rng = _Uniforms(rng, MATERIAL_DRAWS * len(OBJECT_NAMES))  # the materials' draws in one call
     for obj in OBJECT_NAMES:
@@ -157,7 +152,7 @@ def draw_look(config: Config, rng: np.random.Generator) -> FrameLook:
             "fabric": Material(_hsv(rng, (0.0, 0.2), (0.55, 0.9)), _uniform(rng, (0.6, 0.9))),
             "rubber": Material(_hsv(rng, (0.0, 0.1), (0.02, 0.06)), _uniform(rng, (0.5, 0.8))),
         }
-    return FrameLook(**look, haze_visibility_m=haze, materials=materials)
+    return FrameLook(**look, haze_visibility_m=None, materials=materials)  # the air is the approach's (draw_world)
 
 
 def _log_uniform(rng: np.random.Generator, bounds) -> float:
@@ -187,11 +182,11 @@ def frame_look(config: Config, state: FrameState, approaches: dict | None = None
 
 def draw_world(config: Config, look: FrameLook, seed: int, state: FrameState,
                approaches: dict | None = None) -> FrameLook:
-    """``look`` with the frame's world drawn onto it: a backlit sun, clouds, sea state,
-    liveries and the sensor, each from its own stream (:func:`datagen.core.conventions.world_rng`)
+    """``look`` with the frame's world drawn onto it: a backlit sun, the air, clouds, sea
+    state, liveries and the sensor, each from its own stream (:func:`datagen.core.conventions.world_rng`)
     and only where its randomizer is on, so that one switch changes no other draw.
 
-    The weather (clouds, sea) and the aircraft's liveries belong to the approach chain
+    The weather (air, clouds, sea) and the aircraft's liveries belong to the approach chain
     (streams keyed by ``state.approach_index``): the frames of one approach see the same
     clouds, sea and aircraft, as a camera flying it would. The sun's backlit draw and the
     sensor's are the frame's own. Cloud altitudes are relative to the tanker's, which is
@@ -239,13 +234,18 @@ def draw_world(config: Config, look: FrameLook, seed: int, state: FrameState,
 
 
 def _approach_world(config: Config, seed: int, approach_index: int, base: float) -> dict:
-    """An approach chain's clouds (their altitudes about the tanker's, ``base``), sea state
-    and liveries, each where its randomizer is on (:func:`draw_world`)."""
+    """An approach chain's air (visibility, the aerosol's scale height), clouds (their
+    altitudes about the tanker's, ``base``), sea state and liveries, each where its
+    randomizer is on (:func:`draw_world`)."""
     from datagen.assets.sea import wave_slope_variance
     from datagen.core.conventions import world_rng
 
     r = config.randomization
     world: dict = {}
+    if r.haze.enabled:
+        rng = world_rng(seed, approach_index, "atmosphere")
+        world.update(haze_visibility_m=_log_uniform(rng, r.haze.visibility_m),
+                     haze_scale_height_m=_uniform(rng, r.haze.aerosol_scale_height_m))
     c = r.clouds
     if c.enabled:
         rng = world_rng(seed, approach_index, "clouds")
