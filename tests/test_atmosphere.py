@@ -220,3 +220,43 @@ def test_the_renders_transmittance_table_holds_every_path_within_1_5_percent(alt
     mu = np.concatenate([mu, mu])
     direct = np.exp(-air.optical_depth(mu, s))
     np.testing.assert_allclose(_looked_up(table, mu, s), direct, atol=0.015)
+
+
+@pytest.mark.render
+@pytest.mark.parametrize(("scene", "frame"), [("wingcam55", 3), ("dashcam75", 150)])
+def test_the_renders_air_per_sample_is_the_per_pixel_formula_away_from_edges(scene: str, frame: int) -> None:
+    """The render kernel's aerial perspective (every sample along its own path, the table
+    looked up, up to two cloud layers weighed) against the numpy formula applied to the
+    same render without it, pixel by pixel along each centre's ray (16 spp, no denoiser,
+    192 px): within 6% of the radiance wherever a pixel and its 8 neighbours show one
+    surface at nearly one depth, and within 1% on average over them (measured: 5% and
+    0.03% at worst; a pixel's samples spread over its area, the formula along its centre)."""
+    import mitsuba as mi
+
+    from datagen.render.renderer import Renderer
+    from datagen.scene.resolved import Scene
+
+    config = override_config(load_config(scene), {"randomization.sensor.enabled": False, "render.denoise": "off"})
+    renderer = Renderer(Scene.resolve(config), spp=16, width=192, height=101)
+    state = FrameStates(config)(frame)
+    look = frame_look(config, state)
+    renderer.pose(state, look)
+    depth, _, surface, alpha = renderer.geometry_pass(1, opacity=True)
+    renderer._set_air(state, look, alpha, 1)
+    seen = np.asarray(mi.render(renderer.scene, seed=7, spp=16), dtype=np.float32)[..., :3]
+    renderer.aerial._frame = None  # the same render without the air
+    bare = np.asarray(mi.render(renderer.scene, seed=7, spp=16), dtype=np.float32)[..., :3]
+    reference = renderer.aerial_perspective(bare, state, look)
+    assert np.abs(seen - bare).max() > 0.01  # the air changed the frame
+    # Pixels inside one surface (and, for clouds, of one opacity: a cloud's own edges mix paths).
+    z = np.where(np.isfinite(depth), depth, 0.0)
+    flat = np.ones_like(surface, dtype=bool)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            shifted = np.roll(np.roll(surface, dy, 0), dx, 1)
+            flat &= (shifted == surface) & (np.abs(np.roll(np.roll(z, dy, 0), dx, 1) - z) <= 0.05 * z)
+    flat &= (alpha == 0.0).all(axis=-1) | (alpha == 1.0).any(axis=-1)
+    flat[[0, -1]] = flat[:, [0, -1]] = False
+    assert flat.mean() > 0.3
+    error = np.abs(seen - reference)[flat] / np.maximum(reference[flat], 1e-3)
+    assert error.max() < 0.06 and error.mean() < 0.01, (error.max(), error.mean())

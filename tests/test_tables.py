@@ -110,6 +110,11 @@ def test_the_dataset_card_describes_the_build_and_a_users_readme_is_left_alone(t
     card = (tmp_path / "ds" / "README.md").read_text()
     assert card.startswith("---\nconfigs:\n") and "path: manifests/train-*.parquet" in card
     assert "# podcam15 (paper model A)" in card and f"(root seed {config.dataset.seed})" in card
+    low, high = config.randomization.haze.visibility_m
+    assert f"round earth seen through the air (sea-level visibility {low / 1000:g}-{high / 1000:g} km" in card
+    hazeless = override_config(config, {"randomization.haze.enabled": False})
+    build_dataset(hazeless, tmp_path / "plain", render=False)
+    assert "no aerial perspective" in (tmp_path / "plain" / "README.md").read_text()
     mine = tmp_path / "mine"
     mine.mkdir()
     build_dataset(config, mine / "ds", render=False)

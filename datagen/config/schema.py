@@ -511,7 +511,7 @@ class HazeConfig(_Section):
     """Render aerial perspective; off: surfaces as if seen through a vacuum (the sea's
     horizon a hard step under the sky)."""
 
-    visibility_m: Annotated[Range, _within(1_000.0, 280_000.0)] = (15_000.0, 150_000.0)
+    visibility_m: Annotated[Range, _within(1_000.0, 280_000.0)] = (20_000.0, 150_000.0)
     """Meteorological visibility at sea level, metres (Koschmieder: 2% contrast at 550 nm;
     the air's molecules alone give 288 km), drawn log-uniform."""
 

@@ -13,8 +13,9 @@ sea's samples of a horizon pixel by its centre's path, or not at all). Per sampl
 - its airlight and the column's transmittance, interpolated from a grid of the sky's own
   radiance every :data:`AIRLIGHT_STEP_PX` pixels (:meth:`~datagen.render.sky.sky_class`'s
   ``radiance``);
-- a sample that meets a cloud layer weighs its path and the one behind the cloud (a second
-  ray) by the cloud's opacity at its pixel, from the geometry pass.
+- a sample that meets cloud layers weighs its path to each layer and the one past it
+  (more rays, up to two layers) by that layer's opacity where its pixel's ray meets it,
+  from the geometry pass (0 where the pixel's ray meets none of it: the path past it).
 
 Everything that changes per frame is a kernel input (arrays, opaque scalars): the render
 kernel compiles once. Samples that meet nothing (the sky) are returned as they are.
@@ -70,6 +71,7 @@ def aerial_class(variant: str):
     from datagen.render.mitsuba import jit_array
     from datagen.render.procedural import drjit_ops
     from datagen.render.raycast import _past
+    from datagen.render.world import CLOUD_LAYERS
 
     ops = drjit_ops()
 
@@ -85,8 +87,9 @@ def aerial_class(variant: str):
 
         def set_frame(self, *, air: Atmosphere, grid: NDArray[np.float32], alpha: NDArray[np.float32],
                       stride: int, intrinsics: Intrinsics, cam_from_render: NDArray[np.float64], codes) -> None:
-            """The frame's air (``grid``: :func:`airlight_grid`; ``alpha``: the opacity of the
-            cloud each pixel's ray stops at, 1 elsewhere, from a geometry pass of ``stride``;
+            """The frame's air (``grid``: :func:`airlight_grid`; ``alpha``: (h, w, layers) the
+            opacity of each cloud layer where each pixel's ray meets it, 0 where it does not,
+            from a geometry pass of ``stride``;
             ``cam_from_render``: the camera's rotation; ``codes``: per shape registry id + 1
             its index in ``("sea", *CLOUD_LAYERS)``)."""
             k = intrinsics
@@ -113,18 +116,29 @@ def aerial_class(variant: str):
             if f is None:
                 return L, valid, aovs
             d = ray.d
-            si = scene.ray_intersect(mi.Ray3f(ray), ray_flags=mi.RayFlags.Minimal, coherent=True, active=active)
-            hit = active & si.is_valid()
-            t = dr.select(hit, si.t, 0.0)
-            shape = dr.reinterpret_array(mi.UInt32, si.shape)
             codes = f["codes"]
-            known = hit & (shape + 1 < dr.width(codes))
-            cloud = dr.select(known, dr.gather(mi.Int32, codes, shape + 1, known), -1) > 0
-            # What lies behind a cloud (the sky: 0).
-            start = _past(t, dr.maximum)
-            behind_si = scene.ray_intersect(mi.Ray3f(ray.o + d * start, d), ray_flags=mi.RayFlags.Minimal,
-                                            coherent=True, active=cloud)
-            t_behind = dr.select(cloud & behind_si.is_valid(), start + behind_si.t, 0.0)
+
+            def cast(origin, active):
+                """(distance, 0 where nothing is met; the cloud layer met: its index in
+                ``("sea", *CLOUD_LAYERS)``, 0 or -1 for anything else) along ``d``."""
+                si = scene.ray_intersect(mi.Ray3f(origin, d), ray_flags=mi.RayFlags.Minimal, coherent=True,
+                                         active=active)
+                hit = active & si.is_valid()
+                shape = dr.reinterpret_array(mi.UInt32, si.shape)
+                known = hit & (shape + 1 < dr.width(codes))
+                return dr.select(hit, si.t, 0.0), dr.select(known, dr.gather(mi.Int32, codes, shape + 1, known), -1)
+
+            # The sample's first hit, and past up to two cloud layers what lies behind each
+            # (the sky: 0).
+            t1, layer1 = cast(ray.o, active)
+            cloud1 = layer1 > 0
+            start = _past(t1, dr.maximum)
+            t2, layer2 = cast(ray.o + d * start, cloud1)
+            t2 = dr.select(cloud1 & (t2 > 0.0), start + t2, 0.0)
+            cloud2 = cloud1 & (layer2 > 0)
+            start = _past(t2, dr.maximum)
+            t3, _ = cast(ray.o + d * start, cloud2)
+            t3 = dr.select(cloud2 & (t3 > 0.0), start + t3, 0.0)
             # The sample's pixel (continuous), from its direction in the camera frame.
             r = f["rotation"]
             x, y, z = (r[i][0] * d.x + r[i][1] * d.y + r[i][2] * d.z for i in range(3))
@@ -135,13 +149,18 @@ def aerial_class(variant: str):
             stride = f["stride"]
             pixel = (mi.UInt32(dr.minimum(v / stride, f["alpha_height"] - 1)) * f["alpha_width"]
                      + mi.UInt32(dr.minimum(u / stride, f["alpha_width"] - 1)))
-            alpha = dr.select(cloud, dr.gather(mi.Float, f["alpha"], pixel, cloud), 1.0)
+            # How much of the sample each path carries: the layers' opacities at its pixel.
+            layers = len(CLOUD_LAYERS)
+            w1, w2 = (dr.select(met, dr.gather(mi.Float, f["alpha"], pixel * layers + mi.UInt32(layer - 1), met), 1.0)
+                      for met, layer in ((cloud1, layer1), (cloud2, layer2)))
+            weights = (w1, (1.0 - w1) * w2, (1.0 - w1) * (1.0 - w2))
             airlight, column = self._grid(u, v, width, height)
-            t_front, t_back = (self._transmittance(d.z, s) for s in (t, t_behind))
+            paths = [self._transmittance(d.z, t) for t in (t1, t2, t3)]
             out = []
             for c in range(3):
-                seen = [through_air(L[c], airlight[c], column[c], tt[c], ops) for tt in (t_front, t_back)]
-                out.append(dr.select(hit, alpha * seen[0] + (1.0 - alpha) * seen[1], L[c]))
+                seen = sum(w * through_air(L[c], airlight[c], column[c], tt[c], ops)
+                           for w, tt in zip(weights, paths, strict=True))
+                out.append(dr.select(t1 > 0.0, seen, L[c]))
             return mi.Spectrum(*out), valid, aovs
 
         def _transmittance(self, mu, s):

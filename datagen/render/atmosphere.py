@@ -9,21 +9,25 @@ camera as ``L0 T + A(d) min(1, (1 - T) / (1 - T_ref(d)))``:
   :func:`air_mass` for each one's scale height (density ``exp(-h / H)`` at altitude ``h``
   along the ray, the earth round: :func:`altitude_along`).
 - ``A(d)``, the sky's own radiance in the ray's direction (the frame's ``sunsky``, the
-  sun's disc excluded, below the horizon the sky just above it: :func:`airlight_directions`),
-  which is the light the whole air column along ``d`` scatters towards the camera;
-  ``T_ref(d)`` is that column's transmittance. A path that is a fraction of the column's
-  optical depth scatters that fraction of its light (single scattering, the same phase
-  angle all along): the horizon becomes the sky's colour as the sea's distance grows,
-  with a width that follows from the visibility drawn.
+  sun's disc excluded, below the horizon the sky just above it: :func:`airlight_directions`).
+  ``sunsky`` is the sky an observer at sea level sees: the light the air column along
+  ``d`` from sea level scatters towards it, whose transmittance is ``T_ref(d)``
+  (:meth:`Atmosphere.column_transmittance`). Scattering the same light per unit of optical
+  depth (single scattering, one phase angle along a direction), a path of transmittance
+  ``T`` adds ``A (1 - T) / (1 - T_ref)``: nothing on a short path, the sky's own colour on
+  a path as opaque as the column (the sea at the horizon, which then meets the sky above it
+  without a step, over a width that follows from the visibility drawn).
 
 The aerosol's extinction at sea level follows from the meteorological visibility ``V``
 (Koschmieder, 2% contrast at 550 nm: ``beta(550) = 3.912 / V``, the molecules' share taken
 out) and spreads over the channels with an Angstrom exponent. Sky pixels are left as the
-sky renders them (their radiance is already the column's). Everything here is numpy.
+sky renders them (their radiance is already the column's). Everything here is numpy or,
+through :class:`~datagen.assets.noise.Ops`, Dr.Jit (:mod:`datagen.render.aerial`).
 """
 
 from __future__ import annotations
 
+import copy
 from typing import Final
 
 import numpy as np
@@ -182,10 +186,14 @@ class Atmosphere:
         return np.asarray(rayleigh_mass)[..., None] * self.rayleigh + np.asarray(aerosol_mass)[..., None] * self.aerosol
 
     def column_transmittance(self, sin_elevation: NDArray) -> NDArray[np.float64]:
-        """(..., 3) transmittance of the air column a direction looks through, directions
-        below the horizon taken at :data:`HORIZON_ELEVATION_DEG` (as their airlight is)."""
+        """(..., 3) transmittance of the air column the sky's radiance in a direction comes
+        through: from sea level (where ``sunsky``'s observer stands) to the top of the air,
+        directions below the horizon taken at :data:`HORIZON_ELEVATION_DEG` (as their
+        airlight is)."""
         mu = np.maximum(np.asarray(sin_elevation, dtype=np.float64), np.sin(np.radians(HORIZON_ELEVATION_DEG)))
-        tau = self.optical_depth(mu, column_distance(self.altitude_m, mu), segments=64, spacing=2.0)
+        ground = copy.copy(self)
+        ground.altitude_m = 0.0
+        tau = ground.optical_depth(mu, column_distance(0.0, mu), segments=64, spacing=2.0)
         return np.exp(-tau)
 
     def seen_through(self, rgb, airlight, column_transmittance, sin_elevation, distances, weights=None) -> list:

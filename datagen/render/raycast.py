@@ -130,9 +130,10 @@ class RayCasting:
         at every pixel centre; with ``stride`` 2, one ray per 2 x 2 block (at its centre),
         repeated over the block (what the camera model and the image statistics need).
 
-        ``opacity``: also the opacity of the cloud a pixel's ray stops at (1 elsewhere),
-        which the aerial perspective weighs a cloud's edge by (a scalar variant gives 1
-        everywhere)."""
+        ``opacity``: also (h, w, 2) the opacity of each cloud layer (in
+        :data:`~datagen.render.world.CLOUD_LAYERS`' order) where the pixel's ray meets it (0
+        where it meets none, or stops before), which the aerial perspective weighs a
+        sample's paths to and past each layer by (a scalar variant gives 0 everywhere)."""
         k = self.intrinsics
         d_cam, z_per_t = self._pixel_rays(stride)
         w, h = -(-k.width // stride), -(-k.height // stride)
@@ -140,20 +141,21 @@ class RayCasting:
         if self.variant.startswith("scalar"):
             t, ids, surface = self.cast(self._camera_render, d_cam @ r.T)
             depth = t * z_per_t
-            alpha = np.ones_like(depth)
+            alpha = np.zeros((len(depth), len(CLOUD_LAYERS)), np.float32)
         else:  # the rays made and rotated on the device
             mi, dr = self._mi, self._dr
             d_dev, z_dev = self._device_rays(stride)
             m = [[dr.opaque(mi.Float, float(r[i, j])) for j in range(3)] for i in range(3)]
             d = mi.Vector3f(*(m[i][0] * d_dev.x + m[i][1] * d_dev.y + m[i][2] * d_dev.z for i in range(3)))
-            t, ids, surface, alpha = self._cast_on_device(d)
+            t, ids, surface, alpha, alpha2 = self._cast_on_device(d)
             depth = t * z_dev
             dr.eval(depth)
-            depth, ids, surface, alpha = (np.asarray(a) for a in (depth, ids, surface, alpha))
+            depth, ids, surface = (np.asarray(a) for a in (depth, ids, surface))
+            alpha = np.stack([np.asarray(alpha), np.asarray(alpha2)], axis=-1)
         out = (depth.reshape(h, w).astype(np.float32), ids.reshape(h, w).astype(np.uint32),
                surface.reshape(h, w).astype(np.uint8))
         if opacity:
-            out += (alpha.reshape(h, w).astype(np.float32),)
+            out += (alpha.reshape(h, w, 2).astype(np.float32),)
         if stride == 1:
             return out
         return tuple(np.repeat(np.repeat(a, stride, axis=0), stride, axis=1)[:k.height, :k.width] for a in out)
@@ -169,10 +171,10 @@ class RayCasting:
 
     def _cast_on_device(self, d):
         """:meth:`cast` of rays ``d`` (``mi.Vector3f``, render frame) from the posed camera, as
-        Dr.Jit work on the variant's device: (t, object id, surface, the opacity of the cloud
-        a ray stops at (1 elsewhere)), evaluated there. The same as the scalar loop but for
-        float32 rounding of the distance travelled through cloud layers (a pixel or two of
-        2 million at a cloud's edge)."""
+        Dr.Jit work on the variant's device: (t, object id, surface, and per cloud layer its
+        opacity where the ray meets it (0 where it does not)), evaluated there.
+        The same as the scalar loop but for float32 rounding of the distance travelled
+        through cloud layers (a pixel or two of 2 million at a cloud's edge)."""
         mi, dr = self._mi, self._dr
         n = dr.width(d)
         o = mi.Point3f(*(dr.zeros(mi.Float, n) + dr.opaque(mi.Float, float(c)) for c in self._camera_render))
@@ -181,7 +183,7 @@ class RayCasting:
         t_out = dr.opaque(mi.Float, dr.inf, n)
         ids_out = dr.opaque(mi.UInt32, 0, n)
         surface_out = dr.opaque(mi.UInt32, 0, n)
-        alpha_out = dr.opaque(mi.Float, 1.0, n)
+        alpha_out = [dr.opaque(mi.Float, 0.0, n) for _ in CLOUD_LAYERS]
         active = dr.opaque(mi.Bool, True, n)
         dr.make_opaque(d, o)
         # Each step is evaluated on its own, so that every kernel is the same whichever
@@ -222,15 +224,16 @@ class RayCasting:
             t_out = dr.select(done, travelled + hit_t, t_out)
             ids_out = dr.select(done, ids, ids_out)
             surface_out = dr.select(done, surface, surface_out)
-            alpha_out = dr.select(done, alpha, alpha_out)
+            for c in range(1, len(layers)):
+                alpha_out[c - 1] = dr.select(active & (code == c), alpha, alpha_out[c - 1])
             active = passing
             step = _past(hit_t, dr.maximum)
             travelled = dr.select(passing, travelled + step, travelled)
             o = dr.select(passing, o + d * step, o)
-            dr.eval(t_out, ids_out, surface_out, alpha_out, active, travelled, o)
+            dr.eval(t_out, ids_out, surface_out, *alpha_out, active, travelled, o)
             if not dr.any(active)[0]:
                 break
-        return t_out, ids_out, surface_out, alpha_out
+        return t_out, ids_out, surface_out, *alpha_out
 
     def feature_visibility(self, state: FrameState, features: FeatureTable
                            ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:

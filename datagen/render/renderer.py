@@ -406,7 +406,8 @@ class Renderer(RayCasting):
             air = Atmosphere(float(state.world_from_cam[2, 3]), look.haze_visibility_m, look.haze_scale_height_m)
         grid = airlight_grid(self.sky, air, self.intrinsics, state.world_from_cam)
         if alpha is None:  # no geometry pass: no cloud's edge to weigh
-            alpha, stride = np.ones((1, 1), np.float32), max(self.intrinsics.width, self.intrinsics.height)
+            alpha, stride = np.zeros((1, 1, len(CLOUD_LAYERS)), np.float32), max(self.intrinsics.width,
+                                                                                  self.intrinsics.height)
         self.aerial.set_frame(air=air, grid=grid, alpha=alpha, stride=stride, intrinsics=self.intrinsics,
                               cam_from_render=state.world_from_cam[:3, :3].T, codes=self._background_codes)
 
