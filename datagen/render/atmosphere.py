@@ -123,9 +123,16 @@ def air_masses(altitude_m, sin_elevation, distance_m, scale_heights_m, *, segmen
 def air_mass(altitude_m: float, sin_elevation: NDArray, distance_m: NDArray, scale_height_m: float,
              **kw) -> NDArray[np.float64]:
     """:func:`air_masses` of one scale height, numpy."""
+    return _air_masses_numpy(altitude_m, sin_elevation, distance_m, (scale_height_m,), **kw)[0]
+
+
+def _air_masses_numpy(altitude_m: float, sin_elevation: NDArray, distance_m: NDArray, scale_heights_m,
+                      **kw) -> list[NDArray[np.float64]]:
+    """:func:`air_masses` in float64 numpy, the arrays broadcast together."""
     s = np.asarray(distance_m, dtype=np.float64)
     mu = np.broadcast_to(np.asarray(sin_elevation, dtype=np.float64), np.broadcast(s, sin_elevation).shape)
-    return air_masses(float(altitude_m), mu, np.broadcast_to(s, mu.shape), (float(scale_height_m),), **kw)[0]
+    return air_masses(float(altitude_m), mu, np.broadcast_to(s, mu.shape),
+                      tuple(float(h) for h in scale_heights_m), **kw)
 
 
 def column_distance(altitude_m: float, sin_elevation: NDArray) -> NDArray[np.float64]:
@@ -177,9 +184,8 @@ class Atmosphere:
 
     def optical_depth(self, sin_elevation: NDArray, distance_m: NDArray, **kw) -> NDArray[np.float64]:
         """(..., 3) optical depth per RGB channel of the paths (numpy)."""
-        m_r = air_mass(self.altitude_m, sin_elevation, distance_m, RAYLEIGH_SCALE_HEIGHT_M, **kw)
-        m_a = air_mass(self.altitude_m, sin_elevation, distance_m, self.aerosol_scale_height_m, **kw)
-        return self.depth_of(m_r, m_a)
+        return self.depth_of(*_air_masses_numpy(self.altitude_m, sin_elevation, distance_m,
+                                                (RAYLEIGH_SCALE_HEIGHT_M, self.aerosol_scale_height_m), **kw))
 
     def depth_of(self, rayleigh_mass: NDArray, aerosol_mass: NDArray) -> NDArray:
         """(..., 3) optical depth of paths of the given air masses (:func:`air_masses`)."""
