@@ -24,8 +24,8 @@ TOUR = {"config": "wingcam55", "frames": 12}
 #: timings are in every rendered row too: see the dataset format).
 ROW_COLUMNS = ("frame_id", "split", "shard", "label_path", "width", "height", "fx", "fy", "cx", "cy",
                "distance_m", "ptd_receiver_m", "approach_index", "time_s", "sun_elevation_deg", "sun_azimuth_deg",
-               "turbidity", "sea_wind_speed_mps", "cloud_layer_coverage", "receiver_livery", "tanker_livery",
-               "sensor_iso", "n_labeled")
+               "turbidity", "sea_wind_speed_mps", "cloud_type", "cloud_layer_coverage", "ground_type",
+               "receiver_livery", "tanker_livery", "sensor_iso", "n_labeled")
 
 
 def tour_config():

@@ -32,6 +32,7 @@ DRAWS = {
     "sensor": [f for f in _FIELDS if f.startswith("sensor_")],
     "backlit sun": ["sun_backlit"],
     "haze": ["haze_visibility_m", "haze_scale_height_m"],
+    "ground": ["ground_type", "ground_seed"],
 }
 #: Draws a randomizer replaces when on: the sea's approach wind replaces the frame's own
 #: wind draw (waves, whitecaps and glint then agree); a backlit sun moves the sun's azimuth.

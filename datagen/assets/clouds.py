@@ -1,5 +1,9 @@
 """Clouds: a cloud layer's opacity at a coverage (:class:`CloudLayer`), band-limited
-procedural noise (:mod:`datagen.assets.noise`) evaluated where it is seen, no texels."""
+procedural noise (:mod:`datagen.assets.noise`) evaluated where it is seen, no texels;
+the forms a pilot meets (:data:`CLOUD_FORMS`: cumulus fields, stratocumulus rolls, an
+overcast, a thin layer above) and their body: a layer is a shaded height field of its
+drawn thickness (:meth:`CloudLayer.radiance`: sunlit slopes and tops, self-shadowed lee
+sides, bases darkening with the thickness above them)."""
 
 from __future__ import annotations
 
@@ -16,11 +20,14 @@ __all__ = [
     "CLOUD_CORE",
     "CLOUD_CORE_TOLERANCE",
     "CLOUD_EDGE",
+    "CLOUD_FORMS",
     "CLOUD_GAIN",
     "CLOUD_OCTAVES",
     "CLOUD_WAVELENGTH_M",
     "COVER_MARGIN",
+    "CloudForm",
     "CloudLayer",
+    "CloudLight",
 ]
 
 #: A cloud layer's field: its largest features CLOUD_WAVELENGTH_M across, CLOUD_OCTAVES octaves
@@ -44,6 +51,67 @@ CLOUD_CORE: Final = 0.35
 #: of it), detail under about 50 m inside thick cloud that 4 spp and the denoiser do not
 #: resolve. The edges keep every octave.
 CLOUD_CORE_TOLERANCE: Final = 0.02
+#: The height field that gives a layer its body is the field's first SHAPE_OCTAVES octaves
+#: (down to 1/32 of the form's wavelength: 60-190 m), sampled at the shading point and at
+#: points towards the sun: SLOPE_STEP of the wavelength away (the slope the sun meets)
+#: and SHADOW_STEPS of it (whether the cloud rises above the sun's ray there: self-shadowing).
+SHAPE_OCTAVES: Final = 6
+SLOPE_STEP: Final = 1.0 / 48.0
+SHADOW_STEPS: Final = (1.0 / 12.0, 1.0 / 5.0)
+#: Multiple scattering inside a cloud lights its slopes beyond the terminator: the sun's
+#: cosine is wrapped by WRAP (0: a Lambertian surface), and a self-shadowed point keeps
+#: SHADOW_FLOOR of the sun's light. A base transmits the sun and sky through a thickness h
+#: as a thick scattering slab does, 1 / (1 + h / BASE_DEPTH_M) (Bohren 1987's diffuse
+#: transmittance, 1 / (1 + 3/4 (1 - g) tau), for a droplet cloud's extinction of about
+#: 0.05 per metre and g = 0.85: half the light through 180 m, a sixth through 1 km).
+WRAP: Final = 0.4
+SHADOW_FLOOR: Final = 0.25
+BASE_DEPTH_M: Final = 180.0
+
+
+@dataclass(frozen=True)
+class CloudForm:
+    """One kind of cloud: its field's largest features ``wavelength_m`` across, elongated
+    ``stretch`` times along a drawn direction (rolls), the share of a layer it covers
+    (``coverage``) and how thick it is (``thickness_m``), both drawn per approach."""
+
+    wavelength_m: float
+    stretch: float
+    coverage: tuple[float, float]
+    thickness_m: tuple[float, float]
+
+
+#: The deck's forms (:class:`CloudForm`), drawn per approach by the config's shares; the
+#: scattered layer is always a ``layer`` (altocumulus: thin, small cells, above or below).
+#: Coverage and thickness from the WMO cloud atlas's descriptions: cumulus fields of
+#: separate heaps 0.5-2.5 km deep, stratocumulus rolls mostly covering the sky, 200-800 m
+#: deep, an overcast (stratus, nimbostratus) over all of it.
+CLOUD_FORMS: Final = {
+    "cumulus": CloudForm(3_000.0, 1.0, (0.1, 0.45), (600.0, 2_500.0)),
+    "stratocumulus": CloudForm(2_500.0, 2.2, (0.5, 0.85), (200.0, 800.0)),
+    "overcast": CloudForm(CLOUD_WAVELENGTH_M, 1.0, (0.93, 1.0), (400.0, 1_500.0)),
+    "layer": CloudForm(2_000.0, 1.5, (0.0, 1.0), (100.0, 600.0)),
+}
+#: A layer of no form drawn (the forms' fields as they were before they had forms).
+FLAT: Final = CloudForm(CLOUD_WAVELENGTH_M, 1.0, (0.0, 1.0), (0.0, 0.0))
+
+
+@dataclass(frozen=True)
+class CloudLight:
+    """What lights a layer this frame: the sun's and the sky's RGB irradiance on a
+    horizontal surface (no occluders), the sun's direction (unit, render frame: z up) and
+    the clouds' albedo."""
+
+    sun: tuple[float, float, float]
+    sky: tuple[float, float, float]
+    sun_direction: tuple[float, float, float]
+    albedo: float
+
+    @property
+    def sun_normal(self) -> tuple[float, float, float]:
+        """The sun's irradiance on a surface facing it."""
+        sin_el = max(self.sun_direction[2], 0.05)
+        return tuple(c / sin_el for c in self.sun)
 
 
 @dataclass(frozen=True)
@@ -57,16 +125,26 @@ class CloudLayer:
     field: FractalField
     threshold: float
     opacity: float
+    thickness_m: float = 0.0
+    #: How far above the threshold the height field reaches its full thickness (the field's
+    #: 99.5th percentile there: a layer's thickest cells).
+    crest: float = CLOUD_CORE
 
     @classmethod
-    def drawn(cls, rng: np.random.Generator, coverage: float, opacity: float, span_m: float) -> CloudLayer:
-        """A layer whose cloud covers ``coverage`` of a square ``span_m`` across (the
-        threshold is the field's quantile there; no cloud at all for coverage 0)."""
-        field = FractalField.drawn(rng, CLOUD_WAVELENGTH_M, CLOUD_OCTAVES, CLOUD_GAIN)
+    def drawn(cls, rng: np.random.Generator, coverage: float, opacity: float, span_m: float,
+              form: CloudForm = FLAT, thickness_m: float = 0.0) -> CloudLayer:
+        """A layer of ``form`` whose cloud covers ``coverage`` of a square ``span_m``
+        across (the threshold is the field's quantile there; no cloud at all for coverage
+        0), ``thickness_m`` deep at its thickest."""
+        direction = float(rng.uniform(0.0, 2.0 * math.pi)) if form.stretch != 1.0 else 0.0
+        field = FractalField.drawn(rng, form.wavelength_m, CLOUD_OCTAVES, CLOUD_GAIN, stretch=form.stretch,
+                                   direction_rad=direction)
         if coverage <= 0.0:
-            return cls(field, math.inf, 0.0)
-        sample = sample_grid(field, span_m, 256, octaves=6)
-        return cls(field, float(np.quantile(sample, 1.0 - min(coverage, 1.0))), float(opacity))
+            return cls(field, math.inf, 0.0, float(thickness_m))
+        sample = sample_grid(field, span_m, 256, octaves=SHAPE_OCTAVES)
+        threshold = float(np.quantile(sample, 1.0 - min(coverage, 1.0)))
+        crest = max(float(np.quantile(sample, 0.995)) - threshold, CLOUD_EDGE)
+        return cls(field, threshold, float(opacity), float(thickness_m), crest)
 
     def opacity_of(self, value, ops: Ops = NUMPY):
         """Opacity where the field is ``value``."""
@@ -123,3 +201,53 @@ class CloudLayer:
             return u < x * ops.f32(0.0)
         value = self.field(x, y, footprint_m, ops, settled=functools.partial(self.decided, u=u))
         return u < ops.clip(self.opacity_of(value, ops), 0.0, 1.0)
+
+    def height(self, x, y, ops: Ops = NUMPY):
+        """The layer's height field at ``(x, y)``: its thickness where the field's first
+        :data:`SHAPE_OCTAVES` octaves reach the crest, rounding down to 0 at the threshold
+        (a heap's dome: the square root of the field's rise)."""
+        value = self.field(x, y, ops=ops, octaves=SHAPE_OCTAVES)
+        rise = ops.clip((value - ops.param_f32(self.threshold)) * ops.param_f32(1.0 / self.crest), 0.0, 1.0)
+        return ops.sqrt(rise) * ops.param_f32(self.thickness_m)
+
+    def radiance(self, light: CloudLight, above, x, y, footprint_m=None, ops: Ops = NUMPY):
+        """What the layer's side facing the camera sends back at ``(x, y)``, RGB,
+        premultiplied by its opacity: from above, its tops and slopes, the sun's light by the
+        height field's slope towards it (wrapped by :data:`WRAP`) where no higher part of the
+        cloud stands in the sun's ray (:data:`SHADOW_STEPS`), and the sky's, thin parts
+        reflecting a little over half what thick cores do; from below (``above``, a kernel
+        weight: 1 or 0), its base, the sun and sky transmitted through the thickness there
+        (:data:`BASE_DEPTH_M`). Both are traced: a layer passing from below the camera to
+        above it compiles no new kernel."""
+        f, p = ops.f32, ops.param_f32
+        value = self.value(x, y, footprint_m, ops)
+        opacity, core = self.opacity_of(value, ops), self.core_of(value, ops)
+        if not math.isfinite(self.threshold):
+            return tuple(opacity for _ in range(3))
+        sx, sy, sz = light.sun_direction
+        horizontal = math.hypot(sx, sy) or 1.0
+        ux, uy = p(sx / horizontal), p(sy / horizontal)
+        sin_el, cos_el = max(sz, 0.05), horizontal
+        wavelength = self.field.wavelength_m
+        h = self.height(x, y, ops)
+        step = SLOPE_STEP * wavelength
+        slope = (self.height(x + ux * p(step), y + uy * p(step), ops) - h) * p(1.0 / step)  # the form's scale: data
+        facing = (p(sin_el) - p(cos_el) * slope) / ops.sqrt(f(1.0) + slope * slope)
+        lit = ops.clip((facing + f(WRAP)) * f(1.0 / (1.0 + WRAP)), 0.0, 1.0)
+        for fraction in SHADOW_STEPS:
+            reach = fraction * wavelength
+            climb = reach * sin_el / max(cos_el, 1e-6)  # how far the sun's ray has risen there
+            over = self.height(x + ux * p(reach), y + uy * p(reach), ops) - h - p(climb)
+            lit = lit * (f(1.0) - f(1.0 - SHADOW_FLOOR) * ops.clip(over * p(1.0 / max(0.25 * self.thickness_m, 1.0)),
+                                                                    0.0, 1.0))
+        reflect = f(0.55) + f(0.45) * core
+        w = above
+        through = f(1.0) / (f(1.0) + h * f(1.0 / BASE_DEPTH_M))
+        sun_n, sun, sky = light.sun_normal, light.sun, light.sky
+        albedo = light.albedo / math.pi
+        out = []
+        for c in range(3):
+            top = (lit * p(sun_n[c] * albedo) + p(sky[c] * albedo)) * reflect
+            base = through * p((sun[c] + sky[c]) * albedo)
+            out.append(opacity * (w * base + (f(1.0) - w) * top))
+        return tuple(out)

@@ -134,6 +134,7 @@ CLOUD_CLEARANCE_M = 200.0
 WORLD_RANDOMIZERS: Final[dict[str, dict[str, Any]]] = {
     "clouds": {"randomization.clouds.enabled": False},
     "haze": {"randomization.haze.enabled": False},
+    "ground": {"randomization.ground.enabled": False},
     "sea": {"randomization.sea.waves": False, "randomization.sea.whitecaps": False,
             "randomization.sea.colour": False},
     "livery": {"randomization.livery.enabled": False},
@@ -500,6 +501,21 @@ def _unit_range(bounds: tuple[float, float]) -> tuple[float, float]:
 UnitRange = Annotated[Range, AfterValidator(_unit_range)]
 
 
+def _shares(shares: dict[str, float]) -> dict[str, float]:
+    if any(not (math.isfinite(v) and v >= 0.0) for v in shares.values()) or not sum(shares.values()) > 0.0:
+        raise ValueError(f"shares must be 0 or more, at least one of them above 0, got {dict(shares)}")
+    return shares
+
+
+#: The cloud deck's forms (:data:`datagen.assets.clouds.CLOUD_FORMS`).
+CloudForm = Literal["cumulus", "stratocumulus", "overcast"]
+#: Relative shares of named kinds, one drawn per approach in proportion (any positive scale).
+CloudShares = Annotated[dict[CloudForm, Number], AfterValidator(_shares)]
+#: The ground's types (:data:`datagen.assets.ground.GROUND_TYPES`).
+GroundType = Literal["sea", "coast", "farmland", "desert", "snow", "mountains"]
+GroundShares = Annotated[dict[GroundType, Number], AfterValidator(_shares)]
+
+
 class HazeConfig(_Section):
     """Aerial perspective (:mod:`datagen.render.atmosphere`): the air between the camera and
     every surface (sea, clouds, aircraft) dims it and adds the sky's own light in its
@@ -522,33 +538,58 @@ class HazeConfig(_Section):
 class CloudsConfig(_Section):
     """Cloud layers: a deck below the aircraft and a scattered layer above or below them.
 
-    Each layer is a horizontal sheet whose opacity is a thresholded fractal-noise field
-    (coverage), lit by the sun and sky (a white diffuse sheet's brightness): a layer between
-    the sun and the aircraft shades them, one between the camera and the sea hides the sea.
-    Altitudes are drawn per approach relative to the tanker's (constant over an approach),
-    never closer to it than the approach's far end plus 200 m, so that no cloud lies between
-    the camera and a labeled feature."""
+    Each layer is a sheet on the sphere of its altitude, out to the horizon, whose opacity
+    is a thresholded fractal-noise field (coverage) and whose body is a height field of the
+    drawn thickness (:mod:`datagen.assets.clouds`): sunlit slopes and tops, self-shadowed lee
+    sides, bases darker the thicker the cloud above them. The deck's form (cumulus,
+    stratocumulus, overcast) sets its cells' size, shape, coverage and thickness; the
+    scattered layer is thin altocumulus. A layer between the sun and the aircraft or the sea
+    shades them. Altitudes are drawn per approach relative to the tanker's (constant over an
+    approach), never closer to it than the approach's far end plus 200 m, so that no cloud
+    lies between the camera and a labeled feature."""
 
     enabled: Flag = True
     """Render cloud layers; off: a clear sky (the scene then has no cloud meshes at all)."""
 
-    deck_coverage: UnitRange = (0.0, 0.9)
-    """Share of the deck's area that is cloud."""
+    forms: CloudShares = {"cumulus": 0.4, "stratocumulus": 0.35, "overcast": 0.25}
+    """The deck's forms and their shares of approaches (cumulus fields, stratocumulus rolls,
+    an overcast); each form draws its own coverage and thickness."""
+
+    deck_coverage: UnitRange = (0.0, 1.0)
+    """Bounds on the share of the deck's area that is cloud (the form's own draw is clipped to them)."""
 
     deck_below_m: Annotated[Range, _within(0.0, 20_000.0)] = (600.0, 3000.0)
     """How far below the tanker the deck lies, metres."""
 
-    layer_coverage: UnitRange = (0.0, 0.5)
+    layer_coverage: UnitRange = (0.0, 0.7)
     """Share of the scattered layer's area that is cloud."""
+
+    layer_thickness_m: Annotated[Range, _within(0.0, 3_000.0)] = (100.0, 600.0)
+    """How thick the scattered layer's thickest cells are, metres."""
 
     layer_offset_m: Annotated[Range, _within(0.0, 20_000.0)] = (600.0, 4000.0)
     """How far above or below the tanker the scattered layer lies (the side is drawn), metres."""
 
-    opacity: UnitRange = (0.6, 1.0)
-    """Opacity of a cloud's thick core (optical thickness): thin layers let the sun through."""
+    opacity: UnitRange = (0.97, 1.0)
+    """Opacity of a cloud's thick core (a droplet cloud 100 m thick lets through under 1% of
+    the light: its thin edges carry the rest of the transparency; lower values make veils,
+    which at a few samples a pixel render as speckle)."""
 
     albedo: UnitRange = (0.6, 0.95)
     """Diffuse reflectance of the cloud tops (brightness)."""
+
+
+class GroundConfig(_Section):
+    """The ground below: open sea or land (:mod:`datagen.assets.ground`), one type per
+    approach drawn by its share: a coast (land and sea), farmland, desert, snow, mountains,
+    each with its own albedo and relief (shaded; the horizon stays the sphere's)."""
+
+    enabled: Flag = True
+    """Draw a ground type per approach; off: open sea everywhere (the surface then has no land in its kernel)."""
+
+    shares: GroundShares = {"sea": 0.55, "coast": 0.15, "farmland": 0.1, "desert": 0.08, "snow": 0.05,
+                            "mountains": 0.07}
+    """Each ground type's share of approaches (sea the majority by default)."""
 
 
 class LiveryConfig(_Section):
@@ -658,6 +699,9 @@ class RandomizationConfig(_Section):
 
     clouds: CloudsConfig = CloudsConfig()
     """Cloud deck and scattered layer."""
+
+    ground: GroundConfig = GroundConfig()
+    """Land as well as sea: the ground type drawn per approach."""
 
     livery: LiveryConfig = LiveryConfig()
     """Aircraft liveries, panel lines, markings and weathering."""

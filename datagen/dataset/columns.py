@@ -59,13 +59,14 @@ __all__ = [
 ]
 
 #: Version of the manifest and feature-table schemas (bumped on any incompatible change).
-MANIFEST_VERSION: Final = "9"
+MANIFEST_VERSION: Final = "10"
 #: The manifest versions this datagen reads: 7 stored fixed-size lists as they are
 #: (:func:`stored_type`); a column added since a version is read as nulls from it
 #: (:data:`COLUMNS_SINCE`).
-READABLE_MANIFEST_VERSIONS: Final = ("7", "8", MANIFEST_VERSION)
+READABLE_MANIFEST_VERSIONS: Final = ("7", "8", "9", MANIFEST_VERSION)
 #: Columns added after version 7, with the version that added them.
-COLUMNS_SINCE: Final = {"haze_scale_height_m": "9"}
+COLUMNS_SINCE: Final = {"haze_scale_height_m": "9", "cloud_type": "10", "cloud_deck_thickness_m": "10",
+                         "cloud_layer_thickness_m": "10", "ground_type": "10", "ground_seed": "10"}
 
 #: The image statistics a manifest records per rendered frame
 #: (:func:`datagen.render.tonemap.image_statistics` measures them).
@@ -97,8 +98,10 @@ APPEARANCE: Final[dict[str, tuple[str, ...]]] = {
     "sun and sky": ("sun_elevation_deg", "sun_azimuth_deg", "sun_backlit", "turbidity", "sun_scale", "sky_scale",
                     "exposure_ev"),
     "atmosphere": ("haze_visibility_m", "haze_scale_height_m"),
-    "clouds": ("cloud_deck_coverage", "cloud_deck_altitude_m", "cloud_layer_coverage", "cloud_layer_altitude_m",
-               "cloud_opacity", "cloud_albedo"),
+    "clouds": ("cloud_type", "cloud_deck_coverage", "cloud_deck_altitude_m", "cloud_deck_thickness_m",
+               "cloud_layer_coverage", "cloud_layer_altitude_m", "cloud_layer_thickness_m", "cloud_opacity",
+               "cloud_albedo"),
+    "ground": ("ground_type",),
     "sea": ("sea_wind_speed_mps", "sea_roughness", "sea_wind_direction_deg", "sea_wave_slope_variance",
             "sea_whitecap_fraction"),
     "livery": ("receiver_livery", "tanker_livery", "livery_weathering"),
@@ -198,10 +201,13 @@ def manifest_schema() -> pa.Schema:
         pa.field("haze_scale_height_m", _F64),
         pa.field("materials", pa.list_(MATERIAL_RECORD), nullable=False),
         pa.field("sun_backlit", pa.bool_()),
+        pa.field("cloud_type", pa.string()),
         pa.field("cloud_deck_coverage", _F64),
         pa.field("cloud_deck_altitude_m", _F64),
+        pa.field("cloud_deck_thickness_m", _F64),
         pa.field("cloud_layer_coverage", _F64),
         pa.field("cloud_layer_altitude_m", _F64),
+        pa.field("cloud_layer_thickness_m", _F64),
         pa.field("cloud_opacity", _F64),
         pa.field("cloud_albedo", _F64),
         pa.field("cloud_seed", pa.int64()),
@@ -210,6 +216,8 @@ def manifest_schema() -> pa.Schema:
         pa.field("sea_whitecap_fraction", _F64),
         pa.field("sea_colour", _vec(3)),
         pa.field("sea_seed", pa.int64()),
+        pa.field("ground_type", pa.string()),
+        pa.field("ground_seed", pa.int64()),
         pa.field("receiver_livery", pa.string()),
         pa.field("tanker_livery", pa.string()),
         pa.field("livery_weathering", _F64),

@@ -15,7 +15,9 @@ sea's samples of a horizon pixel by its centre's path, or not at all). Per sampl
   ``radiance``);
 - a sample that meets cloud layers weighs its path to each layer and the one past it
   (more rays, up to two layers) by that layer's opacity where its pixel's ray meets it,
-  from the geometry pass (0 where the pixel's ray meets none of it: the path past it).
+  from the geometry pass; where the pixel's ray meets none of that layer (a sliver of
+  distant cloud a sample finds inside a pixel whose centre sees the sky), the sample's
+  path ends at the layer it met.
 
 Everything that changes per frame is a kernel input (arrays, opaque scalars): the render
 kernel compiles once. Samples that meet nothing (the sky) are returned as they are.
@@ -88,7 +90,7 @@ def aerial_class(variant: str):
         def set_frame(self, *, air: Atmosphere, grid: NDArray[np.float32], alpha: NDArray[np.float32],
                       stride: int, intrinsics: Intrinsics, cam_from_render: NDArray[np.float64], codes) -> None:
             """The frame's air (``grid``: :func:`airlight_grid`; ``alpha``: (h, w, layers) the
-            opacity of each cloud layer where each pixel's ray meets it, 0 where it does not,
+            opacity of each cloud layer where each pixel's ray meets it, -1 where it does not,
             from a geometry pass of ``stride``;
             ``cam_from_render``: the camera's rotation; ``codes``: per shape registry id + 1
             its index in ``("sea", *CLOUD_LAYERS)``)."""
@@ -153,6 +155,7 @@ def aerial_class(variant: str):
             layers = len(CLOUD_LAYERS)
             w1, w2 = (dr.select(met, dr.gather(mi.Float, f["alpha"], pixel * layers + mi.UInt32(layer - 1), met), 1.0)
                       for met, layer in ((cloud1, layer1), (cloud2, layer2)))
+            w1, w2 = (dr.select(w < 0.0, 1.0, w) for w in (w1, w2))  # the pixel's ray met no such layer
             weights = (w1, (1.0 - w1) * w2, (1.0 - w1) * (1.0 - w2))
             airlight, column = self._grid(u, v, width, height)
             paths = [self._transmittance(d.z, t) for t in (t1, t2, t3)]

@@ -131,9 +131,10 @@ class RayCasting:
         repeated over the block (what the camera model and the image statistics need).
 
         ``opacity``: also (h, w, 2) the opacity of each cloud layer (in
-        :data:`~datagen.render.world.CLOUD_LAYERS`' order) where the pixel's ray meets it (0
-        where it meets none, or stops before), which the aerial perspective weighs a
-        sample's paths to and past each layer by (a scalar variant gives 0 everywhere)."""
+        :data:`~datagen.render.world.CLOUD_LAYERS`' order) where the pixel's ray meets it (-1
+        where it does not: it meets none, or stops before), which the aerial perspective
+        weighs a sample's paths to and past each layer by (a scalar variant gives -1
+        everywhere)."""
         k = self.intrinsics
         d_cam, z_per_t = self._pixel_rays(stride)
         w, h = -(-k.width // stride), -(-k.height // stride)
@@ -141,7 +142,7 @@ class RayCasting:
         if self.variant.startswith("scalar"):
             t, ids, surface = self.cast(self._camera_render, d_cam @ r.T)
             depth = t * z_per_t
-            alpha = np.zeros((len(depth), len(CLOUD_LAYERS)), np.float32)
+            alpha = np.full((len(depth), len(CLOUD_LAYERS)), -1.0, np.float32)
         else:  # the rays made and rotated on the device
             mi, dr = self._mi, self._dr
             d_dev, z_dev = self._device_rays(stride)
@@ -172,7 +173,7 @@ class RayCasting:
     def _cast_on_device(self, d):
         """:meth:`cast` of rays ``d`` (``mi.Vector3f``, render frame) from the posed camera, as
         Dr.Jit work on the variant's device: (t, object id, surface, and per cloud layer its
-        opacity where the ray meets it (0 where it does not)), evaluated there.
+        opacity where the ray meets it (-1 where it does not)), evaluated there.
         The same as the scalar loop but for float32 rounding of the distance travelled
         through cloud layers (a pixel or two of 2 million at a cloud's edge)."""
         mi, dr = self._mi, self._dr
@@ -183,7 +184,7 @@ class RayCasting:
         t_out = dr.opaque(mi.Float, dr.inf, n)
         ids_out = dr.opaque(mi.UInt32, 0, n)
         surface_out = dr.opaque(mi.UInt32, 0, n)
-        alpha_out = [dr.opaque(mi.Float, 0.0, n) for _ in CLOUD_LAYERS]
+        alpha_out = [dr.opaque(mi.Float, -1.0, n) for _ in CLOUD_LAYERS]
         active = dr.opaque(mi.Bool, True, n)
         dr.make_opaque(d, o)
         # Each step is evaluated on its own, so that every kernel is the same whichever

@@ -21,6 +21,7 @@ aerial perspective (:mod:`datagen.render.atmosphere`).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final, Protocol
 
@@ -61,6 +62,9 @@ __all__ = ["FrameRenderer", "RenderResult", "Renderer"]
 AERIAL_PERSPECTIVE: Final = "aerial perspective"
 #: With clouds, the render frame's origin is at a multiple of this altitude (see Renderer._render_origin).
 CLOUD_REFERENCE_STEP_M: Final = 50.0
+#: The cloud-lighting probe counts its sky samples within SUN_CONE_DEG of the sun as the
+#: sun's light (its disc is 0.53 degrees across), the rest as the sky's.
+SUN_CONE_DEG: Final = 1.0
 
 
 @dataclass(frozen=True)
@@ -258,9 +262,10 @@ class Renderer(RayCasting):
         render_from_world = make_transform(np.eye(3), -origin)
         self._world_from_cam = state.world_from_cam
         self._camera_render = cam_pos - origin
-        self.sky.set(sun_direction_world(state, look), look.turbidity, look.sun_scale, look.sky_scale)
+        sun = sun_direction_world(state, look)
+        self.sky.set(sun, look.turbidity, look.sun_scale, look.sky_scale)
         with clock.stage("cloud-lighting probe"):
-            irradiance = self._sky_irradiance() if self.world.clouds else None
+            irradiance = self._sky_irradiance(sun) if self.world.clouds else None
         liveries = self.world.livery_textures(look)
         for obj in RIGID_OBJECTS:
             p[f"{obj}.to_world"] = mi.Transform4f((render_from_world @ state.world_from(obj)).tolist())
@@ -276,7 +281,7 @@ class Renderer(RayCasting):
         p["sensor.to_world"] = mi.Transform4f(sensor.tolist())
         # The earth's top under the camera (the render frame's origin is over the camera's nadir).
         p["earth.to_world"] = mi.Transform4f(make_transform(np.eye(3), [0.0, 0.0, -origin[2]]).tolist())
-        self.world.apply(p, look, float(origin[2]), irradiance, camera_render=self._camera_render)
+        self.world.apply(p, look, float(origin[2]), irradiance, camera_render=self._camera_render, sun_direction=sun)
         p.update()
 
     @property
@@ -295,33 +300,38 @@ class Renderer(RayCasting):
         z = round(float(cam_pos[2]) / CLOUD_REFERENCE_STEP_M) * CLOUD_REFERENCE_STEP_M
         return np.array([cam_pos[0], cam_pos[1], z])
 
-    def _sky_irradiance(self) -> NDArray[np.float64]:
-        """RGB irradiance of the frame's sun and sky on a horizontal surface, no occluders,
-        from a fixed stratified set of the scene's own sky's importance samples
-        (deterministic; nothing else of the scene is involved). The samples' inputs are
-        made once and opaque: built per call, they sometimes compiled three new kernels
-        (a literal folded into one frame's probe and not another's)."""
+    def _sky_irradiance(self, sun: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """RGB irradiance of the frame's sun (the samples within :data:`SUN_CONE_DEG` of
+        ``sun``) and of the rest of its sky on a horizontal surface, no occluders, from a
+        fixed stratified set of the scene's own sky's importance samples (deterministic;
+        nothing else of the scene is involved). The samples' inputs are made once and
+        opaque: built per call, they sometimes compiled three new kernels (a literal folded
+        into one frame's probe and not another's)."""
         mi, dr = self._mi, self._dr
         sky = self.sky
         scalar = self.variant.startswith("scalar")
         n = 16 if scalar else 64  # the scalar fallback samples one direction per call
         grid = ((np.stack(np.meshgrid(np.arange(n), np.arange(n)), -1).reshape(-1, 2) + 0.5) / n).astype(np.float32)
         if scalar:
-            total = np.zeros(3)
+            weights, directions = [], []
             for u, v in grid:
                 ds, weight = sky.sample_direction(dr.zeros(mi.Interaction3f), mi.Point2f(float(u), float(v)))
-                total += np.array([weight[c] for c in range(3)], dtype=np.float64) * max(float(ds.d.z), 0.0)
-            return total / len(grid)
-        if self._sky_probe_inputs is None:
-            it = dr.zeros(mi.Interaction3f, n * n)
-            uv = mi.Point2f(jit_array(mi.Float, grid[:, 0]), jit_array(mi.Float, grid[:, 1]))
-            dr.make_opaque(it, uv)
-            self._sky_probe_inputs = it, uv
-        ds, weight = sky.sample_direction(*self._sky_probe_inputs)
-        cos = dr.maximum(ds.d.z, 0.0)
-        e = [dr.mean(weight[c] * cos) for c in range(3)]
-        dr.eval(e)
-        return np.array([float(v[0]) if hasattr(v, "__len__") else float(v) for v in e])
+                weights.append([weight[c] for c in range(3)])
+                directions.append([ds.d.x, ds.d.y, ds.d.z])
+            weights, directions = np.asarray(weights, np.float64), np.asarray(directions, np.float64)
+        else:
+            if self._sky_probe_inputs is None:
+                it = dr.zeros(mi.Interaction3f, n * n)
+                uv = mi.Point2f(jit_array(mi.Float, grid[:, 0]), jit_array(mi.Float, grid[:, 1]))
+                dr.make_opaque(it, uv)
+                self._sky_probe_inputs = it, uv
+            ds, weight = sky.sample_direction(*self._sky_probe_inputs)
+            dr.eval(ds.d, weight)
+            weights = np.stack([np.asarray(weight[c], np.float64) for c in range(3)], -1)
+            directions = np.stack([np.asarray(ds.d[c], np.float64) for c in range(3)], -1)
+        e = weights * np.maximum(directions[:, 2:3], 0.0) / len(grid)
+        in_sun = directions @ np.asarray(sun, np.float64) > math.cos(math.radians(SUN_CONE_DEG))
+        return e[in_sun].sum(axis=0), e[~in_sun].sum(axis=0)
 
     def _set_livery(self, prefix: str, look: FrameLook, obj: str, texture) -> None:
         """A painted part under its object's livery: the texture is the base colour; the
@@ -406,7 +416,7 @@ class Renderer(RayCasting):
             air = Atmosphere(float(state.world_from_cam[2, 3]), look.haze_visibility_m, look.haze_scale_height_m)
         grid = airlight_grid(self.sky, air, self.intrinsics, state.world_from_cam)
         if alpha is None:  # no geometry pass: no cloud's edge to weigh
-            alpha, stride = np.zeros((1, 1, len(CLOUD_LAYERS)), np.float32), max(self.intrinsics.width,
+            alpha, stride = np.full((1, 1, len(CLOUD_LAYERS)), -1.0, np.float32), max(self.intrinsics.width,
                                                                                   self.intrinsics.height)
         self.aerial.set_frame(air=air, grid=grid, alpha=alpha, stride=stride, intrinsics=self.intrinsics,
                               cam_from_render=state.world_from_cam[:3, :3].T, codes=self._background_codes)

@@ -18,6 +18,9 @@ holds nothing of it (no mesh, texture or kernel). Texture contents change per fr
   :class:`~datagen.assets.sea.SeaSurface`: the drawn body colour,
   tinted over kilometres, with whitecaps shaped where a pixel resolves them and their mean
   where it does not.
+- Ground: where the approach's ground type (:class:`~datagen.assets.ground.Ground`) has
+  land, the same surface takes the land's albedo, relief normal and matte roughness in
+  place of the sea's (one kernel whatever the type: open sea is a ground with no land).
 - Liveries: the painted parts of the receiver and the tanker get texture coordinates
   (:func:`~datagen.assets.liveries.triplanar_uv`) and a base-colour texture per object.
 """
@@ -31,7 +34,8 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.assets.clouds import CloudLayer
+from datagen.assets.clouds import CLOUD_FORMS, CloudLayer, CloudLight
+from datagen.assets.ground import GROUND_TYPES, LAND_ROUGHNESS, Ground
 from datagen.assets.liveries import LIVERY_TEXELS, livery, triplanar_uv
 from datagen.assets.sea import SeaSurface, SeaWaves
 from datagen.core.conventions import EARTH_RADIUS_M, texture_rng
@@ -44,23 +48,33 @@ if TYPE_CHECKING:
 __all__ = ["CLOUD_LAYERS", "CLOUD_SIZE_M", "EARTH_CAP_M", "LIVERY_OBJECTS", "SEA_COLOUR", "SURFACES", "World",
            "earth_cap", "sphere_drop"]
 
-#: The cloud layers' shape names (in the scene) and the FrameLook fields that place them.
-CLOUD_LAYERS: Final = {"cloud_deck": ("cloud_deck_coverage", "cloud_deck_altitude_m"),
-                       "cloud_layer": ("cloud_layer_coverage", "cloud_layer_altitude_m")}
+#: The cloud layers' shape names (in the scene) and the FrameLook fields that place them
+#: (coverage, altitude, thickness).
+CLOUD_LAYERS: Final = {
+    "cloud_deck": ("cloud_deck_coverage", "cloud_deck_altitude_m", "cloud_deck_thickness_m"),
+    "cloud_layer": ("cloud_layer_coverage", "cloud_layer_altitude_m", "cloud_layer_thickness_m"),
+}
 #: A cloud layer is a square CLOUD_SIZE_M across, centred under or over the camera, as a mesh
 #: of cells CLOUD_CELL_M across: a cell exists (has area) only where the layer's field may
 #: reach its threshold there, so that rays through clear sky meet nothing (a plane with a
 #: mask would cost every ray that crosses it an extra path vertex and shadow ray). 1.5 km
 #: cells (25,000 triangles) rebuild with the scene's top level in 0.02 s when an aircraft
 #: moves; 375 m cells (400,000 triangles) took 0.24 s a frame and saved no measurable
-#: path-tracing time.
+#: path-tracing time. Around it, out to CLOUD_REACH_M from the camera each way, a ring of
+#: cells CLOUD_FAR_CELL_M across (edge to edge with the grid: a whole number of them spans
+#: CLOUD_SIZE_M / 2) carries the layer to the horizon (a layer 4 km above the
+#: camera sinks to its horizontal 230 km away; below it, a deck's own horizon from 8 km
+#: above it lies 320 km away), where a pixel spans hundreds of metres.
 CLOUD_SIZE_M: Final = 168_000.0
 CLOUD_CELL_M: Final = 1_500.0
+CLOUD_REACH_M: Final = 408_000.0
+CLOUD_FAR_CELL_M: Final = 12_000.0
 #: A cell's cloud is bounded from the field's first CULL_OCTAVES octaves on a grid of
-#: CULL_SAMPLES x CULL_SAMPLES points per cell, plus what the grid's spacing and the finer
-#: octaves can add (:func:`_cloudy_cells`).
+#: CULL_SAMPLES x CULL_SAMPLES points per cell (CULL_FAR_SAMPLES in the far ring's), plus
+#: what the grid's spacing and the finer octaves can add (:func:`_cloudy_cells`).
 CULL_OCTAVES: Final = 7
 CULL_SAMPLES: Final = 32
+CULL_FAR_SAMPLES: Final = 32
 #: Bound on the slope of one octave of gradient noise, per lattice unit (measured: 2.4).
 NOISE_SLOPE_BOUND: Final = 3.0
 #: The objects that wear a livery (on their painted parts).
@@ -137,9 +151,13 @@ class World:
         self.waves = r.sea.waves
         self.whitecaps = r.sea.whitecaps
         self.sea_colour = r.sea.colour
+        self.ground = r.ground.enabled
         self.livery = r.livery.enabled
+        #: The earth's surface is procedural (a sea with waves, whitecaps or colour, or land).
+        self.earth = self.waves or self.whitecaps or self.sea_colour or self.ground
         #: Any world piece on (the renderer then classifies every pixel's surface).
-        self.any = self.clouds or self.waves or self.whitecaps or self.sea_colour or self.livery
+        self.any = self.clouds or self.earth or self.livery
+        self._ground: Ground | None = None
         self._livery_bbox: dict[str, tuple[NDArray, NDArray]] = {}
         self.pixel_rad = pixel_rad  # the angle one pixel subtends (1 / fx): procedural textures filter to it
         self._cloud_layers: dict[str, CloudLayer] = {}
@@ -172,20 +190,21 @@ class World:
         return "volpath" if self.clouds else "path"
 
     def sea_bsdf(self, principled: dict) -> dict:
-        """The sea's BSDF: ``principled`` with the procedural albedo where whitecaps or colour
-        are on, under the waves' normals and with their roughness where waves are."""
-        if not (self.waves or self.whitecaps or self.sea_colour):
+        """The earth's surface BSDF: ``principled`` with the procedural albedo where whitecaps,
+        colour or ground are on, under the waves' (and the land's relief's) normals and with
+        their roughness where waves or ground are."""
+        if not self.earth:
             return principled
         import mitsuba as mi
 
         from datagen.render.procedural import texture_class
 
         field_texture = texture_class(mi.variant())
-        if self.whitecaps or self.sea_colour:
+        if self.whitecaps or self.sea_colour or self.ground:
             self._sea_texture = field_texture(pixel_rad=self.pixel_rad, colour=True, slant=True)
             self._sea_texture.shade = _clear_colour
             principled = dict(principled, base_color=self._sea_texture)
-        if not self.waves:
+        if not (self.waves or self.ground):
             return principled
         normals = field_texture(pixel_rad=self.pixel_rad, colour=True, slant=True)
         roughness = field_texture(pixel_rad=self.pixel_rad, slant=True)
@@ -275,25 +294,30 @@ class World:
         self._livery_key, self._liveries = key, out
         return out
 
-    def apply(self, params, look: FrameLook, camera_z_m: float, sky_irradiance=None,
-              camera_render=(0.0, 0.0, 0.0)) -> None:
+    def apply(self, params, look: FrameLook, camera_z_m: float, irradiance=None,
+              camera_render=(0.0, 0.0, 0.0), sun_direction=(0.0, 0.0, 1.0)) -> None:
         """Set the frame's clouds and sea (the render frame has its origin at altitude
-        ``camera_z_m``, the camera at ``camera_render`` in it; ``sky_irradiance`` is the sun
-        and sky's RGB irradiance on a horizontal surface, which lights the clouds)."""
+        ``camera_z_m``, the camera at ``camera_render`` in it; ``irradiance`` is the sun's and
+        the sky's RGB irradiance on a horizontal surface, ``sun_direction`` the unit vector to
+        the sun: they light the clouds)."""
 
         if self.clouds:
             from datagen.render.mitsuba import set_buffer
 
-            key = (look.cloud_seed, look.cloud_deck_coverage, look.cloud_layer_coverage, look.cloud_opacity)
+            key = (look.cloud_seed, look.cloud_type, look.cloud_deck_coverage, look.cloud_layer_coverage,
+                   look.cloud_opacity, look.cloud_deck_thickness_m, look.cloud_layer_thickness_m)
             fresh = self._cloud_key != key
             drawn = look.cloud_seed is not None  # a look without cloud draws: clear sky
             rng = texture_rng(look.cloud_seed)
-            albedo = look.cloud_albedo if drawn else 0.0
-            light = np.asarray(sky_irradiance, dtype=np.float64) / np.pi * albedo
-            for name, (coverage_key, altitude_key) in CLOUD_LAYERS.items():
+            sun, sky = irradiance if irradiance is not None else (np.zeros(3), np.zeros(3))
+            light = CloudLight(tuple(float(c) for c in sun), tuple(float(c) for c in sky),
+                               tuple(float(c) for c in sun_direction), look.cloud_albedo if drawn else 0.0)
+            for name, (coverage_key, altitude_key, thickness_key) in CLOUD_LAYERS.items():
                 if fresh:  # an approach's weather, drawn once
                     coverage = getattr(look, coverage_key) if drawn else 0.0
-                    layer = CloudLayer.drawn(rng, coverage, look.cloud_opacity or 0.0, CLOUD_SIZE_M)
+                    form = CLOUD_FORMS[(look.cloud_type or "cumulus") if name == "cloud_deck" else "layer"]
+                    layer = CloudLayer.drawn(rng, coverage, look.cloud_opacity or 0.0, CLOUD_SIZE_M, form,
+                                             getattr(look, thickness_key) or 0.0)
                     self._cloud_layers[name] = layer
                     self._cloudy[name] = _cloudy_cells(layer)
                 layer = self._cloud_layers[name]
@@ -304,7 +328,7 @@ class World:
                     texture.camera = tuple(float(c) for c in camera_render)
                 opacity.shade = layer  # CloudLayer(x, y, footprint_m, ops): the opacity
                 opacity.cover = layer.covers
-                radiance.shade = functools.partial(_layer_radiance, layer, tuple(float(c) for c in light), above)
+                radiance.shade = functools.partial(_layer_radiance, layer, light, above)
                 if fresh or self._cloud_height.get(name) != height:  # the mesh moves only when it must
                     set_buffer(params, f"{name}.vertex_positions",
                                _cloud_cells(self._cloudy[name], height, height + camera_z_m))
@@ -318,24 +342,30 @@ class World:
             texture.camera = tuple(float(c) for c in camera_render)
         if self._wave_textures is None:
             params[f"{SEA_KEY}.bsdf.roughness.value"] = look.sea_roughness
-        if not (self.waves or self.whitecaps or self.sea_colour):
+        if not self.earth:
             return
         key = (look.sea_seed, look.sea_wind_speed_mps, look.sea_wind_direction_deg, look.sea_whitecap_fraction,
-               look.sea_colour)
-        if key != self._sea_key:  # an approach's sea, made once
+               look.sea_colour, look.ground_type, look.ground_seed)
+        if key != self._sea_key:  # an approach's sea and ground, made once
             self._sea_key = key
             rng = texture_rng(look.sea_seed)
             wind = look.sea_wind_speed_mps if look.sea_wind_speed_mps is not None else 7.0
             if self.waves:
                 self._waves = SeaWaves.drawn(rng, wind, look.sea_wind_direction_deg or 0.0)
-                self._wave_textures[0].shade = functools.partial(_wave_normal, self._waves)
-            if self._sea_texture is not None:
+            sea = None
+            if self.whitecaps or self.sea_colour:
                 sea = SeaSurface.drawn(rng, look.sea_colour if look.sea_colour is not None else SEA_COLOUR,
-                                                look.sea_whitecap_fraction or 0.0, look.sea_wind_direction_deg or 0.0,
-                                                tint=self.sea_colour)
-                self._sea_texture.shade = functools.partial(_sea_albedo, sea)
-        if self._waves is not None:  # the frame's roughness (a uniform sea model draws it per frame)
-            self._wave_textures[1].shade = functools.partial(_wave_roughness, self._waves, float(look.sea_roughness))
+                                       look.sea_whitecap_fraction or 0.0, look.sea_wind_direction_deg or 0.0,
+                                       tint=self.sea_colour)
+            if self.ground:
+                self._ground = Ground.drawn(texture_rng(look.ground_seed), GROUND_TYPES[look.ground_type or "sea"])
+            if self._sea_texture is not None:
+                self._sea_texture.shade = functools.partial(_earth_albedo, sea, self._ground)
+            if self._wave_textures is not None:
+                self._wave_textures[0].shade = functools.partial(_earth_normal, self._waves, self._ground)
+        if self._wave_textures is not None:  # the frame's roughness (a uniform sea model draws it per frame)
+            self._wave_textures[1].shade = functools.partial(_earth_roughness, self._waves, float(look.sea_roughness),
+                                                             self._ground)
 
     def texel_footprint_px(self, depth: NDArray | None, ids: NDArray | None, surface: NDArray | None,
                            fx: float) -> dict[str, float | None]:
@@ -397,57 +427,90 @@ def _flat_normal(x, y, footprint_m, ops):
     return mi.Color3f(x * ops.f32(0.0) + ops.f32(0.5), ops.f32(0.5), ops.f32(1.0))
 
 
-def _wave_normal(waves: SeaWaves, x, y, footprint_m, ops):
-    """The waves' normal at a footprint, encoded as a normal map's colour (n / 2 + 1/2)."""
+def _earth_normal(waves: SeaWaves | None, ground: Ground | None, x, y, footprint_m, ops):
+    """The surface's normal at a footprint, encoded as a normal map's colour (n / 2 + 1/2):
+    the waves' (or a calm sea's) where there is sea, the relief's where there is land."""
     import mitsuba as mi
 
-    half = ops.f32(0.5)
-    return mi.Color3f(*(c * half + half for c in waves.normal(x, y, footprint_m, ops)))
-
-
-def _wave_roughness(waves: SeaWaves, roughness: float, x, y, footprint_m, ops):
-    return waves.roughness(footprint_m, roughness, ops) + x * ops.f32(0.0)
-
-
-def _sea_albedo(sea: SeaSurface, x, y, footprint_m, ops):
-    """The sea's albedo, filtered to the long axis of a pixel's footprint (whitecaps seen
-    edge-on fade to their mean rather than flicker)."""
-    import mitsuba as mi
-
-    return mi.Color3f(*sea.albedo(x, y, footprint_m.longest(ops), ops))
-
-
-def _layer_radiance(layer: CloudLayer, light: tuple[float, float, float], above: bool,
-                    x, y, footprint_m, ops):
-    """What a layer's side facing the camera emits, premultiplied by its opacity: the tops
-    ``light`` (albedo / pi times the sky's irradiance) from their thick cores, a little over
-    half of it from their thin parts; a base (``above`` the camera) the part its thickness
-    lets through, 0.3 of it at full opacity and half that again in a core. Both are traced
-    and ``above`` weighs them as a kernel input: a layer passing from below the camera to
-    above it compiles no new kernel."""
-    import mitsuba as mi
-
-    value = layer.value(x, y, footprint_m, ops)
-    opacity, core = layer.opacity_of(value, ops), layer.core_of(value, ops)
     f = ops.f32
-    base = opacity * (f(1.0) - f(0.7) * opacity) * (f(1.0) - f(0.5) * core)
-    top = opacity * (f(0.55) + f(0.45) * core)
-    w = ops.param_f32(1.0 if above else 0.0)
-    shade = w * base + (f(1.0) - w) * top
-    return mi.Color3f(*(shade * ops.param_f32(c) for c in light))
+    n = waves.normal(x, y, footprint_m, ops) if waves is not None else (x * f(0.0), x * f(0.0), x * f(0.0) + f(1.0))
+    if ground is not None:
+        wide = footprint_m.longest(ops)
+        m = ground.land_weight(x, y, wide, ops)
+        land = ground.normal(x, y, wide, ops)
+        n = tuple(a + (b - a) * m for a, b in zip(n, land, strict=True))
+        norm = ops.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+        n = tuple(c / norm for c in n)
+    half = f(0.5)
+    return mi.Color3f(*(c * half + half for c in n))
+
+
+def _earth_roughness(waves: SeaWaves | None, roughness: float, ground: Ground | None, x, y, footprint_m, ops):
+    """The sea's roughness (what its waves leave unresolved, or the drawn one), the land's
+    :data:`~datagen.assets.ground.LAND_ROUGHNESS`."""
+    r = waves.roughness(footprint_m, roughness, ops) if waves is not None else ops.param_f32(roughness)
+    r = r + x * ops.f32(0.0)
+    if ground is None:
+        return r
+    m = ground.land_weight(x, y, footprint_m.longest(ops), ops)
+    return r + (ops.f32(LAND_ROUGHNESS) - r) * m
+
+
+def _earth_albedo(sea: SeaSurface | None, ground: Ground | None, x, y, footprint_m, ops):
+    """The surface's albedo: the sea's (filtered to the long axis of a pixel's footprint:
+    whitecaps seen edge-on fade to their mean rather than flicker), the land's where there
+    is land."""
+    import mitsuba as mi
+
+    wide = footprint_m.longest(ops)
+    if sea is not None:
+        colour = sea.albedo(x, y, wide, ops)
+    else:
+        colour = tuple(x * ops.f32(0.0) + ops.f32(c) for c in SEA_COLOUR)
+    if ground is not None:
+        m = ground.land_weight(x, y, wide, ops)
+        colour = tuple(a + (b - a) * m for a, b in zip(colour, ground.albedo(x, y, wide, ops), strict=True))
+    return mi.Color3f(*colour)
+
+
+def _layer_radiance(layer: CloudLayer, light: CloudLight, above: bool, x, y, footprint_m, ops):
+    """What a layer's side facing the camera emits (:meth:`CloudLayer.radiance`), its tops
+    or, ``above`` the camera, its base (a kernel weight)."""
+    import mitsuba as mi
+
+    return mi.Color3f(*layer.radiance(light, ops.param_f32(1.0 if above else 0.0), x, y, footprint_m, ops))
+
+
+@functools.cache
+def _cell_layout() -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The cells of a cloud layer: lower-left corners ``x0``, ``y0`` and sizes, the
+    :data:`CLOUD_CELL_M` grid over :data:`CLOUD_SIZE_M` first (rows along y), then the ring of
+    :data:`CLOUD_FAR_CELL_M` cells around it out to :data:`CLOUD_REACH_M`."""
+    cells = round(CLOUD_SIZE_M / CLOUD_CELL_M)
+    i, j = np.meshgrid(np.arange(cells), np.arange(cells))  # j: rows (y), i: columns (x)
+    near_x, near_y = i.reshape(-1) * CLOUD_CELL_M - CLOUD_SIZE_M / 2, j.reshape(-1) * CLOUD_CELL_M - CLOUD_SIZE_M / 2
+    assert (CLOUD_SIZE_M / 2) % CLOUD_FAR_CELL_M == 0 and CLOUD_REACH_M % CLOUD_FAR_CELL_M == 0  # no gap, no overlap
+    far = round(2 * CLOUD_REACH_M / CLOUD_FAR_CELL_M)
+    i, j = np.meshgrid(np.arange(far), np.arange(far))
+    far_x, far_y = i.reshape(-1) * CLOUD_FAR_CELL_M - CLOUD_REACH_M, j.reshape(-1) * CLOUD_FAR_CELL_M - CLOUD_REACH_M
+    outside = ((far_x >= CLOUD_SIZE_M / 2) | (far_x + CLOUD_FAR_CELL_M <= -CLOUD_SIZE_M / 2)
+               | (far_y >= CLOUD_SIZE_M / 2) | (far_y + CLOUD_FAR_CELL_M <= -CLOUD_SIZE_M / 2))
+    x0 = np.concatenate([near_x, far_x[outside]])
+    y0 = np.concatenate([near_y, far_y[outside]])
+    size = np.concatenate([np.full(near_x.size, CLOUD_CELL_M), np.full(int(outside.sum()), CLOUD_FAR_CELL_M)])
+    return x0, y0, size
 
 
 @functools.cache
 def _cloud_grid() -> tuple[NDArray[np.float32], NDArray[np.uint32]]:
-    """The cell layout of a cloud layer: every cell its own quad (4 vertices, 2 faces),
-    vertex positions at z = 0, cells in rows along y."""
-    cells = round(CLOUD_SIZE_M / CLOUD_CELL_M)
-    i, j = np.meshgrid(np.arange(cells), np.arange(cells))  # j: rows (y), i: columns (x)
+    """The cell layout of a cloud layer (:func:`_cell_layout`): every cell its own quad (4
+    vertices, 2 faces), vertex positions at z = 0."""
+    x0, y0, size = _cell_layout()
     corners = np.array([[0, 0], [1, 0], [1, 1], [0, 1]])
-    x = (i.reshape(-1, 1) + corners[:, 0]) * CLOUD_CELL_M - CLOUD_SIZE_M / 2  # (cells^2, 4)
-    y = (j.reshape(-1, 1) + corners[:, 1]) * CLOUD_CELL_M - CLOUD_SIZE_M / 2
+    x = x0[:, None] + corners[:, 0] * size[:, None]  # (cells, 4)
+    y = y0[:, None] + corners[:, 1] * size[:, None]
     verts = np.stack([x.reshape(-1), y.reshape(-1), np.zeros(x.size)], axis=-1).astype(np.float32)
-    base = (np.arange(cells * cells) * 4)[:, None]
+    base = (np.arange(len(x0)) * 4)[:, None]
     faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]], axis=1).reshape(-1, 3).astype(np.uint32)
     return verts, faces
 
@@ -459,34 +522,66 @@ def _cloud_faces(facing_down: bool) -> NDArray[np.uint32]:
 
 
 def _cloudy_cells(layer: CloudLayer) -> NDArray[np.bool_]:
-    """Which cells of the layer (rows along y) may hold cloud: the field's first
-    :data:`CULL_OCTAVES` octaves at the centres of a :data:`CULL_SAMPLES`-square grid per
-    cell, whose largest value per cell, plus how far those octaves can rise within half a
-    sample's diagonal and all the finer octaves can add, reaches the threshold. Evaluated
-    by Dr.Jit (12.8 million points)."""
+    """Which cells of the layer (:func:`_cell_layout`'s order) may hold cloud: the field's
+    first :data:`CULL_OCTAVES` octaves at the centres of a square grid of samples per cell
+    (:data:`CULL_SAMPLES` a side, :data:`CULL_FAR_SAMPLES` in the far ring), whose largest
+    value per cell, plus how far those octaves can rise within half a sample's diagonal and
+    all the finer octaves can add, reaches the threshold. Evaluated by Dr.Jit (22 million
+    points)."""
     from datagen.render.procedural import evaluate
 
-    cells = round(CLOUD_SIZE_M / CLOUD_CELL_M)
+    x0, y0, size = _cell_layout()
     if not math.isfinite(layer.threshold):
-        return np.zeros(cells * cells, dtype=bool)
-    n = cells * CULL_SAMPLES
-    spacing = CLOUD_SIZE_M / n
-    c = ((np.arange(n) + 0.5) * spacing - CLOUD_SIZE_M / 2).astype(np.float32)
-    x, y = np.meshgrid(c, c)
-    value = evaluate(lambda x, y, ops: layer.field(x, y, ops=ops, octaves=CULL_OCTAVES), x, y)
-    value = value.reshape(cells, CULL_SAMPLES, cells, CULL_SAMPLES).max(axis=(1, 3))
+        return np.zeros(len(x0), dtype=bool)
     field = layer.field
-    rise = sum(NOISE_SLOPE_BOUND * field.amplitude(o) * 2.0**o / field.wavelength_m for o in range(CULL_OCTAVES))
-    slack = rise * spacing / math.sqrt(2.0) + field.bound(CULL_OCTAVES)
-    return (value + slack > layer.threshold).reshape(-1)
+    rise = sum(NOISE_SLOPE_BOUND * field.amplitude(o) * 2.0**o / field.wavelength_m
+               for o in range(CULL_OCTAVES))
+    kept = np.zeros(len(x0), dtype=bool)
+    for cell, samples in ((CLOUD_CELL_M, CULL_SAMPLES), (CLOUD_FAR_CELL_M, CULL_FAR_SAMPLES)):
+        group = np.flatnonzero(size == cell)
+        if not len(group):
+            continue
+        spacing = cell / samples
+        offsets = (np.arange(samples) + 0.5) * spacing
+        x = (x0[group, None, None] + offsets[None, None, :]).astype(np.float32)
+        y = (y0[group, None, None] + offsets[None, :, None]).astype(np.float32)
+        x, y = np.broadcast_arrays(x, y)
+        value = evaluate(lambda x, y, ops: field(x, y, ops=ops, octaves=CULL_OCTAVES), x, y)
+        slack = rise * spacing / math.sqrt(2.0) + field.bound(CULL_OCTAVES)
+        kept[group] = value.reshape(len(group), -1).max(axis=1) + slack > layer.threshold
+    return kept
 
 
 def _cloud_cells(cloudy: NDArray[np.bool_], height: float, altitude: float) -> NDArray[np.float32]:
     """Vertex positions of a cloud layer ``height`` over the render frame's origin, at
     ``altitude`` above the sea, on the sphere of that altitude (its top over the origin, as
     the sea's): cells that may hold cloud keep their quad, the others collapse to their
-    centre (no area: no ray meets them)."""
+    centre (no area: no ray meets them). The near grid's vertices on its border lie on the
+    far ring's edges (straight chords 12 km long, which sag under the sphere by up to 3 m):
+    a ray grazing the layer finds no crack between the two.
+
+    Seen from above (``height`` < 0), the layer ends at its horizon, the distance at which
+    the camera's ray grazes its sphere: every cell wholly beyond collapses. Past it the
+    camera would see the layer's underside (a ray through a gap, down past the sea's
+    horizon and up again), whose side facing away emits nothing: dark dots along the
+    horizon, where the sky's haze now shows."""
     out = _cloud_grid()[0].reshape(-1, 4, 3).astype(np.float64)
+    radius = EARTH_RADIUS_M + max(altitude, 0.0)
+    if height < 0.0:
+        horizon = math.sqrt((radius - height) ** 2 - radius**2)
+        x0, y0, size = _cell_layout()
+        nearest = np.hypot(np.clip(0.0, x0, x0 + size), np.clip(0.0, y0, y0 + size))
+        cloudy = cloudy & (nearest <= horizon)
+    drop = sphere_drop(np.hypot(out[..., 0], out[..., 1]), radius)
+    edge = CLOUD_SIZE_M / 2
+    for axis in (0, 1):  # border vertices: on x = +-edge (chords along y), on y = +-edge (along x)
+        on = np.isclose(np.abs(out[..., axis]), edge)
+        along = out[..., 1 - axis][on]
+        lo = np.floor(along / CLOUD_FAR_CELL_M) * CLOUD_FAR_CELL_M
+        t = (along - lo) / CLOUD_FAR_CELL_M
+        side = np.sign(out[..., axis][on]) * edge
+        ends = [sphere_drop(np.hypot(side, a), radius) for a in (lo, lo + CLOUD_FAR_CELL_M)]
+        drop[on] = (1.0 - t) * ends[0] + t * ends[1]
+    out[..., 2] = height - drop
     out[~cloudy] = out[~cloudy].mean(axis=1, keepdims=True)
-    out[..., 2] = height - sphere_drop(np.hypot(out[..., 0], out[..., 1]), EARTH_RADIUS_M + max(altitude, 0.0))
     return out.astype(np.float32).reshape(-1)

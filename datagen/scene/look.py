@@ -62,10 +62,13 @@ class FrameLook:
     # The world (each None where its randomizer is off; see draw_world).
     sun_backlit: bool | None = None  # the sun was put near the camera's forward azimuth
     haze_scale_height_m: float | None = None  # the aerosol's scale height
+    cloud_type: str | None = None  # the deck's form (datagen.assets.clouds.CLOUD_FORMS)
     cloud_deck_coverage: float | None = None
     cloud_deck_altitude_m: float | None = None  # above sea level
+    cloud_deck_thickness_m: float | None = None  # its thickest cells
     cloud_layer_coverage: float | None = None
     cloud_layer_altitude_m: float | None = None
+    cloud_layer_thickness_m: float | None = None
     cloud_opacity: float | None = None
     cloud_albedo: float | None = None
     cloud_seed: int | None = None  # seeds the layers' noise fields
@@ -74,6 +77,8 @@ class FrameLook:
     sea_whitecap_fraction: float | None = None
     sea_colour: tuple[float, float, float] | None = None  # linear RGB body colour
     sea_seed: int | None = None  # seeds the wave phases and whitecaps
+    ground_type: str | None = None  # datagen.assets.ground.GROUND_TYPES
+    ground_seed: int | None = None  # seeds the land's fields
     receiver_livery: str | None = None
     tanker_livery: str | None = None
     livery_weathering: float | None = None
@@ -160,6 +165,14 @@ def _log_uniform(rng: np.random.Generator, bounds) -> float:
     return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
 
 
+def _share(rng: np.random.Generator, shares: dict[str, float]) -> str:
+    """One of ``shares``' names, each drawn with its share of their sum (one uniform draw)."""
+    names = list(shares)
+    weights = np.asarray([shares[n] for n in names], dtype=np.float64)
+    return names[int(np.searchsorted(np.cumsum(weights) / weights.sum(), rng.random(), side="right").clip(
+        0, len(names) - 1))]
+
+
 def _seed(rng: np.random.Generator) -> int:
     return int(rng.integers(2**31))
 
@@ -235,7 +248,7 @@ def draw_world(config: Config, look: FrameLook, seed: int, state: FrameState,
 
 def _approach_world(config: Config, seed: int, approach_index: int, base: float) -> dict:
     """An approach chain's air (visibility, the aerosol's scale height), clouds (their
-    altitudes about the tanker's, ``base``), sea state and liveries, each where its
+    altitudes about the tanker's, ``base``), sea state, ground and liveries, each where its
     randomizer is on (:func:`draw_world`)."""
     from datagen.assets.sea import wave_slope_variance
     from datagen.core.conventions import world_rng
@@ -248,13 +261,20 @@ def _approach_world(config: Config, seed: int, approach_index: int, base: float)
                      haze_scale_height_m=_uniform(rng, r.haze.aerosol_scale_height_m))
     c = r.clouds
     if c.enabled:
+        from datagen.assets.clouds import CLOUD_FORMS
+
         rng = world_rng(seed, approach_index, "clouds")
         side = 1.0 if rng.random() < 0.5 else -1.0
+        form = _share(rng, c.forms)
+        drawn = CLOUD_FORMS[form]
         world.update(
-            cloud_deck_coverage=_uniform(rng, c.deck_coverage),
+            cloud_type=form,
+            cloud_deck_coverage=float(np.clip(_uniform(rng, drawn.coverage), *c.deck_coverage)),
             cloud_deck_altitude_m=base - _uniform(rng, c.deck_below_m),
+            cloud_deck_thickness_m=_log_uniform(rng, drawn.thickness_m),
             cloud_layer_coverage=_uniform(rng, c.layer_coverage),
             cloud_layer_altitude_m=base + side * _uniform(rng, c.layer_offset_m),
+            cloud_layer_thickness_m=_uniform(rng, c.layer_thickness_m),
             cloud_opacity=_uniform(rng, c.opacity),
             cloud_albedo=_uniform(rng, c.albedo),
             cloud_seed=_seed(rng),
@@ -276,6 +296,9 @@ def _approach_world(config: Config, seed: int, approach_index: int, base: float)
         if sea.colour:
             world["sea_colour"] = tuple(float(v) for v in colour)
         world["sea_seed"] = _seed(rng)
+    if r.ground.enabled:
+        rng = world_rng(seed, approach_index, "ground")
+        world.update(ground_type=_share(rng, r.ground.shares), ground_seed=_seed(rng))
     lv = r.livery
     if lv.enabled:
         rng = world_rng(seed, approach_index, "livery")
