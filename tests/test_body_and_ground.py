@@ -65,9 +65,9 @@ def test_each_cloud_form_draws_coverage_and_thickness_within_its_own_ranges_clip
 def test_a_config_with_no_positive_share_is_refused_naming_the_key() -> None:
     from datagen.core.errors import ConfigError
 
-    with pytest.raises(ConfigError, match="randomization.ground.shares: .*shares must be 0 or more"):
+    with pytest.raises(ConfigError, match=r"randomization\.ground\.shares: .*shares must be 0 or more"):
         override_config(load_config("wingcam55"), {"randomization.ground.shares": {"sea": 0.0}})
-    with pytest.raises(ConfigError, match="randomization.clouds.forms"):
+    with pytest.raises(ConfigError, match=r"randomization\.clouds\.forms"):
         override_config(load_config("wingcam55"), {"randomization.clouds.forms": {"cirrus": 1.0}})
 
 
@@ -133,12 +133,12 @@ def test_a_layer_seen_from_above_keeps_no_cell_past_its_horizon_and_every_cell_b
 def test_the_far_ring_meets_the_near_grid_edge_to_edge_without_overlap() -> None:
     from datagen.render.world import CLOUD_REACH_M, _cell_layout
 
-    x0, y0, size = _cell_layout()
+    _, _, size = _cell_layout()
     assert math.isclose(float((size**2).sum()), (2 * CLOUD_REACH_M) ** 2, rel_tol=1e-12)  # no gap, no overlap
     # The near grid's border vertices lie on the far ring's chords: the same height at a far corner.
     from datagen.render.world import CLOUD_SIZE_M, _cloud_cells
 
-    verts = _cloud_cells(np.ones(len(x0), dtype=bool), 2000.0, 9000.0).reshape(-1, 3)
+    verts = _cloud_cells(np.ones(len(size), dtype=bool), 2000.0, 9000.0).reshape(-1, 3)
     border = np.isclose(np.abs(verts[:, 0]), CLOUD_SIZE_M / 2) & np.isclose(verts[:, 1] % 12_000.0, 0.0)
     far_corner = np.isclose(np.abs(verts[:, 0]), CLOUD_SIZE_M / 2) & (np.abs(verts[:, 1]) > CLOUD_SIZE_M / 2 - 1)
     assert border.any()
@@ -186,7 +186,7 @@ def test_the_kernels_shade_clouds_and_land_as_numpy_does() -> None:
     footprint = np.full(x.shape, 15.0, np.float32)
     ground = Ground.drawn(np.random.default_rng(8), GROUND_TYPES["coast"])
     for c in range(3):
-        kernel = evaluate(lambda x, y, f, ops: ground.albedo(x, y, f, ops)[c] * ground.land_weight(x, y, f, ops),
+        kernel = evaluate(lambda x, y, f, ops, c=c: ground.albedo(x, y, f, ops)[c] * ground.land_weight(x, y, f, ops),
                           x, y, footprint)
         np.testing.assert_allclose(kernel, ground.albedo(x, y, footprint)[c] * ground.land_weight(x, y, footprint),
                                    atol=2e-4)

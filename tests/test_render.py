@@ -669,11 +669,13 @@ def test_the_sun_glint_on_a_cox_munk_sea_is_still_there() -> None:
     from datagen.analysis.image_quality import luminance
     from datagen.scene.look import sun_direction_world
 
-    # Clouds could shade the sun, the sensor would rescale the image and the air veil the
-    # glint's far end (a low sun's mirror lies tens of kilometres out): off; the waves stay.
+    # Clouds could shade the sun, the sensor would rescale the image, the air veil the
+    # glint's far end (a low sun's mirror lies tens of kilometres out) and the approach's
+    # ground be land: off; the waves stay.
     config = override_config(load_config("dashcam75"), {"camera.width": 256, "camera.height": 135,
                                                         "render.spp": 16, "render.denoise": "off",
-                                                        **world_off("clouds", "sensor", "backlit sun", "haze")})
+                                                        **world_off("clouds", "sensor", "backlit sun", "haze",
+                                                                    "ground")})
     assert config.randomization.sea.model == "cox_munk" and config.randomization.sea.waves
     frame, seed = 209, config.dataset.seed  # a low sun ahead: its mirror image lies in the view
     state = frame_state(config, frame)

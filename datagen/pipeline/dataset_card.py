@@ -80,26 +80,25 @@ def _world_card(config) -> str:
     """What the world's randomizers draw, as the config switches them."""
     r = config.randomization
     h = r.haze
-    g = r.ground
-    total = sum(g.shares.values())
-    ground = ("the ground drawn per approach (" + ", ".join(f"{name} {share / total:.0%}" for name, share
-                                                             in g.shares.items() if share > 0) + ")"
-              if g.enabled else "the sea")
+    ground = f"the ground drawn per approach ({_shares(r.ground.shares)})" if r.ground.enabled else "the sea"
     air = (f"{ground} on a round earth seen through the air (sea-level visibility {h.visibility_m[0] / 1000:g}-"
            f"{h.visibility_m[1] / 1000:g} km, aerosol scale height {h.aerosol_scale_height_m[0]:g}-"
            f"{h.aerosol_scale_height_m[1]:g} m, per approach)" if h.enabled
            else f"{ground} on a round earth, no aerial perspective")
     c = r.clouds
-    ctotal = sum(c.forms.values())
-    clouds = ("a cloud deck (" + ", ".join(f"{name} {share / ctotal:.0%}" for name, share in c.forms.items()
-                                           if share > 0)
-              + f"; thickness per form) and a layer {c.layer_thickness_m[0]:g}-{c.layer_thickness_m[1]:g} m thick"
-              if c.enabled else "no clouds")
+    clouds = (f"a cloud deck ({_shares(c.forms)}; thickness per form) and a layer {c.layer_thickness_m[0]:g}-"
+              f"{c.layer_thickness_m[1]:g} m thick" if c.enabled else "no clouds")
     pieces = [air, clouds,
               "waves, whitecaps and sea colour from the wind" if r.sea.waves or r.sea.whitecaps or r.sea.colour
               else "a uniform sea", "generated liveries" if r.livery.enabled else "plain paint",
               "a camera model (blur, noise, glare, JPEG)" if r.sensor.enabled else "a pinhole camera"]
     return ", ".join(pieces)
+
+
+def _shares(shares: dict[str, float]) -> str:
+    """Named shares as percentages of their sum, those above 0 (``cumulus 40%, ...``)."""
+    total = sum(shares.values())
+    return ", ".join(f"{name} {share / total:.0%}" for name, share in shares.items() if share > 0)
 
 
 def _unseen_card(scene: Scene, never: list[int]) -> str:
