@@ -52,10 +52,10 @@ CLOUD_CORE: Final = 0.35
 #: resolve. The edges keep every octave.
 CLOUD_CORE_TOLERANCE: Final = 0.02
 #: The height field that gives a layer its body is the field's first SHAPE_OCTAVES octaves
-#: (down to 1/32 of the form's wavelength: 60-190 m), sampled at the shading point and at
+#: (down to 1/16 of the form's wavelength: 125-375 m), sampled at the shading point and at
 #: points towards the sun: SLOPE_STEP of the wavelength away (the slope the sun meets)
 #: and SHADOW_STEPS of it (whether the cloud rises above the sun's ray there: self-shadowing).
-SHAPE_OCTAVES: Final = 6
+SHAPE_OCTAVES: Final = 5
 SLOPE_STEP: Final = 1.0 / 48.0
 SHADOW_STEPS: Final = (1.0 / 12.0, 1.0 / 5.0)
 #: Multiple scattering inside a cloud lights its slopes beyond the terminator: the sun's
@@ -229,25 +229,33 @@ class CloudLayer:
         ux, uy = p(sx / horizontal), p(sy / horizontal)
         sin_el, cos_el = max(sz, 0.05), horizontal
         wavelength = self.field.wavelength_m
-        h = self.height(x, y, ops)
-        step = SLOPE_STEP * wavelength
-        slope = (self.height(x + ux * p(step), y + uy * p(step), ops) - h) * p(1.0 / step)  # the form's scale: data
-        facing = (p(sin_el) - p(cos_el) * slope) / ops.sqrt(f(1.0) + slope * slope)
-        lit = ops.clip((facing + f(WRAP)) * f(1.0 / (1.0 + WRAP)), 0.0, 1.0)
-        for fraction in SHADOW_STEPS:
-            reach = fraction * wavelength
-            climb = reach * sin_el / max(cos_el, 1e-6)  # how far the sun's ray has risen there
-            over = self.height(x + ux * p(reach), y + uy * p(reach), ops) - h - p(climb)
-            lit = lit * (f(1.0) - f(1.0 - SHADOW_FLOOR) * ops.clip(over * p(1.0 / max(0.25 * self.thickness_m, 1.0)),
-                                                                    0.0, 1.0))
-        reflect = f(0.55) + f(0.45) * core
-        w = above
-        through = f(1.0) / (f(1.0) + h * f(1.0 / BASE_DEPTH_M))
         sun_n, sun, sky = light.sun_normal, light.sun, light.sky
         albedo = light.albedo / math.pi
-        out = []
-        for c in range(3):
-            top = (lit * p(sun_n[c] * albedo) + p(sky[c] * albedo)) * reflect
-            base = through * p((sun[c] + sky[c]) * albedo)
-            out.append(opacity * (w * base + (f(1.0) - w) * top))
-        return tuple(out)
+
+        def shaded():
+            h = self.height(x, y, ops)
+            step = SLOPE_STEP * wavelength
+            slope = (self.height(x + ux * p(step), y + uy * p(step), ops) - h) * p(1.0 / step)  # the form's scale: data
+            facing = (p(sin_el) - p(cos_el) * slope) / ops.sqrt(f(1.0) + slope * slope)
+            lit = ops.clip((facing + f(WRAP)) * f(1.0 / (1.0 + WRAP)), 0.0, 1.0)
+            for fraction in SHADOW_STEPS:
+                reach = fraction * wavelength
+                climb = reach * sin_el / max(cos_el, 1e-6)  # how far the sun's ray has risen there
+                over = self.height(x + ux * p(reach), y + uy * p(reach), ops) - h - p(climb)
+                lit = lit * (f(1.0) - f(1.0 - SHADOW_FLOOR) * ops.clip(
+                    over * p(1.0 / max(0.25 * self.thickness_m, 1.0)), 0.0, 1.0))
+            reflect = f(0.55) + f(0.45) * core
+            through = f(1.0) / (f(1.0) + h * f(1.0 / BASE_DEPTH_M))
+            out = []
+            for c in range(3):
+                top = (lit * p(sun_n[c] * albedo) + p(sky[c] * albedo)) * reflect
+                base = through * p((sun[c] + sky[c]) * albedo)
+                out.append(opacity * (above * base + (f(1.0) - above) * top))
+            return tuple(out)
+
+        # Only where there is cloud and the camera's side of the layer is seen (an emitter
+        # seen from behind gets an infinite footprint: it shows nothing).
+        seen = opacity > f(0.0)
+        if footprint_m is not None:
+            seen = seen & (footprint_m < f(1e30))
+        return ops.where(seen, tuple(opacity * f(0.0) for _ in range(3)), shaded)

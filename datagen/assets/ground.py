@@ -22,7 +22,7 @@ import numpy as np
 
 from datagen.assets.noise import _HX, _HY, NUMPY, FractalField, Ops, _hash, ramp, sample_grid
 
-__all__ = ["GROUND_TYPES", "LAND_ROUGHNESS", "Ground", "GroundType"]
+__all__ = ["GROUND_TYPES", "LAND_ROUGHNESS", "NO_SHORE", "Ground", "GroundType"]
 
 RGB = tuple[float, float, float]
 

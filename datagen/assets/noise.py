@@ -59,6 +59,16 @@ class Ops:
     #: Sums a :func:`series` at a footprint, term by term until the rest are filtered away
     #: in every lane (None: every term, in a Python loop).
     series_loop: object = None
+    #: ``only_where(active, initial, fn)``: the tuple ``fn()`` where ``active``, ``initial``
+    #: elsewhere, ``fn`` evaluated only where needed (None: everywhere, then selected).
+    only_where: object = None
+
+    def where(self, active, initial: tuple, fn) -> tuple:
+        """``fn()`` (a tuple of arrays) where ``active``, ``initial`` elsewhere; a kernel
+        skips ``fn``'s work in packets of lanes none of which is active."""
+        if self.only_where is not None:
+            return self.only_where(active, initial, fn)
+        return tuple(self.select(active, a, b) for a, b in zip(fn(), initial, strict=True))
 
 
 #: numpy's spelling (float32 and uint32 arrays; uint32 products wrap, as in a kernel).

@@ -69,7 +69,23 @@ def _ops(variant: str) -> Ops:
         abs=dr.abs,
         select=dr.select,
     )
-    return dataclasses.replace(ops, series_loop=functools.partial(_series_loop, ops))
+    return dataclasses.replace(ops, series_loop=functools.partial(_series_loop, ops), only_where=_only_where)
+
+
+def _only_where(active, initial: tuple, fn) -> tuple:
+    """:meth:`datagen.assets.noise.Ops.where` in a kernel: ``fn`` inside a loop of at most one
+    pass, which the lanes that are not ``active`` leave at once (a packet of lanes none of
+    which is active skips the work)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    width = max(dr.width(active), *(dr.width(v) for v in initial))
+    state = (dr.zeros(mi.UInt32, width), *(v + dr.zeros(type(v), width) for v in initial))
+
+    def body(i, *values):
+        return i + 1, *fn()
+
+    return tuple(dr.while_loop(state=state, cond=lambda i, *v: (i < 1) & active, body=body)[1:])
 
 
 def evaluate(fn, *arrays: np.ndarray) -> np.ndarray:

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.assets.clouds import CLOUD_FORMS, CloudLayer, CloudLight
-from datagen.assets.ground import GROUND_TYPES, LAND_ROUGHNESS, Ground
+from datagen.assets.ground import GROUND_TYPES, LAND_ROUGHNESS, NO_SHORE, Ground
 from datagen.assets.liveries import LIVERY_TEXELS, livery, triplanar_uv
 from datagen.assets.sea import SeaSurface, SeaWaves
 from datagen.core.conventions import EARTH_RADIUS_M, texture_rng
@@ -436,9 +436,7 @@ def _earth_normal(waves: SeaWaves | None, ground: Ground | None, x, y, footprint
     n = waves.normal(x, y, footprint_m, ops) if waves is not None else (x * f(0.0), x * f(0.0), x * f(0.0) + f(1.0))
     if ground is not None:
         wide = footprint_m.longest(ops)
-        m = ground.land_weight(x, y, wide, ops)
-        land = ground.normal(x, y, wide, ops)
-        n = tuple(a + (b - a) * m for a, b in zip(n, land, strict=True))
+        n = _with_land(ground, x, y, wide, ops, n, lambda: ground.normal(x, y, wide, ops))
         norm = ops.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
         n = tuple(c / norm for c in n)
     half = f(0.5)
@@ -452,8 +450,8 @@ def _earth_roughness(waves: SeaWaves | None, roughness: float, ground: Ground | 
     r = r + x * ops.f32(0.0)
     if ground is None:
         return r
-    m = ground.land_weight(x, y, footprint_m.longest(ops), ops)
-    return r + (ops.f32(LAND_ROUGHNESS) - r) * m
+    return _with_land(ground, x, y, footprint_m.longest(ops), ops, (r,),
+                      lambda: (x * ops.f32(0.0) + ops.f32(LAND_ROUGHNESS),))[0]
 
 
 def _earth_albedo(sea: SeaSurface | None, ground: Ground | None, x, y, footprint_m, ops):
@@ -468,9 +466,25 @@ def _earth_albedo(sea: SeaSurface | None, ground: Ground | None, x, y, footprint
     else:
         colour = tuple(x * ops.f32(0.0) + ops.f32(c) for c in SEA_COLOUR)
     if ground is not None:
-        m = ground.land_weight(x, y, wide, ops)
-        colour = tuple(a + (b - a) * m for a, b in zip(colour, ground.albedo(x, y, wide, ops), strict=True))
+        colour = _with_land(ground, x, y, wide, ops, colour, lambda: ground.albedo(x, y, wide, ops))
     return mi.Color3f(*colour)
+
+
+def _with_land(ground: Ground, x, y, footprint_m, ops, sea: tuple, land) -> tuple:
+    """``sea`` (a tuple of values at the points) mixed towards ``land()`` (the same for the
+    land) by the ground's land weight there. In a kernel the weight is computed only where
+    the approach's ground has land at all, and ``land()`` only in lanes with land
+    (:meth:`~datagen.assets.noise.Ops.where`): over open sea the land costs nothing, over a
+    coast the sea's lanes skip the land's fields."""
+    sea = tuple(v + x * ops.f32(0.0) for v in sea)
+
+    def mixed():
+        m = ground.land_weight(x, y, footprint_m, ops)
+        return ops.where(m > ops.f32(0.0), sea, lambda: tuple(a + (b - a) * m for a, b in zip(sea, land(),
+                                                                                             strict=True)))
+
+    has_land = x * ops.f32(0.0) + ops.param_f32(ground.threshold) < ops.f32(0.5 * NO_SHORE)  # open sea: NO_SHORE
+    return ops.where(has_land, sea, mixed)
 
 
 def _layer_radiance(layer: CloudLayer, light: CloudLight, above: bool, x, y, footprint_m, ops):
