@@ -70,11 +70,10 @@ CLOUD_CELL_M: Final = 1_500.0
 CLOUD_REACH_M: Final = 408_000.0
 CLOUD_FAR_CELL_M: Final = 12_000.0
 #: A cell's cloud is bounded from the field's first CULL_OCTAVES octaves on a grid of
-#: CULL_SAMPLES x CULL_SAMPLES points per cell (CULL_FAR_SAMPLES in the far ring's), plus
+#: CULL_SAMPLES x CULL_SAMPLES points per cell (near or far: a far cell's are wider apart), plus
 #: what the grid's spacing and the finer octaves can add (:func:`_cloudy_cells`).
 CULL_OCTAVES: Final = 7
 CULL_SAMPLES: Final = 32
-CULL_FAR_SAMPLES: Final = 32
 #: Bound on the slope of one octave of gradient noise, per lattice unit (measured: 2.4).
 NOISE_SLOPE_BOUND: Final = 3.0
 #: The objects that wear a livery (on their painted parts).
@@ -538,7 +537,7 @@ def _cloud_faces(facing_down: bool) -> NDArray[np.uint32]:
 def _cloudy_cells(layer: CloudLayer) -> NDArray[np.bool_]:
     """Which cells of the layer (:func:`_cell_layout`'s order) may hold cloud: the field's
     first :data:`CULL_OCTAVES` octaves at the centres of a square grid of samples per cell
-    (:data:`CULL_SAMPLES` a side, :data:`CULL_FAR_SAMPLES` in the far ring), whose largest
+    (:data:`CULL_SAMPLES` a side), whose largest
     value per cell, plus how far those octaves can rise within half a sample's diagonal and
     all the finer octaves can add, reaches the threshold. Evaluated by Dr.Jit (22 million
     points)."""
@@ -551,12 +550,10 @@ def _cloudy_cells(layer: CloudLayer) -> NDArray[np.bool_]:
     rise = sum(NOISE_SLOPE_BOUND * field.amplitude(o) * 2.0**o / field.wavelength_m
                for o in range(CULL_OCTAVES))
     kept = np.zeros(len(x0), dtype=bool)
-    for cell, samples in ((CLOUD_CELL_M, CULL_SAMPLES), (CLOUD_FAR_CELL_M, CULL_FAR_SAMPLES)):
+    for cell in (CLOUD_CELL_M, CLOUD_FAR_CELL_M):
         group = np.flatnonzero(size == cell)
-        if not len(group):
-            continue
-        spacing = cell / samples
-        offsets = (np.arange(samples) + 0.5) * spacing
+        spacing = cell / CULL_SAMPLES
+        offsets = (np.arange(CULL_SAMPLES) + 0.5) * spacing
         x = (x0[group, None, None] + offsets[None, None, :]).astype(np.float32)
         y = (y0[group, None, None] + offsets[None, :, None]).astype(np.float32)
         x, y = np.broadcast_arrays(x, y)
