@@ -27,7 +27,7 @@ from datagen.render.atmosphere import (
     table_coordinates,
     transmittance_table,
 )
-from datagen.render.world import earth_cap, sphere_drop
+from datagen.render.world import EARTH_CAP_SAG, earth_cap, sphere_drop
 from datagen.scene.approach import FrameStates
 from datagen.scene.look import frame_look
 
@@ -144,8 +144,10 @@ def test_the_seas_mesh_lies_on_the_earths_sphere_and_reaches_past_every_horizon(
     assert np.abs(radius - EARTH_RADIUS_M).max() < 2.0  # float32 vertices on the sphere
     np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-5)
     edges = v[faces] - v[np.roll(faces, 1, axis=1)]
-    longest = float(np.linalg.norm(edges, axis=-1).max())
-    assert longest**2 / (8 * EARTH_RADIUS_M) < 1.0  # a flat triangle sags less than a metre
+    sag = np.linalg.norm(edges, axis=-1).max(axis=1) ** 2 / (8 * EARTH_RADIUS_M)  # a flat triangle's, below the sphere
+    nearest = np.hypot(v[faces][..., 0], v[faces][..., 1]).min(axis=1)  # of its corners, from the nadir
+    assert (sag / np.maximum(nearest, 1.0) < 1.05 * EARTH_CAP_SAG)[nearest > 100.0].all()  # seen from the cap's top
+    assert sag[nearest <= 100.0].max() < 1e-3
     horizon_20km = math.sqrt((EARTH_RADIUS_M + 20_000.0) ** 2 - EARTH_RADIUS_M**2)
     assert np.hypot(v[:, 0], v[:, 1]).max() > horizon_20km
     up = np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]])

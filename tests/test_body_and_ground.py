@@ -148,6 +148,38 @@ def test_the_far_ring_meets_the_near_grid_edge_to_edge_without_overlap() -> None
     assert far_corner.any()
 
 
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), stretch=st.floats(1.0, 3.0), direction=st.floats(0.0, math.pi),
+       footprint=st.one_of(st.none(), st.floats(1.0, 400.0)))
+def test_a_fields_slope_is_the_derivative_of_its_value(seed: int, stretch: float, direction: float,
+                                                       footprint: float | None) -> None:
+    """FractalField.slope's value is the field's own and its derivatives are the field's
+    central differences (float64 points, where float32 lattice rounding cannot hide an
+    error), with and without a footprint's band weights."""
+    from datagen.assets.noise import FractalField
+
+    field = FractalField.drawn(np.random.default_rng(seed), 3_000.0, 6, 0.55, stretch=stretch, direction_rad=direction)
+    x, y = np.random.default_rng(seed + 1).uniform(-5e4, 5e4, (2, 200))
+    fp = None if footprint is None else np.float32(footprint)
+    value, dx, dy = field.slope(x, y, fp)
+    np.testing.assert_allclose(value, field(x, y, fp), rtol=0, atol=1e-6)  # float32 band weights
+    e = 1e-3
+    np.testing.assert_allclose(dx, (field(x + e, y, fp) - field(x - e, y, fp)) / (2 * e), rtol=0, atol=1e-8)
+    np.testing.assert_allclose(dy, (field(x, y + e, fp) - field(x, y - e, fp)) / (2 * e), rtol=0, atol=1e-8)
+
+
+def test_a_clouds_height_slope_is_its_height_fields_derivative_towards_the_sun(cumulus: CloudLayer) -> None:
+    x, y = np.random.default_rng(3).uniform(-3e4, 3e4, (2, 4000))
+    ux, uy = math.cos(0.4), math.sin(0.4)
+    h, slope = cumulus.height_slope(x, y, ux, uy)
+    np.testing.assert_allclose(h, cumulus.height(x, y), rtol=0, atol=1e-9)
+    e = 1e-2
+    numeric = (cumulus.height(x + e * ux, y + e * uy) - cumulus.height(x - e * ux, y - e * uy)) / (2 * e)
+    smooth = (h > 1.0) & (h < 0.999 * cumulus.thickness_m)  # the clip's kinks: one-sided there
+    assert smooth.sum() > 500
+    np.testing.assert_allclose(slope[smooth], numeric[smooth], rtol=1e-4, atol=1e-6)
+
+
 @pytest.mark.parametrize("name", list(GROUND_TYPES))
 def test_each_ground_type_puts_land_where_its_share_of_land_says(name: str) -> None:
     kind = GROUND_TYPES[name]
@@ -190,6 +222,9 @@ def test_the_kernels_shade_clouds_and_land_as_numpy_does() -> None:
                           x, y, footprint)
         np.testing.assert_allclose(kernel, ground.albedo(x, y, footprint)[c] * ground.land_weight(x, y, footprint),
                                    atol=2e-4)
+    for c in range(3):
+        kernel = evaluate(lambda x, y, f, ops, c=c: ground.normal(x, y, f, ops)[c], x, y, footprint)
+        np.testing.assert_allclose(kernel, ground.normal(x, y, footprint)[c], atol=2e-4)
     layer = CloudLayer.drawn(np.random.default_rng(4), 0.4, 1.0, 168_000.0, CLOUD_FORMS["cumulus"], 1200.0)
     light = _light(20.0)
     kernel = evaluate(lambda x, y, f, ops: layer.radiance(light, ops.param_f32(0.0), x, y, f, ops)[0], x, y, footprint)

@@ -52,11 +52,12 @@ CLOUD_CORE: Final = 0.35
 #: resolve. The edges keep every octave.
 CLOUD_CORE_TOLERANCE: Final = 0.02
 #: The height field that gives a layer its body is the field's first SHAPE_OCTAVES octaves
-#: (down to 1/16 of the form's wavelength: 125-375 m), sampled at the shading point and at
-#: points towards the sun: SLOPE_STEP of the wavelength away (the slope the sun meets)
-#: and SHADOW_STEPS of it (whether the cloud rises above the sun's ray there: self-shadowing).
+#: (down to 1/16 of the form's wavelength: 125-375 m) with its slope towards the sun at the
+#: shading point, and its first SHADOW_OCTAVES at SHADOW_STEPS of the wavelength towards the
+#: sun (whether the cloud rises above the sun's ray there: self-shadowing; detail finer than
+#: an eighth of the wavelength hardly moves a shadow cast from that far).
 SHAPE_OCTAVES: Final = 5
-SLOPE_STEP: Final = 1.0 / 48.0
+SHADOW_OCTAVES: Final = 4
 SHADOW_STEPS: Final = (1.0 / 12.0, 1.0 / 5.0)
 #: Multiple scattering inside a cloud lights its slopes beyond the terminator: the sun's
 #: cosine is wrapped by WRAP (0: a Lambertian surface), and a self-shadowed point keeps
@@ -202,13 +203,26 @@ class CloudLayer:
         value = self.field(x, y, footprint_m, ops, settled=functools.partial(self.decided, u=u))
         return u < ops.clip(self.opacity_of(value, ops), 0.0, 1.0)
 
-    def height(self, x, y, ops: Ops = NUMPY):
+    def _rise(self, value, ops: Ops):
+        return ops.clip((value - ops.param_f32(self.threshold)) * ops.param_f32(1.0 / self.crest), 0.0, 1.0)
+
+    def height(self, x, y, ops: Ops = NUMPY, octaves: int = SHAPE_OCTAVES):
         """The layer's height field at ``(x, y)``: its thickness where the field's first
-        :data:`SHAPE_OCTAVES` octaves reach the crest, rounding down to 0 at the threshold
-        (a heap's dome: the square root of the field's rise)."""
-        value = self.field(x, y, ops=ops, octaves=SHAPE_OCTAVES)
-        rise = ops.clip((value - ops.param_f32(self.threshold)) * ops.param_f32(1.0 / self.crest), 0.0, 1.0)
-        return ops.sqrt(rise) * ops.param_f32(self.thickness_m)
+        ``octaves`` octaves reach the crest, rounding down to 0 at the threshold (a heap's
+        dome, ``r (2 - r)`` of the field's rise ``r``: flat on top, a finite slope at its
+        foot)."""
+        rise = self._rise(self.field(x, y, ops=ops, octaves=octaves), ops)
+        return rise * (ops.f32(2.0) - rise) * ops.param_f32(self.thickness_m)
+
+    def height_slope(self, x, y, ux, uy, ops: Ops = NUMPY):
+        """:meth:`height` at ``(x, y)`` and its slope along the unit direction ``(ux, uy)``
+        (kernel values), from one pass over the field's octaves with their derivatives."""
+        value, dx, dy = self.field.slope(x, y, ops=ops, octaves=SHAPE_OCTAVES)
+        rise = self._rise(value, ops)
+        inside = (rise > ops.f32(0.0)) & (rise < ops.f32(1.0))
+        per_rise = ops.select(inside, (ops.f32(2.0) - ops.f32(2.0) * rise) * ops.param_f32(
+            self.thickness_m / self.crest), ops.f32(0.0))
+        return rise * (ops.f32(2.0) - rise) * ops.param_f32(self.thickness_m), per_rise * (dx * ux + dy * uy)
 
     def radiance(self, light: CloudLight, above, x, y, footprint_m=None, ops: Ops = NUMPY):
         """What the layer's side facing the camera sends back at ``(x, y)``, RGB,
@@ -233,15 +247,13 @@ class CloudLayer:
         albedo = light.albedo / math.pi
 
         def shaded():
-            h = self.height(x, y, ops)
-            step = SLOPE_STEP * wavelength
-            slope = (self.height(x + ux * p(step), y + uy * p(step), ops) - h) * p(1.0 / step)  # the form's scale: data
+            h, slope = self.height_slope(x, y, ux, uy, ops)
             facing = (p(sin_el) - p(cos_el) * slope) / ops.sqrt(f(1.0) + slope * slope)
             lit = ops.clip((facing + f(WRAP)) * f(1.0 / (1.0 + WRAP)), 0.0, 1.0)
             for fraction in SHADOW_STEPS:
                 reach = fraction * wavelength
                 climb = reach * sin_el / max(cos_el, 1e-6)  # how far the sun's ray has risen there
-                over = self.height(x + ux * p(reach), y + uy * p(reach), ops) - h - p(climb)
+                over = self.height(x + ux * p(reach), y + uy * p(reach), ops, SHADOW_OCTAVES) - h - p(climb)
                 lit = lit * (f(1.0) - f(1.0 - SHADOW_FLOOR) * ops.clip(
                     over * p(1.0 / max(0.25 * self.thickness_m, 1.0)), 0.0, 1.0))
             reflect = f(0.55) + f(0.45) * core

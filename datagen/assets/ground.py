@@ -124,18 +124,12 @@ class Ground:
         value = self.land(x, y, footprint_m, ops, settled=settled)
         return ramp(value, threshold, LAND_EDGE, ops)
 
-    def height(self, x, y, footprint_m, ops: Ops = NUMPY):
-        """The relief's height field (metres about its mean)."""
-        return self.relief(x, y, footprint_m, ops) * ops.param_f32(self.kind.relief_m)
-
     def normal(self, x, y, footprint_m, ops: Ops = NUMPY):
-        """The relief's unit normal (local frame: z up), by finite differences one footprint
-        (at least 5 m) apart."""
+        """The relief's unit normal (local frame: z up): the slope of its field filtered to
+        the footprint (:meth:`FractalField.slope`, one pass)."""
         f = ops.f32
-        step = ops.clip(footprint_m, 5.0, 1e6)
-        h = self.height(x, y, footprint_m, ops)
-        dx = (self.height(x + step, y, footprint_m, ops) - h) / step
-        dy = (self.height(x, y + step, footprint_m, ops) - h) / step
+        _, dx, dy = self.relief.slope(x, y, footprint_m, ops)
+        dx, dy = dx * ops.param_f32(self.kind.relief_m), dy * ops.param_f32(self.kind.relief_m)
         norm = ops.sqrt(dx * dx + dy * dy + f(1.0))
         return -dx / norm, -dy / norm, f(1.0) / norm
 

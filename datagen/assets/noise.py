@@ -19,8 +19,8 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["NOISE_BOUND", "NUMPY", "FractalField", "Ops", "Slant", "band_weight", "gradient_noise", "ramp",
-           "row_params", "series"]
+__all__ = ["NOISE_BOUND", "NUMPY", "FractalField", "Ops", "Slant", "band_weight", "gradient_noise",
+           "gradient_noise_slope", "ramp", "row_params", "series"]
 
 #: |gradient_noise| never exceeds this: Perlin's noise with unit gradients peaks at sqrt(1/2)
 #: in two dimensions, and a corner gradient here is at most sqrt(2) long ([-1, 1]^2).
@@ -100,12 +100,15 @@ _HX: Final = 0x8DA6B343
 _HY: Final = 0xD8163841
 
 
-def _corner(h, dx, dy, ops: Ops):
-    """The corner's random gradient (two 16-bit halves of its hash, in [-1, 1]) dotted with
-    the offset from the corner."""
+def _gradient(h, ops: Ops):
+    """A corner's random gradient: two 16-bit halves of its hash, each in [-1, 1]."""
     scale, one = ops.f32(2.0 / 65535.0), ops.f32(1.0)
-    gx = ops.to_f32(h & ops.u32(0xFFFF)) * scale - one
-    gy = ops.to_f32(h >> ops.u32(16)) * scale - one
+    return ops.to_f32(h & ops.u32(0xFFFF)) * scale - one, ops.to_f32(h >> ops.u32(16)) * scale - one
+
+
+def _corner(h, dx, dy, ops: Ops):
+    """The corner's random gradient (:func:`_gradient`) dotted with the offset from the corner."""
+    gx, gy = _gradient(h, ops)
     return gx * dx + gy * dy
 
 
@@ -196,6 +199,37 @@ def gradient_noise(x, y, seed, ops: Ops = NUMPY):
     return bottom + (top - bottom) * v
 
 
+def _fade_slope(t, ops: Ops):
+    """The derivative of :func:`_fade`."""
+    s = t * (t - ops.f32(1.0))
+    return ops.f32(30.0) * s * s
+
+
+def gradient_noise_slope(x, y, seed, ops: Ops = NUMPY):
+    """:func:`gradient_noise` at ``(x, y)`` with its partial derivatives: ``(value, d/dx,
+    d/dy)``, exact (the same lattice, hashes and fade; one pass instead of three)."""
+    xf, yf = ops.floor(x), ops.floor(y)
+    fx, fy = x - xf, y - yf
+    hx0, hy0 = ops.to_u32(xf) * ops.u32(_HX), ops.to_u32(yf) * ops.u32(_HY)
+    hx1, hy1 = hx0 + ops.u32(_HX), hy0 + ops.u32(_HY)
+    one = ops.f32(1.0)
+    fx1, fy1 = fx - one, fy - one
+    g00, g10 = _gradient(_hash(hx0, hy0, seed, ops), ops), _gradient(_hash(hx1, hy0, seed, ops), ops)
+    g01, g11 = _gradient(_hash(hx0, hy1, seed, ops), ops), _gradient(_hash(hx1, hy1, seed, ops), ops)
+    n00, n10 = g00[0] * fx + g00[1] * fy, g10[0] * fx1 + g10[1] * fy
+    n01, n11 = g01[0] * fx + g01[1] * fy1, g11[0] * fx1 + g11[1] * fy1
+    u, v = _fade(fx, ops), _fade(fy, ops)
+    du, dv = _fade_slope(fx, ops), _fade_slope(fy, ops)
+    bottom, top = n00 + (n10 - n00) * u, n01 + (n11 - n01) * u
+    # d/dx of a corner's dot is its gradient's x; the fade's slope carries the blend.
+    bottom_x = g00[0] + (g10[0] - g00[0]) * u + (n10 - n00) * du
+    top_x = g01[0] + (g11[0] - g01[0]) * u + (n11 - n01) * du
+    bottom_y = g00[1] + (g10[1] - g00[1]) * u
+    top_y = g01[1] + (g11[1] - g01[1]) * u
+    return (bottom + (top - bottom) * v, bottom_x + (top_x - bottom_x) * v,
+            bottom_y + (top_y - bottom_y) * v + (top - bottom) * dv)
+
+
 @dataclass(frozen=True)
 class FractalField:
     """A band-limited fractal field on the plane (metres): ``octaves`` of gradient noise
@@ -274,6 +308,22 @@ class FractalField:
             return (term,)
 
         return series(self.rows(), octave, 1, footprint_m, ops, count=octaves, settled=settled)[0]
+
+    def slope(self, x, y, footprint_m=None, ops: Ops = NUMPY, octaves: int | None = None):
+        """The field at ``(x, y)`` as :meth:`__call__` makes it, with its partial derivatives
+        in x and y (per metre): ``(value, d/dx, d/dy)`` in one pass over the octaves."""
+        def octave(row, footprint_m, ops):
+            lx = x * row["a"] + y * row["b"] + row["ox"]
+            ly = x * row["c"] + y * row["d"] + row["oy"]
+            value, d_lx, d_ly = gradient_noise_slope(lx, ly, row["seed"], ops)
+            amplitude = row["amplitude"]
+            if footprint_m is not None:
+                amplitude = amplitude * band_weight(row["wavelength"], footprint_m, ops)
+            # The lattice is (x, y) mapped by [[a, b], [c, d]]: the chain rule through it.
+            return (value * amplitude, (d_lx * row["a"] + d_ly * row["c"]) * amplitude,
+                    (d_lx * row["b"] + d_ly * row["d"]) * amplitude)
+
+        return series(self.rows(), octave, 3, footprint_m, ops, count=octaves)
 
 
 def sample_grid(field: FractalField, span_m: float, n: int, octaves: int | None = None) -> NDArray[np.float32]:

@@ -87,15 +87,18 @@ SEA_COLOUR: Final = (0.01, 0.03, 0.05)
 #: The sea is the part of the earth's sphere within EARTH_CAP_M metres (horizontally) of the
 #: camera's nadir: beyond the horizon from any altitude a config allows (505 km at 20 km).
 EARTH_CAP_M: Final = 600_000.0
-#: The cap's mesh: rings of EARTH_CAP_AZIMUTHS vertices at radii growing geometrically by
-#: EARTH_CAP_GROWTH from EARTH_CAP_FIRST_M to EARTH_CAP_STEP_M apart, then every
-#: EARTH_CAP_STEP_M: no edge longer than 6.4 km, so that the flat triangles lie within
-#: 0.8 m of the sphere (an edge L sags L^2 / 8R), which moves the horizon by less than
-#: 1e-5 degrees; 133,000 vertices, built once (an instance moves it with the camera).
-EARTH_CAP_AZIMUTHS: Final = 768
+#: The cap's mesh: rings of EARTH_CAP_AZIMUTHS vertices, from EARTH_CAP_FIRST_M out, each
+#: EARTH_CAP_GROWTH of the one before or nearer: a flat triangle sags below the sphere by
+#: L^2 / 8R for a longest edge of L, which moves what a camera above the cap sees there by
+#: at most that over its distance from the nadir r, kept under EARTH_CAP_SAG radians (0.08
+#: px of podcam15 at 2K, the narrowest camera; the edges grow as sqrt(8 R EARTH_CAP_SAG r),
+#: about 10 km at the horizon from 7 km). 26,000 vertices, built once (an instance moves it
+#: with the camera); five times as many, each a fixed size, cost every ray 10-20% more to
+#: trace.
+EARTH_CAP_AZIMUTHS: Final = 256
 EARTH_CAP_FIRST_M: Final = 50.0
 EARTH_CAP_GROWTH: Final = 1.25
-EARTH_CAP_STEP_M: Final = 4_000.0
+EARTH_CAP_SAG: Final = 1e-5
 
 
 def sphere_drop(r_m, radius_m: float = EARTH_RADIUS_M):
@@ -111,9 +114,12 @@ def earth_cap() -> tuple[NDArray[np.float32], NDArray[np.uint32], NDArray[np.flo
     coordinates (linear in x and y: the waves' normal map keeps its frame along x) and
     vertex normals (the sphere's)."""
     radii = [0.0, EARTH_CAP_FIRST_M]
-    while radii[-1] * (EARTH_CAP_GROWTH - 1.0) < EARTH_CAP_STEP_M:
-        radii.append(radii[-1] * EARTH_CAP_GROWTH)
-    radii += list(np.arange(radii[-1] + EARTH_CAP_STEP_M, EARTH_CAP_M + EARTH_CAP_STEP_M, EARTH_CAP_STEP_M))
+    while radii[-1] < EARTH_CAP_M:
+        r = radii[-1]
+        # A quad's diagonal is its longest edge: the ring step and the outer ring's chord together.
+        chord = 2.0 * math.pi * 1.05 * r / EARTH_CAP_AZIMUTHS
+        radii.append(r + min(r * (EARTH_CAP_GROWTH - 1.0),
+                             math.sqrt(8.0 * EARTH_RADIUS_M * EARTH_CAP_SAG * r - chord * chord)))
     radii = np.asarray(radii)
     step = 2.0 * np.pi / EARTH_CAP_AZIMUTHS
     phi = np.arange(EARTH_CAP_AZIMUTHS) * step
@@ -432,10 +438,16 @@ def _earth_normal(waves: SeaWaves | None, ground: Ground | None, x, y, footprint
     import mitsuba as mi
 
     f = ops.f32
-    n = waves.normal(x, y, footprint_m, ops) if waves is not None else (x * f(0.0), x * f(0.0), x * f(0.0) + f(1.0))
-    if ground is not None:
+
+    def sea():
+        return waves.normal(x, y, footprint_m, ops) if waves is not None else (x * f(0.0), x * f(0.0),
+                                                                               x * f(0.0) + f(1.0))
+
+    if ground is None:
+        n = sea()
+    else:
         wide = footprint_m.longest(ops)
-        n = _with_land(ground, x, y, wide, ops, n, lambda: ground.normal(x, y, wide, ops))
+        n = _with_land(ground, x, y, wide, ops, 3, sea, lambda: ground.normal(x, y, wide, ops))
         norm = ops.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
         n = tuple(c / norm for c in n)
     half = f(0.5)
@@ -445,11 +457,13 @@ def _earth_normal(waves: SeaWaves | None, ground: Ground | None, x, y, footprint
 def _earth_roughness(waves: SeaWaves | None, roughness: float, ground: Ground | None, x, y, footprint_m, ops):
     """The sea's roughness (what its waves leave unresolved, or the drawn one), the land's
     :data:`~datagen.assets.ground.LAND_ROUGHNESS`."""
-    r = waves.roughness(footprint_m, roughness, ops) if waves is not None else ops.param_f32(roughness)
-    r = r + x * ops.f32(0.0)
+    def sea():
+        r = waves.roughness(footprint_m, roughness, ops) if waves is not None else ops.param_f32(roughness)
+        return (r + x * ops.f32(0.0),)
+
     if ground is None:
-        return r
-    return _with_land(ground, x, y, footprint_m.longest(ops), ops, (r,),
+        return sea()[0]
+    return _with_land(ground, x, y, footprint_m.longest(ops), ops, 1, sea,
                       lambda: (x * ops.f32(0.0) + ops.f32(LAND_ROUGHNESS),))[0]
 
 
@@ -460,30 +474,31 @@ def _earth_albedo(sea: SeaSurface | None, ground: Ground | None, x, y, footprint
     import mitsuba as mi
 
     wide = footprint_m.longest(ops)
-    if sea is not None:
-        colour = sea.albedo(x, y, wide, ops)
-    else:
-        colour = tuple(x * ops.f32(0.0) + ops.f32(c) for c in SEA_COLOUR)
-    if ground is not None:
-        colour = _with_land(ground, x, y, wide, ops, colour, lambda: ground.albedo(x, y, wide, ops))
-    return mi.Color3f(*colour)
+
+    def water():
+        if sea is not None:
+            return sea.albedo(x, y, wide, ops)
+        return tuple(x * ops.f32(0.0) + ops.f32(c) for c in SEA_COLOUR)
+
+    if ground is None:
+        return mi.Color3f(*water())
+    return mi.Color3f(*_with_land(ground, x, y, wide, ops, 3, water, lambda: ground.albedo(x, y, wide, ops)))
 
 
-def _with_land(ground: Ground, x, y, footprint_m, ops, sea: tuple, land) -> tuple:
-    """``sea`` (a tuple of values at the points) mixed towards ``land()`` (the same for the
-    land) by the ground's land weight there. In a kernel the weight is computed only where
-    the approach's ground has land at all, and ``land()`` only in lanes with land
-    (:meth:`~datagen.assets.noise.Ops.where`): over open sea the land costs nothing, over a
-    coast the sea's lanes skip the land's fields."""
-    sea = tuple(v + x * ops.f32(0.0) for v in sea)
-
-    def mixed():
-        m = ground.land_weight(x, y, footprint_m, ops)
-        return ops.where(m > ops.f32(0.0), sea, lambda: tuple(a + (b - a) * m for a, b in zip(sea, land(),
-                                                                                             strict=True)))
-
-    has_land = x * ops.f32(0.0) + ops.param_f32(ground.threshold) < ops.f32(0.5 * NO_SHORE)  # open sea: NO_SHORE
-    return ops.where(has_land, sea, mixed)
+def _with_land(ground: Ground, x, y, footprint_m, ops, size: int, sea, land) -> tuple:
+    """``sea()`` (a tuple of ``size`` values at the points) mixed towards ``land()`` (the same for
+    the land) by the ground's land weight there. In a kernel each is computed only in lanes
+    that show it (:meth:`~datagen.assets.noise.Ops.where`): the weight only where the
+    approach's ground has land at all, the sea only where the land does not cover it all,
+    the land only where there is some: over open sea the land costs nothing, over a desert
+    the sea nothing, over a coast each its own side of the shore."""
+    zero = x * ops.f32(0.0)
+    has_land = zero + ops.param_f32(ground.threshold) < ops.f32(0.5 * NO_SHORE)  # open sea: NO_SHORE
+    m = ops.where(has_land, (zero,), lambda: (ground.land_weight(x, y, footprint_m, ops),))[0]
+    one = ops.f32(1.0)
+    water = ops.where(m < one, (zero,) * size, sea)
+    return ops.where(m > ops.f32(0.0), water,
+                     lambda: tuple(a + (b - a) * m for a, b in zip(water, land(), strict=True)))
 
 
 def _layer_radiance(layer: CloudLayer, light: CloudLight, above: bool, x, y, footprint_m, ops):
