@@ -14,7 +14,7 @@ from typing import Final
 
 import numpy as np
 
-from datagen.assets.noise import NUMPY, FractalField, Ops, ramp, sample_grid
+from datagen.assets.noise import NUMPY, FractalField, Ops, Slant, ramp, sample_grid
 
 __all__ = [
     "CLOUD_CORE",
@@ -206,18 +206,19 @@ class CloudLayer:
     def _rise(self, value, ops: Ops):
         return ops.clip((value - ops.param_f32(self.threshold)) * ops.param_f32(1.0 / self.crest), 0.0, 1.0)
 
-    def height(self, x, y, ops: Ops = NUMPY, octaves: int = SHAPE_OCTAVES):
+    def height(self, x, y, ops: Ops = NUMPY, octaves: int = SHAPE_OCTAVES, footprint_m=None):
         """The layer's height field at ``(x, y)``: its thickness where the field's first
         ``octaves`` octaves reach the crest, rounding down to 0 at the threshold (a heap's
         dome, ``r (2 - r)`` of the field's rise ``r``: flat on top, a finite slope at its
-        foot)."""
-        rise = self._rise(self.field(x, y, ops=ops, octaves=octaves), ops)
+        foot); with ``footprint_m``, octaves finer than a pixel there fade to their mean
+        (far away a heap's shading is filtered, not aliased into speckle)."""
+        rise = self._rise(self.field(x, y, footprint_m, ops, octaves=octaves), ops)
         return rise * (ops.f32(2.0) - rise) * ops.param_f32(self.thickness_m)
 
-    def height_slope(self, x, y, ux, uy, ops: Ops = NUMPY):
+    def height_slope(self, x, y, ux, uy, ops: Ops = NUMPY, footprint_m=None):
         """:meth:`height` at ``(x, y)`` and its slope along the unit direction ``(ux, uy)``
         (kernel values), from one pass over the field's octaves with their derivatives."""
-        value, dx, dy = self.field.slope(x, y, ops=ops, octaves=SHAPE_OCTAVES)
+        value, dx, dy = self.field.slope(x, y, footprint_m, ops, octaves=SHAPE_OCTAVES)
         rise = self._rise(value, ops)
         inside = (rise > ops.f32(0.0)) & (rise < ops.f32(1.0))
         per_rise = ops.select(inside, (ops.f32(2.0) - ops.f32(2.0) * rise) * ops.param_f32(
@@ -234,6 +235,11 @@ class CloudLayer:
         (:data:`BASE_DEPTH_M`). Both are traced: a layer passing from below the camera to
         above it compiles no new kernel."""
         f, p = ops.f32, ops.param_f32
+        # A pixel's footprint on the layer: across the view (the opacity's, as the mask's) and,
+        # seen at a slant, along it (the body's shading filtered to the longest axis).
+        wide = footprint_m
+        if isinstance(footprint_m, Slant):
+            footprint_m, wide = footprint_m.across, footprint_m.longest(ops)
         value = self.value(x, y, footprint_m, ops)
         opacity, core = self.opacity_of(value, ops), self.core_of(value, ops)
         if not math.isfinite(self.threshold):
@@ -247,13 +253,13 @@ class CloudLayer:
         albedo = light.albedo / math.pi
 
         def shaded():
-            h, slope = self.height_slope(x, y, ux, uy, ops)
+            h, slope = self.height_slope(x, y, ux, uy, ops, wide)
             facing = (p(sin_el) - p(cos_el) * slope) / ops.sqrt(f(1.0) + slope * slope)
             lit = ops.clip((facing + f(WRAP)) * f(1.0 / (1.0 + WRAP)), 0.0, 1.0)
             for fraction in SHADOW_STEPS:
                 reach = fraction * wavelength
                 climb = reach * sin_el / max(cos_el, 1e-6)  # how far the sun's ray has risen there
-                over = self.height(x + ux * p(reach), y + uy * p(reach), ops, SHADOW_OCTAVES) - h - p(climb)
+                over = self.height(x + ux * p(reach), y + uy * p(reach), ops, SHADOW_OCTAVES, wide) - h - p(climb)
                 lit = lit * (f(1.0) - f(1.0 - SHADOW_FLOOR) * ops.clip(
                     over * p(1.0 / max(0.25 * self.thickness_m, 1.0)), 0.0, 1.0))
             reflect = f(0.55) + f(0.45) * core

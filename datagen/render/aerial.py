@@ -88,12 +88,15 @@ def aerial_class(variant: str):
             self._paths = None
 
         def set_frame(self, *, air: Atmosphere, grid: NDArray[np.float32], alpha: NDArray[np.float32],
-                      stride: int, intrinsics: Intrinsics, cam_from_render: NDArray[np.float64], codes) -> None:
+                      stride: int, intrinsics: Intrinsics, cam_from_render: NDArray[np.float64], codes,
+                      opacities: tuple = ()) -> None:
             """The frame's air (``grid``: :func:`airlight_grid`; ``alpha``: (h, w, layers) the
             opacity of each cloud layer where each pixel's ray meets it, -1 where it does not,
             from a geometry pass of ``stride``;
             ``cam_from_render``: the camera's rotation; ``codes``: per shape registry id + 1
-            its index in ``("sea", *CLOUD_LAYERS)``)."""
+            its index in ``("sea", *CLOUD_LAYERS)``; ``opacities``: the layers' opacity
+            textures, in that order, asked where a sample meets a layer its pixel's ray did
+            not)."""
             k = intrinsics
             gh, gw = grid.shape[:2]
             if self._paths is None:  # the table's entries, made once
@@ -108,7 +111,7 @@ def aerial_class(variant: str):
                 "alpha_height": dr.opaque(mi.UInt32, alpha.shape[0]), "stride": opaque(stride),
                 "k": [opaque(x) for x in (k.fx, k.fy, k.cx, k.cy)], "size": (k.width, k.height),
                 "rotation": [[opaque(cam_from_render[i, j]) for j in range(3)] for i in range(3)],
-                "codes": codes,
+                "codes": codes, "opacities": tuple(opacities),
             }
             dr.make_opaque(self._frame["table"], self._frame["grid"], self._frame["alpha"])
 
@@ -155,7 +158,12 @@ def aerial_class(variant: str):
             layers = len(CLOUD_LAYERS)
             w1, w2 = (dr.select(met, dr.gather(mi.Float, f["alpha"], pixel * layers + mi.UInt32(layer - 1), met), 1.0)
                       for met, layer in ((cloud1, layer1), (cloud2, layer2)))
-            w1, w2 = (dr.select(w < 0.0, 1.0, w) for w in (w1, w2))  # the pixel's ray met no such layer
+            # A sample that meets a layer its pixel's ray did not (-1: a thin edge inside the
+            # pixel) is weighed by the layer's opacity at its own hit: a path through the edge
+            # to the sea behind then takes the sea's air, not the cloud's (dark specks).
+            w1 = self._own_opacity(w1, cloud1, layer1, ray.o + d * t1)
+            w2 = self._own_opacity(w2, cloud2, layer2, ray.o + d * t2)
+            w1, w2 = (dr.select(w < 0.0, 1.0, w) for w in (w1, w2))  # no opacity to ask: the path ends there
             weights = (w1, (1.0 - w1) * w2, (1.0 - w1) * (1.0 - w2))
             airlight, column = self._grid(u, v, width, height)
             paths = [self._transmittance(d.z, t) for t in (t1, t2, t3)]
@@ -165,6 +173,22 @@ def aerial_class(variant: str):
                            for w, tt in zip(weights, paths, strict=True))
                 out.append(dr.select(t1 > 0.0, seen, L[c]))
             return mi.Spectrum(*out), valid, aovs
+
+        def _own_opacity(self, w, met, layer, p):
+            """``w`` (a pixel's opacity of the layer a sample met, -1 where its ray met
+            none), with the layer's own opacity at the sample's hit ``p`` where it is -1; the
+            texture is evaluated only in those lanes (packets without one skip it)."""
+            opacities = self._frame["opacities"]
+            if not opacities:
+                return w
+            si = dr.zeros(mi.SurfaceInteraction3f)
+            si.p = p
+            for k, texture in enumerate(opacities, start=1):
+                def own(texture=texture):
+                    return (dr.clip(texture.eval_1(si), 0.0, 1.0),)
+
+                w = ops.where(met & (w < 0.0) & (layer == k), (w,), own)[0]
+            return w
 
         def _transmittance(self, mu, s):
             """The table's transmittance (RGB) of paths of elevation ``asin(mu)`` and length ``s``."""

@@ -419,7 +419,8 @@ class Renderer(RayCasting):
             alpha, stride = np.full((1, 1, len(CLOUD_LAYERS)), -1.0, np.float32), max(self.intrinsics.width,
                                                                                   self.intrinsics.height)
         self.aerial.set_frame(air=air, grid=grid, alpha=alpha, stride=stride, intrinsics=self.intrinsics,
-                              cam_from_render=state.world_from_cam[:3, :3].T, codes=self._background_codes)
+                              cam_from_render=state.world_from_cam[:3, :3].T, codes=self._background_codes,
+                              opacities=self.world.cloud_opacities())
 
     def aerial_perspective(self, rgb: NDArray[np.float32], state: FrameState, look: FrameLook) -> NDArray[np.float32]:
         """``rgb`` (the finished render's linear radiance) seen through the frame's air, per

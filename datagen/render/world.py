@@ -241,7 +241,7 @@ class World:
         entries = {}
         for name in CLOUD_LAYERS:
             opacity = field_texture(pixel_rad=self.pixel_rad)
-            radiance = field_texture(pixel_rad=self.pixel_rad, colour=True, front_only=True)
+            radiance = field_texture(pixel_rad=self.pixel_rad, colour=True, front_only=True, slant=True)
             for texture in (opacity, radiance):
                 texture.shade = _clear
             opacity.cover = _uncovered
@@ -258,6 +258,11 @@ class World:
             self.cloud_meshes[name] = mitsuba_mesh(name, verts, faces, bsdf, texcoords=uv, emitter=emitter)
             entries[name] = self.cloud_meshes[name]
         return entries
+
+    def cloud_opacities(self) -> tuple:
+        """The cloud layers' opacity textures in :data:`CLOUD_LAYERS` order (none without
+        clouds): what each frame's layer draws, asked at any render-frame point."""
+        return tuple(self._cloud_textures[name][0] for name in CLOUD_LAYERS if name in self._cloud_textures)
 
     def wears_livery(self, obj: str, material_class: str) -> bool:
         return self.livery and obj in LIVERY_OBJECTS and material_class == "paint"
