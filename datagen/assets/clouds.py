@@ -206,14 +206,16 @@ class CloudLayer:
     def _rise(self, value, ops: Ops):
         return ops.clip((value - ops.param_f32(self.threshold)) * ops.param_f32(1.0 / self.crest), 0.0, 1.0)
 
+    def _dome(self, rise, ops: Ops):
+        return rise * (ops.f32(2.0) - rise) * ops.param_f32(self.thickness_m)
+
     def height(self, x, y, ops: Ops = NUMPY, octaves: int = SHAPE_OCTAVES, footprint_m=None):
         """The layer's height field at ``(x, y)``: its thickness where the field's first
         ``octaves`` octaves reach the crest, rounding down to 0 at the threshold (a heap's
         dome, ``r (2 - r)`` of the field's rise ``r``: flat on top, a finite slope at its
         foot); with ``footprint_m``, octaves finer than a pixel there fade to their mean
         (far away a heap's shading is filtered, not aliased into speckle)."""
-        rise = self._rise(self.field(x, y, footprint_m, ops, octaves=octaves), ops)
-        return rise * (ops.f32(2.0) - rise) * ops.param_f32(self.thickness_m)
+        return self._dome(self._rise(self.field(x, y, footprint_m, ops, octaves=octaves), ops), ops)
 
     def height_slope(self, x, y, ux, uy, ops: Ops = NUMPY, footprint_m=None):
         """:meth:`height` at ``(x, y)`` and its slope along the unit direction ``(ux, uy)``
@@ -223,7 +225,7 @@ class CloudLayer:
         inside = (rise > ops.f32(0.0)) & (rise < ops.f32(1.0))
         per_rise = ops.select(inside, (ops.f32(2.0) - ops.f32(2.0) * rise) * ops.param_f32(
             self.thickness_m / self.crest), ops.f32(0.0))
-        return rise * (ops.f32(2.0) - rise) * ops.param_f32(self.thickness_m), per_rise * (dx * ux + dy * uy)
+        return self._dome(rise, ops), per_rise * (dx * ux + dy * uy)
 
     def radiance(self, light: CloudLight, above, x, y, footprint_m=None, ops: Ops = NUMPY):
         """What the layer's side facing the camera sends back at ``(x, y)``, RGB,

@@ -106,12 +106,6 @@ def _gradient(h, ops: Ops):
     return ops.to_f32(h & ops.u32(0xFFFF)) * scale - one, ops.to_f32(h >> ops.u32(16)) * scale - one
 
 
-def _corner(h, dx, dy, ops: Ops):
-    """The corner's random gradient (:func:`_gradient`) dotted with the offset from the corner."""
-    gx, gy = _gradient(h, ops)
-    return gx * dx + gy * dy
-
-
 def ramp(value, start, width: float, ops: Ops = NUMPY):
     """0 up to ``start``, 1 from ``start + width``, smoothstep between (``start`` a constant
     or a kernel parameter already made by ``ops``)."""
@@ -180,19 +174,26 @@ def _fade(t, ops: Ops):
     return t * t * t * (t * (t * f(6.0) - f(15.0)) + f(10.0))
 
 
-def gradient_noise(x, y, seed, ops: Ops = NUMPY):
-    """Gradient noise at ``(x, y)`` (lattice units, float32 arrays), in about [-0.7, 0.7]
-    and never beyond :data:`NOISE_BOUND`; zero at every lattice corner."""
+def _lattice(x, y, seed, ops: Ops):
+    """The lattice cell of ``(x, y)``: the offsets from its lower corner (``fx, fy``) and
+    from its upper one (``fx - 1, fy - 1``), and its four corners' gradients (:func:`_gradient`)
+    in the order (0, 0), (1, 0), (0, 1), (1, 1)."""
     xf, yf = ops.floor(x), ops.floor(y)
     fx, fy = x - xf, y - yf
     hx0, hy0 = ops.to_u32(xf) * ops.u32(_HX), ops.to_u32(yf) * ops.u32(_HY)
     hx1, hy1 = hx0 + ops.u32(_HX), hy0 + ops.u32(_HY)  # the next corners': (i + 1) * H wraps as i * H + H
     one = ops.f32(1.0)
-    fx1, fy1 = fx - one, fy - one
-    n00 = _corner(_hash(hx0, hy0, seed, ops), fx, fy, ops)
-    n10 = _corner(_hash(hx1, hy0, seed, ops), fx1, fy, ops)
-    n01 = _corner(_hash(hx0, hy1, seed, ops), fx, fy1, ops)
-    n11 = _corner(_hash(hx1, hy1, seed, ops), fx1, fy1, ops)
+    corners = tuple(_gradient(_hash(hx, hy, seed, ops), ops) for hx, hy in ((hx0, hy0), (hx1, hy0), (hx0, hy1),
+                                                                             (hx1, hy1)))
+    return fx, fy, fx - one, fy - one, corners
+
+
+def gradient_noise(x, y, seed, ops: Ops = NUMPY):
+    """Gradient noise at ``(x, y)`` (lattice units, float32 arrays), in about [-0.7, 0.7]
+    and never beyond :data:`NOISE_BOUND`; zero at every lattice corner."""
+    fx, fy, fx1, fy1, (g00, g10, g01, g11) = _lattice(x, y, seed, ops)
+    n00, n10 = g00[0] * fx + g00[1] * fy, g10[0] * fx1 + g10[1] * fy
+    n01, n11 = g01[0] * fx + g01[1] * fy1, g11[0] * fx1 + g11[1] * fy1
     u, v = _fade(fx, ops), _fade(fy, ops)
     bottom = n00 + (n10 - n00) * u
     top = n01 + (n11 - n01) * u
@@ -208,14 +209,7 @@ def _fade_slope(t, ops: Ops):
 def gradient_noise_slope(x, y, seed, ops: Ops = NUMPY):
     """:func:`gradient_noise` at ``(x, y)`` with its partial derivatives: ``(value, d/dx,
     d/dy)``, exact (the same lattice, hashes and fade; one pass instead of three)."""
-    xf, yf = ops.floor(x), ops.floor(y)
-    fx, fy = x - xf, y - yf
-    hx0, hy0 = ops.to_u32(xf) * ops.u32(_HX), ops.to_u32(yf) * ops.u32(_HY)
-    hx1, hy1 = hx0 + ops.u32(_HX), hy0 + ops.u32(_HY)
-    one = ops.f32(1.0)
-    fx1, fy1 = fx - one, fy - one
-    g00, g10 = _gradient(_hash(hx0, hy0, seed, ops), ops), _gradient(_hash(hx1, hy0, seed, ops), ops)
-    g01, g11 = _gradient(_hash(hx0, hy1, seed, ops), ops), _gradient(_hash(hx1, hy1, seed, ops), ops)
+    fx, fy, fx1, fy1, (g00, g10, g01, g11) = _lattice(x, y, seed, ops)
     n00, n10 = g00[0] * fx + g00[1] * fy, g10[0] * fx1 + g10[1] * fy
     n01, n11 = g01[0] * fx + g01[1] * fy1, g11[0] * fx1 + g11[1] * fy1
     u, v = _fade(fx, ops), _fade(fy, ops)

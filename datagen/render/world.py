@@ -262,7 +262,7 @@ class World:
     def cloud_opacities(self) -> tuple:
         """The cloud layers' opacity textures in :data:`CLOUD_LAYERS` order (none without
         clouds): what each frame's layer draws, asked at any render-frame point."""
-        return tuple(self._cloud_textures[name][0] for name in CLOUD_LAYERS if name in self._cloud_textures)
+        return tuple(self._cloud_textures[name][0] for name in CLOUD_LAYERS) if self._cloud_textures else ()
 
     def wears_livery(self, obj: str, material_class: str) -> bool:
         return self.livery and obj in LIVERY_OBJECTS and material_class == "paint"
