@@ -27,7 +27,7 @@ from datagen.render.atmosphere import (
     table_coordinates,
     transmittance_table,
 )
-from datagen.render.world import EARTH_CAP_SAG, earth_cap, sphere_drop
+from datagen.render.world import CLOUD_LAYERS, EARTH_CAP_SAG, SURFACES, earth_cap, sphere_drop
 from datagen.scene.approach import FrameStates
 from datagen.scene.look import frame_look
 
@@ -225,28 +225,54 @@ def test_the_renders_transmittance_table_holds_every_path_within_1_5_percent(alt
 
 
 @pytest.mark.render
+def test_the_renders_air_does_not_depend_on_the_geometry_pass_resolution() -> None:
+    """A build's frame (the geometry pass at half resolution) and a frame rendered with the
+    full geometry pass are the same image: each sample weighs the cloud layers it meets by
+    their opacity where it meets them, not by a pass's pixel (a 2 x 2 block's opacity drew
+    rows of dark dots under wisps of a cumulus deck)."""
+    from datagen.render.renderer import Renderer
+    from datagen.scene.resolved import Scene
+
+    config = override_config(load_config("wingcam55"), {
+        "randomization.sensor.enabled": False, "render.denoise": "off",
+        "randomization.clouds.forms": {"cumulus": 1.0}, "randomization.clouds.deck_coverage": [0.3, 0.4]})
+    renderer = Renderer(Scene.resolve(config), spp=4, width=160, height=84)
+    state = FrameStates(config)(0)
+    look = frame_look(config, state)
+    build = renderer.render(state, look, 3).rgb
+    full = renderer.render(state, look, 3, geometry=True)
+    assert (full.surface == SURFACES.index("cloud")).mean() > 0.05  # clouds in view
+    np.testing.assert_array_equal(build, full.rgb)
+
+
+@pytest.mark.render
 @pytest.mark.parametrize(("scene", "frame"), [("wingcam55", 3), ("dashcam75", 150)])
 def test_the_renders_air_per_sample_is_the_per_pixel_formula_away_from_edges(scene: str, frame: int) -> None:
     """The render kernel's aerial perspective (every sample along its own path, the table
     looked up, up to two cloud layers weighed) against the numpy formula applied to the
     same render without it, pixel by pixel along each centre's ray (16 spp, no denoiser,
     192 px): within 8% of the radiance wherever a pixel and its 8 neighbours show one
-    surface at nearly one depth and each cloud layer unmet, clear or opaque alike, and
-    within 1% on average over them (measured: 4.1% and 0.17% at worst, with clouds reaching
-    the horizon and shaded by their slopes; a pixel's samples spread over its area, the
-    formula along its centre)."""
+    surface at nearly one depth and each cloud layer unmet, clear or opaque alike, at the
+    centre and at 3 x 3 points across the pixel (a sample weighs a layer by its opacity
+    where the sample meets it: a wisp of cloud inside a pixel whose centre is clear is an
+    edge), and within 1% on average over them (measured: 4.1% and 0.16% at worst, with
+    clouds reaching the horizon and shaded by their slopes; a pixel's samples spread over
+    its area, the formula along its centre)."""
     import mitsuba as mi
 
     from datagen.render.renderer import Renderer
     from datagen.scene.resolved import Scene
 
     config = override_config(load_config(scene), {"randomization.sensor.enabled": False, "render.denoise": "off"})
-    renderer = Renderer(Scene.resolve(config), spp=16, width=192, height=101)
     state = FrameStates(config)(frame)
     look = frame_look(config, state)
+    finer = Renderer(Scene.resolve(config), spp=1, width=3 * 192, height=3 * 101)  # one live scene at a time
+    finer.pose(state, look)
+    sub = finer.geometry_pass(1, opacity=True)[3].reshape(101, 3, 192, 3, len(CLOUD_LAYERS))
+    renderer = Renderer(Scene.resolve(config), spp=16, width=192, height=101)
     renderer.pose(state, look)
     depth, _, surface, alpha = renderer.geometry_pass(1, opacity=True)
-    renderer._set_air(state, look, alpha, 1)
+    renderer._set_air(state, look)
     seen = np.asarray(mi.render(renderer.scene, seed=7, spp=16), dtype=np.float32)[..., :3]
     renderer.aerial._frame = None  # the same render without the air
     bare = np.asarray(mi.render(renderer.scene, seed=7, spp=16), dtype=np.float32)[..., :3]
@@ -260,8 +286,9 @@ def test_the_renders_air_per_sample_is_the_per_pixel_formula_away_from_edges(sce
             shifted = np.roll(np.roll(surface, dy, 0), dx, 1)
             flat &= (shifted == surface) & (np.abs(np.roll(np.roll(z, dy, 0), dx, 1) - z) <= 0.05 * z)
             flat &= (np.roll(np.roll(alpha, dy, 0), dx, 1) == alpha).all(axis=-1)  # each layer as at the centre
-    # Each layer not met (-1), clear or opaque there, and so around it.
+    # Each layer not met (-1), clear or opaque there, and so around it and across it.
     flat &= ((alpha <= 0.0) | (alpha == 1.0)).all(axis=-1)
+    flat &= (sub == alpha[:, None, :, None, :]).all(axis=(1, 3, 4))
     flat[[0, -1]] = flat[:, [0, -1]] = False
     assert flat.mean() > 0.3
     error = np.abs(seen - reference)[flat] / np.maximum(reference[flat], 1e-3)

@@ -13,8 +13,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from datagen.assets.clouds import CLOUD_FORMS, CloudLayer, CloudLight
+from datagen.assets.clouds import CLOUD_FORMS, CloudLayer, CloudLight, forward_scattered
 from datagen.assets.ground import GROUND_TYPES, Ground
+from datagen.assets.noise import Slant
 from datagen.config.load import load_config, override_config
 from datagen.scene.look import _approach_world
 
@@ -112,6 +113,40 @@ def test_a_clouds_base_darkens_with_the_thickness_above_it() -> None:
     assert np.all(base_thick[cloud] < base_thin[cloud])
     # The overcast has structure from below: its base's brightness varies over the layer.
     assert np.std(base_thick[cloud]) / np.mean(base_thick[cloud]) > 0.1
+
+
+def test_the_forward_scattering_phase_is_normalized_and_peaks_at_unit_optical_depth() -> None:
+    """:func:`forward_scattered` per unit ``tau exp(-tau)`` integrates to 1 over the sphere
+    (a phase function), and over optical depth it is largest at 1 and under 1e-6 of that
+    through a thick core (tau 20)."""
+    cos = np.linspace(-1.0, 1.0, 200_001)
+    phase = forward_scattered(np.float64(1.0), cos) / math.exp(-1.0)
+    assert abs(np.trapezoid(phase, cos) * 2.0 * math.pi - 1.0) < 1e-3
+    tau = np.linspace(0.0, 20.0, 2001)
+    out = forward_scattered(tau, np.float64(0.9))
+    assert abs(tau[np.argmax(out)] - 1.0) < 0.011
+    assert out[-1] < 1e-6 * out.max()
+
+
+def test_a_bases_thin_edges_glow_towards_the_sun_and_not_away_from_it() -> None:
+    """From below, a thin layer's edges (opacity under 1) looked at towards the sun are
+    brighter than the same edges looked at away from it, by more than twice; its thick
+    cores (hardly any light scattered once gets through them) look the same both ways, within
+    1%."""
+    layer = CloudLayer.drawn(np.random.default_rng(3), 0.4, 1.0, 168_000.0, CLOUD_FORMS["layer"], 300.0)
+    rng = np.random.default_rng(5)
+    x, y = rng.uniform(-2e4, 2e4, (2, 40_000)).astype(np.float32)
+    light = _light(20.0)  # the sun towards +x
+    footprint = np.full(x.shape, 2.0, np.float32)
+    looks = {}
+    for name, sx in (("sunward", 2.0), ("away", -2.0)):  # views 63 degrees from the zenith
+        slant = Slant(footprint, np.full(x.shape, sx, np.float32), np.zeros_like(x))
+        looks[name] = layer.radiance(light, np.float32(1.0), x, y, slant)[1]
+    opacity = layer(x, y, footprint)
+    edge, core = (opacity > 0.05) & (opacity < 0.9), layer.height(x, y) > 250.0
+    assert edge.sum() > 200 and core.sum() > 200
+    assert np.median(looks["sunward"][edge]) > 2.0 * np.median(looks["away"][edge])
+    np.testing.assert_allclose(looks["sunward"][core], looks["away"][core], rtol=1e-2)
 
 
 @settings(max_examples=25, deadline=None)

@@ -28,6 +28,7 @@ __all__ = [
     "CloudForm",
     "CloudLayer",
     "CloudLight",
+    "forward_scattered",
 ]
 
 #: A cloud layer's field: its largest features CLOUD_WAVELENGTH_M across, CLOUD_OCTAVES octaves
@@ -61,13 +62,33 @@ SHADOW_OCTAVES: Final = 4
 SHADOW_STEPS: Final = (1.0 / 12.0, 1.0 / 5.0)
 #: Multiple scattering inside a cloud lights its slopes beyond the terminator: the sun's
 #: cosine is wrapped by WRAP (0: a Lambertian surface), and a self-shadowed point keeps
-#: SHADOW_FLOOR of the sun's light. A base transmits the sun and sky through a thickness h
-#: as a thick scattering slab does, 1 / (1 + h / BASE_DEPTH_M) (Bohren 1987's diffuse
-#: transmittance, 1 / (1 + 3/4 (1 - g) tau), for a droplet cloud's extinction of about
-#: 0.05 per metre and g = 0.85: half the light through 180 m, a sixth through 1 km).
+#: SHADOW_FLOOR of the sun's light.
 WRAP: Final = 0.4
 SHADOW_FLOOR: Final = 0.25
-BASE_DEPTH_M: Final = 180.0
+#: A droplet cloud's extinction (per metre) and the asymmetry of its phase function
+#: (Henyey-Greenstein's g).
+EXTINCTION_PER_M: Final = 0.05
+ASYMMETRY: Final = 0.85
+#: A base transmits the sun and sky through a thickness h as a thick scattering slab does,
+#: 1 / (1 + h / BASE_DEPTH_M) (Bohren 1987's diffuse transmittance, 1 / (1 + 3/4 (1 - g)
+#: tau): half the light through 180 m, a sixth through 1 km); its thin parts also send the
+#: sun's light on forwards, scattered once (:func:`forward_scattered`): a silver lining
+#: round a cloud seen towards the sun from below.
+BASE_DEPTH_M: Final = 1.0 / (0.75 * (1.0 - ASYMMETRY) * EXTINCTION_PER_M)
+
+
+def forward_scattered(tau, cos_angle, ops: Ops = NUMPY):
+    """The radiance a bit of cloud of optical depth ``tau`` along both the sun's ray and the
+    view (a lump as deep as it is wide: a cloud's edges are lit from the side, not through a
+    slab) sends towards the camera per unit of the sun's normal irradiance, scattered once
+    with albedo 1: the Henyey-Greenstein phase (:data:`ASYMMETRY`) at the scattering angle's
+    cosine ``cos_angle`` times ``tau exp(-tau)``. Largest at an optical depth of 1, nothing
+    through a thick core: it lights a cloud's thin edges towards the sun."""
+    f = ops.f32
+    g = ASYMMETRY
+    spread = f(1.0 + g * g) - f(2.0 * g) * cos_angle
+    phase = f((1.0 - g * g) / (4.0 * math.pi)) / (spread * ops.sqrt(spread))
+    return phase * tau * ops.exp(-tau)
 
 
 @dataclass(frozen=True)
@@ -234,13 +255,16 @@ class CloudLayer:
         cloud stands in the sun's ray (:data:`SHADOW_STEPS`), and the sky's, thin parts
         reflecting a little over half what thick cores do; from below (``above``, a kernel
         weight: 1 or 0), its base, the sun and sky transmitted through the thickness there
-        (:data:`BASE_DEPTH_M`). Both are traced: a layer passing from below the camera to
-        above it compiles no new kernel."""
+        (:data:`BASE_DEPTH_M`), and where ``footprint_m`` is a :class:`Slant` (it gives the
+        view's direction) the sun's light its thin parts scatter forwards towards the camera
+        (:func:`forward_scattered`). Both are traced: a layer passing from below the camera
+        to above it compiles no new kernel."""
         f, p = ops.f32, ops.param_f32
         # A pixel's footprint on the layer: across the view (the opacity's, as the mask's) and,
         # seen at a slant, along it (the body's shading filtered to the longest axis).
-        wide = footprint_m
+        wide, view = footprint_m, None
         if isinstance(footprint_m, Slant):
+            view = (footprint_m.sx, footprint_m.sy)  # the view's horizontal part over its vertical part
             footprint_m, wide = footprint_m.across, footprint_m.longest(ops)
         value = self.value(x, y, footprint_m, ops)
         opacity, core = self.opacity_of(value, ops), self.core_of(value, ops)
@@ -266,10 +290,15 @@ class CloudLayer:
                     over * p(1.0 / max(0.25 * self.thickness_m, 1.0)), 0.0, 1.0))
             reflect = f(0.55) + f(0.45) * core
             through = f(1.0) / (f(1.0) + h * f(1.0 / BASE_DEPTH_M))
+            forward = f(0.0)
+            if view is not None:  # seen from below: the camera looks up along (sx, sy, 1)
+                mu_view = f(1.0) / ops.sqrt(f(1.0) + view[0] * view[0] + view[1] * view[1])
+                cos_angle = mu_view * (view[0] * p(sx) + view[1] * p(sy) + p(sz))
+                forward = forward_scattered(h * f(EXTINCTION_PER_M), cos_angle, ops)
             out = []
             for c in range(3):
                 top = (lit * p(sun_n[c] * albedo) + p(sky[c] * albedo)) * reflect
-                base = through * p((sun[c] + sky[c]) * albedo)
+                base = through * p((sun[c] + sky[c]) * albedo) + forward * p(sun_n[c] * light.albedo)
                 out.append(opacity * (above * base + (f(1.0) - above) * top))
             return tuple(out)
 

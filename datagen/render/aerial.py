@@ -14,10 +14,11 @@ sea's samples of a horizon pixel by its centre's path, or not at all). Per sampl
   radiance every :data:`AIRLIGHT_STEP_PX` pixels (:meth:`~datagen.render.sky.sky_class`'s
   ``radiance``);
 - a sample that meets cloud layers weighs its path to each layer and the one past it
-  (more rays, up to two layers) by that layer's opacity where its pixel's ray meets it,
-  from the geometry pass; where the pixel's ray meets none of that layer (a sliver of
-  distant cloud a sample finds inside a pixel whose centre sees the sky), the sample's
-  path ends at the layer it met.
+  (more rays, up to two layers) by that layer's opacity where the sample meets it (the
+  share of the sample's light the layer itself sends; the rest comes from behind it). A
+  pixel's or a block's opacity instead (a geometry pass's) gave every sample of a block
+  whose centre met a wisp of cloud the wisp's short path: rows of dark dots where the
+  sample saw the far sea.
 
 Everything that changes per frame is a kernel input (arrays, opaque scalars): the render
 kernel compiles once. Samples that meet nothing (the sky) are returned as they are.
@@ -73,7 +74,6 @@ def aerial_class(variant: str):
     from datagen.render.mitsuba import jit_array
     from datagen.render.procedural import drjit_ops
     from datagen.render.raycast import _past
-    from datagen.render.world import CLOUD_LAYERS
 
     ops = drjit_ops()
 
@@ -87,16 +87,12 @@ def aerial_class(variant: str):
             self._frame: dict | None = None
             self._paths = None
 
-        def set_frame(self, *, air: Atmosphere, grid: NDArray[np.float32], alpha: NDArray[np.float32],
-                      stride: int, intrinsics: Intrinsics, cam_from_render: NDArray[np.float64], codes,
-                      opacities: tuple = ()) -> None:
-            """The frame's air (``grid``: :func:`airlight_grid`; ``alpha``: (h, w, layers) the
-            opacity of each cloud layer where each pixel's ray meets it, -1 where it does not,
-            from a geometry pass of ``stride``;
-            ``cam_from_render``: the camera's rotation; ``codes``: per shape registry id + 1
-            its index in ``("sea", *CLOUD_LAYERS)``; ``opacities``: the layers' opacity
-            textures, in that order, asked where a sample meets a layer its pixel's ray did
-            not)."""
+        def set_frame(self, *, air: Atmosphere, grid: NDArray[np.float32], intrinsics: Intrinsics,
+                      cam_from_render: NDArray[np.float64], codes, opacities: tuple = ()) -> None:
+            """The frame's air (``grid``: :func:`airlight_grid`; ``cam_from_render``: the
+            camera's rotation; ``codes``: per shape registry id + 1 its index in
+            ``("sea", *CLOUD_LAYERS)``; ``opacities``: the layers' opacity textures, in that
+            order, asked where a sample meets a layer)."""
             k = intrinsics
             gh, gw = grid.shape[:2]
             if self._paths is None:  # the table's entries, made once
@@ -106,14 +102,11 @@ def aerial_class(variant: str):
             self._frame = {
                 "table": table,
                 "grid": jit_array(mi.Float, np.ascontiguousarray(grid).reshape(-1)), "gw": gw, "gh": gh,
-                "alpha": jit_array(mi.Float, np.ascontiguousarray(alpha, dtype=np.float32).reshape(-1)),
-                "alpha_width": dr.opaque(mi.UInt32, alpha.shape[1]),
-                "alpha_height": dr.opaque(mi.UInt32, alpha.shape[0]), "stride": opaque(stride),
                 "k": [opaque(x) for x in (k.fx, k.fy, k.cx, k.cy)], "size": (k.width, k.height),
                 "rotation": [[opaque(cam_from_render[i, j]) for j in range(3)] for i in range(3)],
                 "codes": codes, "opacities": tuple(opacities),
             }
-            dr.make_opaque(self._frame["table"], self._frame["grid"], self._frame["alpha"])
+            dr.make_opaque(self._frame["table"], self._frame["grid"])
 
         def sample(self, scene, sampler, ray, medium=None, active=True):
             L, valid, aovs = self.inner.sample(scene, sampler, ray, medium, active)
@@ -151,19 +144,9 @@ def aerial_class(variant: str):
             width, height = f["size"]
             u = dr.clip(fx * x / z + cx, 0.0, width - 1e-3)
             v = dr.clip(fy * y / z + cy, 0.0, height - 1e-3)
-            stride = f["stride"]
-            pixel = (mi.UInt32(dr.minimum(v / stride, f["alpha_height"] - 1)) * f["alpha_width"]
-                     + mi.UInt32(dr.minimum(u / stride, f["alpha_width"] - 1)))
-            # How much of the sample each path carries: the layers' opacities at its pixel.
-            layers = len(CLOUD_LAYERS)
-            w1, w2 = (dr.select(met, dr.gather(mi.Float, f["alpha"], pixel * layers + mi.UInt32(layer - 1), met), 1.0)
-                      for met, layer in ((cloud1, layer1), (cloud2, layer2)))
-            # A sample that meets a layer its pixel's ray did not (-1: a thin edge inside the
-            # pixel) is weighed by the layer's opacity at its own hit: a path through the edge
-            # to the sea behind then takes the sea's air, not the cloud's (dark specks).
-            w1 = self._own_opacity(w1, cloud1, layer1, ray.o + d * t1)
-            w2 = self._own_opacity(w2, cloud2, layer2, ray.o + d * t2)
-            w1, w2 = (dr.select(w < 0.0, 1.0, w) for w in (w1, w2))  # no opacity to ask: the path ends there
+            # How much of the sample each path carries: the layers' opacities where it meets them.
+            w1 = self._opacity(cloud1, layer1, ray.o + d * t1)
+            w2 = self._opacity(cloud2, layer2, ray.o + d * t2)
             weights = (w1, (1.0 - w1) * w2, (1.0 - w1) * (1.0 - w2))
             airlight, column = self._grid(u, v, width, height)
             paths = [self._transmittance(d.z, t) for t in (t1, t2, t3)]
@@ -174,20 +157,19 @@ def aerial_class(variant: str):
                 out.append(dr.select(t1 > 0.0, seen, L[c]))
             return mi.Spectrum(*out), valid, aovs
 
-        def _own_opacity(self, w, met, layer, p):
-            """``w`` (a pixel's opacity of the layer a sample met, -1 where its ray met
-            none), with the layer's own opacity at the sample's hit ``p`` where it is -1; the
-            texture is evaluated only in those lanes (packets without one skip it)."""
-            opacities = self._frame["opacities"]
-            if not opacities:
-                return w
+        def _opacity(self, met, layer, p):
+            """The opacity of the cloud layer a sample met (``layer``: its index in
+            ``("sea", *CLOUD_LAYERS)``) at the sample's hit ``p``, 1 where it met none or no
+            opacity is known (the path ends there); a texture is evaluated only in its
+            layer's lanes (packets without one skip it)."""
+            w = dr.full(mi.Float, 1.0, dr.width(p))
             si = dr.zeros(mi.SurfaceInteraction3f)
             si.p = p
-            for k, texture in enumerate(opacities, start=1):
+            for k, texture in enumerate(self._frame["opacities"], start=1):
                 def own(texture=texture):
                     return (dr.clip(texture.eval_1(si), 0.0, 1.0),)
 
-                w = ops.where(met & (w < 0.0) & (layer == k), (w,), own)[0]
+                w = ops.where(met & (layer == k), (w,), own)[0]
             return w
 
         def _transmittance(self, mu, s):

@@ -360,16 +360,15 @@ class Renderer(RayCasting):
         with clock.stage("pose"):  # the cloud-lighting probe inside it is a stage of its own
             self.pose(state, look, clock)
         haze = look.haze_visibility_m is not None
-        with clock.stage("geometry pass"):  # before the render: the air's kernel inputs come from it
-            stride = 1 if geometry else 2
-            if haze or geometry or self.always_geometry:  # the camera model and the statistics: half resolution will do
-                depth, ids, surface, alpha = self.geometry_pass(stride, opacity=True)
+        with clock.stage("geometry pass"):
+            if geometry or self.always_geometry:  # the camera model and the statistics: half resolution will do
+                depth, ids, surface = self.geometry_pass(1 if geometry else 2)
             else:
-                depth = ids = surface = alpha = None
+                depth = ids = surface = None
             texels = self.world.texel_footprint_px(depth, ids, surface, self.intrinsics.fx)
         if self.aerial is not None:
             with clock.stage(AERIAL_PERSPECTIVE):
-                self._set_air(state, look, alpha, stride)
+                self._set_air(state, look)
         with clock.stage(PATH_TRACING):
             image = mi.render(self.scene, seed=seed, spp=self.spp)
             self._dr.eval(image)  # the render happens here (Dr.Jit evaluates lazily)
@@ -404,7 +403,7 @@ class Renderer(RayCasting):
         return RenderResult(out.rgb, out.depth, out.object_id, render_s, denoise_s, out.surface,
                             {**out.measured, **texels}, clock.seconds)
 
-    def _set_air(self, state: FrameState, look: FrameLook, alpha: NDArray[np.float32], stride: int) -> None:
+    def _set_air(self, state: FrameState, look: FrameLook) -> None:
         """The frame's air as the render's kernel inputs (:mod:`datagen.render.aerial`); a
         look without it (a config drawn with haze off): air that dims nothing."""
         from datagen.render.aerial import airlight_grid
@@ -415,10 +414,7 @@ class Renderer(RayCasting):
         else:
             air = Atmosphere(float(state.world_from_cam[2, 3]), look.haze_visibility_m, look.haze_scale_height_m)
         grid = airlight_grid(self.sky, air, self.intrinsics, state.world_from_cam)
-        if alpha is None:  # no geometry pass: no cloud's edge to weigh
-            alpha, stride = np.full((1, 1, len(CLOUD_LAYERS)), -1.0, np.float32), max(self.intrinsics.width,
-                                                                                  self.intrinsics.height)
-        self.aerial.set_frame(air=air, grid=grid, alpha=alpha, stride=stride, intrinsics=self.intrinsics,
+        self.aerial.set_frame(air=air, grid=grid, intrinsics=self.intrinsics,
                               cam_from_render=state.world_from_cam[:3, :3].T, codes=self._background_codes,
                               opacities=self.world.cloud_opacities())
 
