@@ -24,7 +24,6 @@ __all__ = [
     "CLOUD_GAIN",
     "CLOUD_OCTAVES",
     "CLOUD_WAVELENGTH_M",
-    "COVER_MARGIN",
     "CloudForm",
     "CloudLayer",
     "CloudLight",
@@ -40,9 +39,6 @@ CLOUD_WAVELENGTH_M: Final = 6_000.0
 CLOUD_OCTAVES: Final = 14
 CLOUD_GAIN: Final = 0.55
 CLOUD_EDGE: Final = 0.06
-#: What float rounding can add to a field's value beyond the provable bound of the octaves
-#: still to come (float32 sums of 14 terms, under 2.3 in all: under 2e-6).
-COVER_MARGIN: Final = 1e-5
 #: How far above its threshold the field reaches a layer's thickest core (which shades the
 #: tops brighter and the bases darker than the thin parts).
 CLOUD_CORE: Final = 0.35
@@ -207,23 +203,6 @@ class CloudLayer:
         """Opacity at ``(x, y)`` metres, filtered to a pixel of ``footprint_m`` metres there."""
         return self.opacity_of(self.value(x, y, footprint_m, ops, core=False), ops)
 
-    def decided(self, total, row, ops: Ops = NUMPY, *, u):
-        """Where octaves still to come (at most ``row["rest"]``, plus :data:`COVER_MARGIN`
-        for float rounding) cannot carry the opacity of the field so far ``total`` across
-        ``u``, and wherever :meth:`settled` without core holds (the opacity is then known)."""
-        value, rest = total[0], row["rest"] + ops.f32(COVER_MARGIN)
-        return (self.settled(total, row, ops, core=False) | (u < self.opacity_of(value - rest, ops))
-                | (u >= self.opacity_of(value + rest, ops)))
-
-    def covers(self, x, y, footprint_m, u, ops: Ops = NUMPY):
-        """Whether the opacity at ``(x, y)`` (:meth:`__call__`, clipped to [0, 1]) exceeds
-        ``u``, the octaves summed only until the answer is :meth:`decided` (a kernel's lane
-        stops there)."""
-        if not math.isfinite(self.threshold):
-            return u < x * ops.f32(0.0)
-        value = self.field(x, y, footprint_m, ops, settled=functools.partial(self.decided, u=u))
-        return u < ops.clip(self.opacity_of(value, ops), 0.0, 1.0)
-
     def _rise(self, value, ops: Ops):
         return ops.clip((value - ops.param_f32(self.threshold)) * ops.param_f32(1.0 / self.crest), 0.0, 1.0)
 
@@ -288,7 +267,11 @@ class CloudLayer:
                 over = self.height(x + ux * p(reach), y + uy * p(reach), ops, SHADOW_OCTAVES, wide) - h - p(climb)
                 lit = lit * (f(1.0) - f(1.0 - SHADOW_FLOOR) * ops.clip(
                     over * p(1.0 / max(0.25 * self.thickness_m, 1.0)), 0.0, 1.0))
-            reflect = f(0.55) + f(0.45) * core
+            # Thin parts reflect a little over half what the thickest do, by the height field's
+            # share of the thickness (the large shapes: the whole field's crisp valleys drew
+            # grey contour lines over an overcast); a layer of no thickness by its core.
+            deep = h * p(1.0 / self.thickness_m) if self.thickness_m > 0.0 else core
+            reflect = f(0.55) + f(0.45) * deep
             through = f(1.0) / (f(1.0) + h * f(1.0 / BASE_DEPTH_M))
             forward = f(0.0)
             if view is not None:  # seen from below: the camera looks up along (sx, sy, 1)

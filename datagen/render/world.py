@@ -244,7 +244,6 @@ class World:
             radiance = field_texture(pixel_rad=self.pixel_rad, colour=True, front_only=True, slant=True)
             for texture in (opacity, radiance):
                 texture.shade = _clear
-            opacity.cover = _uncovered
             self._cloud_textures[name] = (opacity, radiance)
             # Behind the mask, a black mirror: a delta lobe, so that the path tracer spends no
             # shadow ray on a surface that reflects nothing (a black diffuse one would).
@@ -337,7 +336,6 @@ class World:
                 for texture in (opacity, radiance):
                     texture.camera = tuple(float(c) for c in camera_render)
                 opacity.shade = layer  # CloudLayer(x, y, footprint_m, ops): the opacity
-                opacity.cover = layer.covers
                 radiance.shade = functools.partial(_layer_radiance, layer, light, above)
                 if fresh or self._cloud_height.get(name) != height:  # the mesh moves only when it must
                     set_buffer(params, f"{name}.vertex_positions",
@@ -412,11 +410,6 @@ class World:
 
         footprint = np.asarray(distance_m) * self.pixel_rad
         return evaluate(layer, np.asarray(xy)[:, 0], np.asarray(xy)[:, 1], footprint)
-
-
-def _uncovered(x, y, footprint_m, u, ops):
-    """A layer without cloud stops no path."""
-    return u < x * ops.f32(0.0)
 
 
 def _clear(x, y, footprint_m, ops):
