@@ -13,9 +13,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from datagen.assets.clouds import BASE_DEPTH_M, CLOUD_FORMS, CloudLayer, CloudLight, forward_scattered
+from datagen.assets.clouds import CLOUD_FORMS, CloudLayer, CloudLight, forward_scattered
 from datagen.assets.ground import GROUND_TYPES, Ground
-from datagen.assets.noise import NUMPY, Slant
+from datagen.assets.noise import Slant
 from datagen.config.load import load_config, override_config
 from datagen.scene.look import _approach_world
 
@@ -113,28 +113,6 @@ def test_a_clouds_base_darkens_with_the_thickness_above_it() -> None:
     assert np.all(base_thick[cloud] < base_thin[cloud])
     # The overcast has structure from below: its base's brightness varies over the layer.
     assert np.std(base_thick[cloud]) / np.mean(base_thick[cloud]) > 0.1
-
-
-@pytest.mark.parametrize("form", ["cumulus", "overcast"])
-def test_a_clouds_shadow_passes_its_gaps_and_the_diffuse_light_its_thickness_lets_through(form: str) -> None:
-    """The sun's share under a layer: 1 in its gaps, never less than ``1 - opacity`` nor more
-    than 1, and under full cloud the layer's coverage times its thickness's diffuse
-    transmittance: a thin deck's shadow lighter than a thick one's, a broad overcast's lighter
-    than a sparse cumulus field's of the same thickness."""
-    rng = np.random.default_rng(11)
-    x, y = rng.uniform(-2e4, 2e4, (2, 20_000)).astype(np.float32)
-    shade = {}
-    for coverage, thickness in ((0.3, 400.0), (0.3, 1500.0), (0.95, 1500.0)):
-        layer = CloudLayer.drawn(np.random.default_rng(2), coverage, 1.0, 168_000.0, CLOUD_FORMS[form], thickness)
-        opacity, sun = layer(x, y), layer.sun_transmittance(x, y)
-        assert np.all(sun >= 1.0 - opacity - 1e-6) and np.all(sun <= 1.0 + 1e-6)
-        np.testing.assert_allclose(sun[opacity == 0.0], 1.0)
-        full = opacity >= 1.0
-        h = layer._dome(layer._rise(layer.value(x, y, core=False), NUMPY), NUMPY)
-        np.testing.assert_allclose(sun[full], coverage / (1.0 + h[full] / BASE_DEPTH_M), rtol=1e-5)
-        shade[coverage, thickness] = float(np.mean(sun[full]))
-    assert shade[0.3, 400.0] > shade[0.3, 1500.0]
-    assert shade[0.95, 1500.0] > shade[0.3, 1500.0]
 
 
 def test_the_forward_scattering_phase_is_normalized_and_peaks_at_unit_optical_depth() -> None:

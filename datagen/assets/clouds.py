@@ -17,7 +17,6 @@ import numpy as np
 from datagen.assets.noise import NUMPY, FractalField, Ops, Slant, ramp, sample_grid
 
 __all__ = [
-    "BASE_DEPTH_M",
     "CLOUD_CORE",
     "CLOUD_CORE_TOLERANCE",
     "CLOUD_EDGE",
@@ -148,8 +147,6 @@ class CloudLayer:
     #: How far above the threshold the height field reaches its full thickness (the field's
     #: 99.5th percentile there: a layer's thickest cells).
     crest: float = CLOUD_CORE
-    #: The share of the layer that is cloud.
-    coverage: float = 0.0
 
     @classmethod
     def drawn(cls, rng: np.random.Generator, coverage: float, opacity: float, span_m: float,
@@ -165,7 +162,7 @@ class CloudLayer:
         sample = sample_grid(field, span_m, 256, octaves=SHAPE_OCTAVES)
         threshold = float(np.quantile(sample, 1.0 - min(coverage, 1.0)))
         crest = max(float(np.quantile(sample, 0.995)) - threshold, CLOUD_EDGE)
-        return cls(field, threshold, float(opacity), float(thickness_m), crest, min(float(coverage), 1.0))
+        return cls(field, threshold, float(opacity), float(thickness_m), crest)
 
     def opacity_of(self, value, ops: Ops = NUMPY):
         """Opacity where the field is ``value``."""
@@ -205,20 +202,6 @@ class CloudLayer:
     def __call__(self, x, y, footprint_m=None, ops: Ops = NUMPY):
         """Opacity at ``(x, y)`` metres, filtered to a pixel of ``footprint_m`` metres there."""
         return self.opacity_of(self.value(x, y, footprint_m, ops, core=False), ops)
-
-    def sun_transmittance(self, x, y, footprint_m=None, ops: Ops = NUMPY):
-        """The share of the sun's light that a ray towards the sun through ``(x, y)`` brings
-        to a point below: what passes the cloud's gaps (``1 - opacity``) and, of what meets
-        cloud, the diffuse light the thickness there transmits (``1 / (1 + h /
-        BASE_DEPTH_M)``) coming from the share of the point's sky that the layer's cloud
-        fills (its coverage): under a broad deck a shadow keeps the light its cloud lets
-        through, under a small heap almost only the sky's."""
-        if not math.isfinite(self.threshold):
-            return x * ops.f32(0.0) + ops.f32(1.0)
-        value = self.value(x, y, footprint_m, ops, core=False)
-        opacity = ops.clip(self.opacity_of(value, ops), 0.0, 1.0)
-        through = ops.f32(1.0) / (ops.f32(1.0) + self._dome(self._rise(value, ops), ops) * ops.f32(1.0 / BASE_DEPTH_M))
-        return ops.f32(1.0) - opacity * (ops.f32(1.0) - ops.param_f32(self.coverage) * through)
 
     def _rise(self, value, ops: Ops):
         return ops.clip((value - ops.param_f32(self.threshold)) * ops.param_f32(1.0 / self.crest), 0.0, 1.0)

@@ -168,9 +168,7 @@ def texture_class(variant: str):
     :class:`~datagen.assets.noise.Slant`; ``front_only``: the texture is the radiance of a
     one-sided ``area`` emitter, which shows nothing of it behind its surface (Mitsuba's
     ``area`` returns 0 there but evaluates its texture first): a lane that sees the back
-    gets an infinite footprint, so that a series sums no term there. An opacity's owner may
-    also set ``transmit`` (``(x, y, footprint_m, ops)``: what a shadow ray passes there),
-    which :func:`mask_class` asks instead of ``1 - value``."""
+    gets an infinite footprint, so that a series sums no term there."""
     import drjit as dr
     import mitsuba as mi
 
@@ -184,7 +182,6 @@ def texture_class(variant: str):
             self.front_only = front_only
             self.camera = (0.0, 0.0, 0.0)
             self.shade = None  # (x, y, footprint_m, ops) -> value (Float, or Color3f when colour)
-            self.transmit = None  # (x, y, footprint_m, ops) -> what a shadow ray passes (an opacity's)
 
         def _at(self, si):
             """``(x, y, footprint_m)`` of the point ``si``, for ``shade``."""
@@ -215,14 +212,6 @@ def texture_class(variant: str):
             with np.errstate(over="ignore"):
                 return self.shade(*self._at(si), drjit_ops())
 
-        def transmittance(self, si):
-            """What a shadow ray passes at ``si`` where the texture is an opacity:
-            ``transmit``'s answer, or ``1 - value`` (clipped) without one."""
-            if self.transmit is None:
-                return 1.0 - dr.clip(self.eval_1(si), 0.0, 1.0)
-            with np.errstate(over="ignore"):
-                return self.transmit(*self._at(si), drjit_ops())
-
         def eval(self, si, active=True):
             v = self._value(si)
             return v if self.colour else mi.Color3f(v)
@@ -250,9 +239,8 @@ def texture_class(variant: str):
 @functools.cache
 def mask_class(variant: str):
     """Mitsuba's ``mask`` BSDF over a black mirror, as a Python :class:`mitsuba.BSDF` whose
-    opacity is a :func:`texture_class` texture; shadow rays' null transmission is the
-    texture's ``transmittance`` (``1 - opacity``, as ``mask``'s, unless its owner sets a
-    ``transmit``).
+    opacity is a :func:`texture_class` texture; shadow rays' null transmission is ``1 -
+    opacity``, as ``mask``'s.
 
     A path that meets the surface where its opacity is at most :data:`MASK_SPLIT` passes it
     with weight ``1 - opacity`` (a ``Null`` event, whose pdf the path tracers do not use:
@@ -297,7 +285,7 @@ def mask_class(variant: str):
             return mi.Color3f(0.0), mi.Float(0.0)
 
         def eval_null_transmission(self, si, active=True):  # the mirror transmits nothing
-            return mi.Color3f(self.opacity.transmittance(si))
+            return mi.Color3f(1.0 - dr.clip(self.opacity.eval_1(si, active), 0.0, 1.0))
 
         def to_string(self):
             return "OpacityMask[]"

@@ -336,7 +336,6 @@ class World:
                 for texture in (opacity, radiance):
                     texture.camera = tuple(float(c) for c in camera_render)
                 opacity.shade = layer  # CloudLayer(x, y, footprint_m, ops): the opacity
-                opacity.transmit = layer.sun_transmittance
                 radiance.shade = functools.partial(_layer_radiance, layer, light, above)
                 if fresh or self._cloud_height.get(name) != height:  # the mesh moves only when it must
                     set_buffer(params, f"{name}.vertex_positions",
