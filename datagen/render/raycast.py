@@ -132,9 +132,9 @@ class RayCasting:
 
         ``opacity``: also (h, w, 2) the opacity of each cloud layer (in
         :data:`~datagen.render.world.CLOUD_LAYERS`' order) where the pixel's ray meets it (-1
-        where it does not: it meets none, or stops before), which the aerial perspective
-        weighs a sample's paths to and past each layer by (a scalar variant gives -1
-        everywhere)."""
+        where it does not: it meets none, or stops before; a scalar variant gives -1
+        everywhere), copied to the host only when asked for (the aerial perspective weighs each
+        sample by the layers' opacity where the sample meets them, not by this)."""
         k = self.intrinsics
         d_cam, z_per_t = self._pixel_rays(stride)
         w, h = -(-k.width // stride), -(-k.height // stride)
@@ -142,21 +142,21 @@ class RayCasting:
         if self.variant.startswith("scalar"):
             t, ids, surface = self.cast(self._camera_render, d_cam @ r.T)
             depth = t * z_per_t
-            alpha = np.full((len(depth), len(CLOUD_LAYERS)), -1.0, np.float32)
+            alpha = [np.full(len(depth), -1.0, np.float32)] * len(CLOUD_LAYERS)
         else:  # the rays made and rotated on the device
             mi, dr = self._mi, self._dr
             d_dev, z_dev = self._device_rays(stride)
             m = [[dr.opaque(mi.Float, float(r[i, j])) for j in range(3)] for i in range(3)]
             d = mi.Vector3f(*(m[i][0] * d_dev.x + m[i][1] * d_dev.y + m[i][2] * d_dev.z for i in range(3)))
-            t, ids, surface, alpha, alpha2 = self._cast_on_device(d)
+            t, ids, surface, *alpha = self._cast_on_device(d)
             depth = t * z_dev
             dr.eval(depth)
             depth, ids, surface = (np.asarray(a) for a in (depth, ids, surface))
-            alpha = np.stack([np.asarray(alpha), np.asarray(alpha2)], axis=-1)
         out = (depth.reshape(h, w).astype(np.float32), ids.reshape(h, w).astype(np.uint32),
                surface.reshape(h, w).astype(np.uint8))
         if opacity:
-            out += (alpha.reshape(h, w, 2).astype(np.float32),)
+            layers = np.stack([np.asarray(a) for a in alpha], axis=-1)  # one per layer: a copy from the device
+            out += (layers.reshape(h, w, len(CLOUD_LAYERS)).astype(np.float32),)
         if stride == 1:
             return out
         return tuple(np.repeat(np.repeat(a, stride, axis=0), stride, axis=1)[:k.height, :k.width] for a in out)
