@@ -208,16 +208,17 @@ def test_small_features_keep_their_contrast_after_denoising(dark: bool, radius_p
 
 def renderer_for(config_name: str, **kwargs) -> tuple[Renderer, object]:
     config = load_config(ROOT / "scenes" / config_name)
-    size = {"width": 320, "height": 169} if not kwargs.pop("full_size", False) else {}
-    return Renderer(Scene.resolve(config), spp=kwargs.pop("spp", 4), **size, **kwargs), config
+    return Renderer(Scene.resolve(config), spp=kwargs.pop("spp", 4), width=320, height=169, **kwargs), config
 
 
 @pytest.mark.parametrize(("config_name", "frame", "obj"), [("podcam15.yaml", 0, "drogue"),
                                                          ("wingcam55.yaml", 2, "tanker")])
 def test_object_id_silhouette_matches_projected_mesh(config_name: str, frame: int, obj: str) -> None:
-    # Full 2048 x 1080: the geometry pass alone (no path tracing) is quick, and thin
-    # parts such as wing tips then span pixels instead of slipping between centres.
-    renderer, config = renderer_for(config_name, full_size=True)
+    # Twice 2048 x 1080: the geometry pass alone (no path tracing) is quick, and thin
+    # parts such as wing and fin tips then span pixels instead of slipping between centres
+    # (at 2048 a fin's tip slipped 1.14 px inside its projection; at three times, 0.14).
+    config = load_config(ROOT / "scenes" / config_name)
+    renderer = Renderer(Scene.resolve(config), spp=4, width=2 * 2048, height=2 * 1080)
     k = renderer.intrinsics
     mesh = load_mesh(object_paths(config, obj)[0], obj).combined
     states = FrameStates(config)
@@ -241,7 +242,7 @@ def test_object_id_silhouette_matches_projected_mesh(config_name: str, frame: in
     assert mask.sum() > 50, "the object should be in view"
     rows, cols = np.nonzero(mask)
     silhouette = np.array([cols.min(), rows.min(), cols.max() + 1, rows.max() + 1], dtype=float)
-    np.testing.assert_array_less(np.abs(silhouette - projected), 1.0)
+    np.testing.assert_array_less(np.abs(silhouette - projected) / 2, 1.0)  # in pixels at 2048 x 1080
 
 
 def test_per_frame_parameters_reproduce_a_fresh_scene_load(one_thread) -> None:

@@ -33,10 +33,14 @@ DRAWS = {
     "backlit sun": ["sun_backlit"],
     "haze": ["haze_visibility_m", "haze_scale_height_m"],
     "ground": ["ground_type", "ground_seed"],
+    "vibration": ["camera_vibration_rms_deg", "camera_vibration_hz"],
+    "drogue": ["drogue_canopy", "drogue_tape", "hose_band_colour", "hose_band_spacing_m", "hose_band_width_m"],
 }
 #: Draws a randomizer replaces when on: the sea's approach wind replaces the frame's own
 #: wind draw (waves, whitecaps and glint then agree); a backlit sun moves the sun's azimuth.
-REPLACES = {"sea": ["sea_wind_speed_mps", "sea_roughness"], "backlit sun": ["sun_azimuth_deg"]}
+#: The drogue's draw replaces the frame's own draws of the drogue's and the hose's materials.
+REPLACES = {"sea": ["sea_wind_speed_mps", "sea_roughness"], "backlit sun": ["sun_azimuth_deg"],
+            "drogue": ["materials"]}
 
 
 def wingcam(**updates):

@@ -79,6 +79,9 @@ class PnPSettings:
 # --- one frame ---------------------------------------------------------------------------
 #: Up to this many matches, AP3P on every four of them is also tried (at most 35 solves).
 _AP3P_MAX_POINTS: Final = 7
+#: Levenberg-Marquardt's stop for the chosen pose's refinement (:func:`_solve_pose`): at most
+#: this many iterations, or a step below this.
+_REFINE_ITERATIONS, _REFINE_EPS = 100, 1e-14
 #: How far apart, as a share of the distance, the poses that fit three matches may lie for
 #: the pose to be kept (:func:`_three_point_pose`).
 THREE_POINT_AGREEMENT: Final = 1e-3
@@ -151,6 +154,13 @@ def _solve_pose(points_model: NDArray, uv_px: NDArray, k: Intrinsics, settings: 
     if scores[best][0] < settings.min_matches:
         return None
     rvec, tvec = candidates[best]
+    # The solvers stop short where a far object's pose is ill-conditioned (noise-free points:
+    # 6e-4 px RMS left, a 4 cm error at 67 m); Levenberg-Marquardt on the pose's inliers
+    # finishes the descent (1.7e-7 px there).
+    inlier = _distances_px(obj, img, rvec, tvec, camera, distortion) <= settings.reprojection_px
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, _REFINE_ITERATIONS, _REFINE_EPS)
+    rvec, tvec = cv2.solvePnPRefineLM(obj[inlier], img[inlier], camera, distortion, rvec.copy(), tvec.copy(),
+                                      criteria)
     return rvec.ravel(), tvec.ravel()
 
 
@@ -178,13 +188,19 @@ def _three_point_pose(obj: NDArray, img: NDArray, camera: NDArray, distortion: N
 def _score(obj: NDArray, img: NDArray, rvec: NDArray, tvec: NDArray, camera: NDArray,
            distortion: NDArray | None, threshold_px: float) -> tuple[int, float]:
     """``(inliers, -rms over the inliers)`` of a pose: larger is better."""
-    import cv2
-
-    projected, _ = cv2.projectPoints(obj, rvec, tvec, camera, distortion)
-    d = np.linalg.norm((projected - img).reshape(-1, 2), axis=-1)
+    d = _distances_px(obj, img, rvec, tvec, camera, distortion)
     inlier = d <= threshold_px
     rms = math.sqrt(float(np.mean(d[inlier] ** 2))) if inlier.any() else math.inf
     return int(inlier.sum()), -rms
+
+
+def _distances_px(obj: NDArray, img: NDArray, rvec: NDArray, tvec: NDArray, camera: NDArray,
+                  distortion: NDArray | None) -> NDArray[np.float64]:
+    """How far each point's projection under a pose lies from its image point, px."""
+    import cv2
+
+    projected, _ = cv2.projectPoints(obj, rvec, tvec, camera, distortion)
+    return np.linalg.norm((projected - img).reshape(-1, 2), axis=-1)
 
 
 def ptd_from_poses(receiver: tuple[NDArray, NDArray], target: tuple[NDArray, NDArray]) -> NDArray[np.float64]:

@@ -140,6 +140,8 @@ WORLD_RANDOMIZERS: Final[dict[str, dict[str, Any]]] = {
     "livery": {"randomization.livery.enabled": False},
     "sensor": {"randomization.sensor.enabled": False},
     "backlit sun": {"randomization.sky.backlit_fraction": 0.0},
+    "vibration": {"camera.vibration.enabled": False},
+    "drogue": {"randomization.drogue.enabled": False},
 }
 
 
@@ -171,6 +173,18 @@ class MountJitterConfig(_Section):
     """Each of yaw, pitch, roll of the mount is drawn uniformly in [-r, r] degrees per approach."""
 
 
+class VibrationConfig(_Section):
+    """The camera's vibration and buffet (:mod:`datagen.scene.vibration`): a small turn of the
+    camera about its own axes, a sum of sinusoids whose amplitude and spectrum each approach
+    draws from its mount's band; it moves the view and blurs the image along its motion."""
+
+    enabled: Flag = True
+    """Vibrate the camera; off: it is fixed to its mount."""
+
+    scale: Number = Field(1.0, ge=0.0, le=10.0)
+    """Multiplies the mount's amplitudes (1: the mount's band)."""
+
+
 class CameraConfig(_Section):
     """The pinhole camera (paper Table 1) and where it is mounted."""
 
@@ -189,6 +203,9 @@ class CameraConfig(_Section):
 
     mount_jitter: MountJitterConfig = MountJitterConfig()
     """Bounds of the per-approach mount pose perturbation."""
+
+    vibration: VibrationConfig = VibrationConfig()
+    """The camera's vibration and buffet per approach."""
 
     @model_validator(mode="after")
     def _makeable(self) -> CameraConfig:
@@ -592,6 +609,29 @@ class GroundConfig(_Section):
     """Each ground type's share of approaches (sea the majority by default)."""
 
 
+#: The drogues' canopy schemes (:data:`datagen.assets.drogues.CANOPIES`).
+CanopyName = Literal["black", "black_white_band", "black_yellow_panels", "olive", "dark_grey_orange_band",
+                     "grey_white_panels", "white_red_panels", "orange_white_band", "white"]
+CanopyShares = Annotated[dict[CanopyName, Number], AfterValidator(_shares)]
+
+
+class DrogueLookConfig(_Section):
+    """The drogue and hose as flown (:mod:`datagen.assets.drogues`): a canopy scheme per
+    approach (dark and light fabrics, a rim band or painted gores, reflective tape, struts
+    painted or bare, a metal coupling) and the hose's rubber and marker bands."""
+
+    enabled: Flag = True
+    """Draw a drogue per approach; off: the drogue's parts take the frame's fabric and metal draws."""
+
+    canopies: CanopyShares = {"black": 0.2, "black_white_band": 0.15, "black_yellow_panels": 0.1, "olive": 0.1,
+                              "dark_grey_orange_band": 0.1, "grey_white_panels": 0.1, "white_red_panels": 0.1,
+                              "orange_white_band": 0.075, "white": 0.075}
+    """Each canopy scheme's share of approaches (dark fabrics 65% by default)."""
+
+    hose_bands: Flag = True
+    """Painted marker bands along the hose near the drogue."""
+
+
 class LiveryConfig(_Section):
     """Aircraft paint: generated liveries on the receiver's and tanker's painted parts."""
 
@@ -666,6 +706,33 @@ class SensorConfig(_Section):
     """Round-trip the 8-bit image through JPEG at the drawn quality (the artefacts of a
     compressed video link), whatever ``render.image_format`` stores."""
 
+    lens: Flag = True
+    """The lens's blur and lateral chromatic aberration, drawn per frame."""
+
+    lens_blur_px: Annotated[Range, _within(0.0, 10.0)] = (0.2, 1.0)
+    """Standard deviation of the lens's Gaussian point spread, pixels (its 10-90% edge width
+    is 2.56 times it, on top of the render's own)."""
+
+    chromatic_aberration_px: Annotated[Range, _within(0.0, 10.0)] = (0.0, 1.2)
+    """Lateral chromatic aberration: red and blue displaced apart by this much at the
+    image's farthest corner, pixels (each half of it, in opposite directions)."""
+
+    colour: Flag = True
+    """The camera's white balance and tone curve, drawn per frame."""
+
+    white_balance_k: Annotated[Range, _within(4000.0, 25000.0)] = (5300.0, 8000.0)
+    """The daylight temperature the camera is white-balanced for (the scene's is D65's 6504 K),
+    K, drawn uniformly in mired (1e6 / K): lower turns the image blue, higher amber."""
+
+    tint: Annotated[Range, _within(-0.2, 0.2)] = (-0.03, 0.03)
+    """Green gain's offset of the white balance (negative: magenta)."""
+
+    tone_gamma: Annotated[Range, _within(0.5, 2.0)] = (0.85, 1.15)
+    """Exponent of the tone curve on display-linear values (above 1: more contrast in the mid-tones)."""
+
+    tone_shoulder: UnitRange = (0.0, 1.0)
+    """Strength of the tone curve's highlight shoulder (0: a hard clip at white)."""
+
     @field_validator("jpeg_quality")
     @classmethod
     def _quality(cls, q: tuple[int, int]) -> tuple[int, int]:
@@ -705,6 +772,9 @@ class RandomizationConfig(_Section):
 
     livery: LiveryConfig = LiveryConfig()
     """Aircraft liveries, panel lines, markings and weathering."""
+
+    drogue: DrogueLookConfig = DrogueLookConfig()
+    """The drogue's canopy and the hose's marker bands, per approach."""
 
     sensor: SensorConfig = SensorConfig()
     """The camera model after the render: exposure, noise, blur, vignetting, glare,

@@ -285,9 +285,10 @@ def evaluation_rng(seed: int, frame_index: int, run: int) -> np.random.Generator
 WORLD_STREAM: Final[int] = 5
 #: The world's randomization dimensions, each with its own stream (third spawn-key element: the
 #: index here), so that switching one on or off changes no draw of another, nor of the look.
-#: The sun and the sensor are drawn per frame; clouds, sea, liveries, the atmosphere and the
-#: ground per approach chain.
-WORLD_DIMENSIONS: Final[tuple[str, ...]] = ("sun", "clouds", "sea", "livery", "sensor", "atmosphere", "ground")
+#: The sun and the sensor are drawn per frame; clouds, sea, liveries, the atmosphere, the
+#: ground, the camera's vibration and the drogue's canopy per approach chain.
+WORLD_DIMENSIONS: Final[tuple[str, ...]] = ("sun", "clouds", "sea", "livery", "sensor", "atmosphere", "ground",
+                                            "vibration", "drogue")
 
 
 def world_rng(seed: int, index: int, dimension: str) -> np.random.Generator:

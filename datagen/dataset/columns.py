@@ -59,19 +59,25 @@ __all__ = [
 ]
 
 #: Version of the manifest and feature-table schemas (bumped on any incompatible change).
-MANIFEST_VERSION: Final = "10"
+MANIFEST_VERSION: Final = "11"
 #: The manifest versions this datagen reads: 7 stored fixed-size lists as they are
 #: (:func:`stored_type`); a column added since a version is read as nulls from it
 #: (:data:`COLUMNS_SINCE`).
-READABLE_MANIFEST_VERSIONS: Final = ("7", "8", "9", MANIFEST_VERSION)
+READABLE_MANIFEST_VERSIONS: Final = ("7", "8", "9", "10", MANIFEST_VERSION)
 #: Columns added after version 7, with the version that added them.
 COLUMNS_SINCE: Final = {"haze_scale_height_m": "9", "cloud_type": "10", "cloud_deck_thickness_m": "10",
-                         "cloud_layer_thickness_m": "10", "ground_type": "10", "ground_seed": "10"}
+                         "cloud_layer_thickness_m": "10", "ground_type": "10", "ground_seed": "10",
+                         **dict.fromkeys(("camera_vibration_rms_deg", "camera_vibration_hz", "drogue_canopy",
+                                          "drogue_tape", "hose_band_colour", "hose_band_spacing_m",
+                                          "hose_band_width_m", "sensor_lens_blur_px",
+                                          "sensor_chromatic_aberration_px", "sensor_white_balance_k", "sensor_tint",
+                                          "sensor_tone_gamma", "sensor_tone_shoulder", "drogue_luminance",
+                                          "drogue_contrast"), "11")}
 
 #: The image statistics a manifest records per rendered frame
 #: (:func:`datagen.render.tonemap.image_statistics` measures them).
 IMAGE_STATISTICS: Final = ("image_mean_luminance", "image_rms_contrast", "share_sky", "share_sea", "share_cloud",
-                           "share_object")
+                           "share_object", "drogue_luminance", "drogue_contrast")
 #: The largest on-screen footprint (px) of a texel the frame sampled: of the world's textures
 #: (the sea's wave normals; clouds are procedural, without texels) and of the aircraft's
 #: liveries (:meth:`datagen.render.world.World.texel_footprint_px`); null where none is seen.
@@ -88,7 +94,8 @@ RUN_COLUMNS: Final = ("render_s", "denoise_s", "frame_s", "worker", "worker_rss_
 #: every worker renders with the same number of threads (``--threads 1``: on any machine).
 #: With the default threads (the cores divided among the workers) they differ in the last
 #: bits, about 1e-7 relative.
-PIXEL_COLUMNS: Final = ("auto_exposure_ev", "image_mean_luminance", "image_rms_contrast")
+PIXEL_COLUMNS: Final = ("auto_exposure_ev", "image_mean_luminance", "image_rms_contrast", "drogue_luminance",
+                         "drogue_contrast")
 #: Manifest columns measured on the rendered frame (the camera model's metering and motion,
 #: the image statistics): null where the frame was not rendered (labels-only builds).
 MEASURED_COLUMNS: Final = ("auto_exposure_ev", "motion_blur_px", "sun_in_view", *IMAGE_STATISTICS, *TEXEL_COLUMNS)
@@ -105,8 +112,11 @@ APPEARANCE: Final[dict[str, tuple[str, ...]]] = {
     "sea": ("sea_wind_speed_mps", "sea_roughness", "sea_wind_direction_deg", "sea_wave_slope_variance",
             "sea_whitecap_fraction"),
     "livery": ("receiver_livery", "tanker_livery", "livery_weathering"),
+    "drogue": ("drogue_canopy", "drogue_tape", "hose_band_spacing_m", "drogue_luminance", "drogue_contrast"),
+    "camera": ("camera_vibration_rms_deg", "camera_vibration_hz", "motion_blur_px"),
     "sensor": ("sensor_iso", "sensor_exposure_time_s", "sensor_vignetting", "sensor_glare", "sensor_jpeg_quality",
-               "auto_exposure_ev", "motion_blur_px", "sun_in_view"),
+               "sensor_lens_blur_px", "sensor_chromatic_aberration_px", "sensor_white_balance_k", "sensor_tint",
+               "sensor_tone_gamma", "sensor_tone_shoulder", "auto_exposure_ev", "sun_in_view"),
     "image": IMAGE_STATISTICS,
     "texels": TEXEL_COLUMNS,
 }
@@ -229,6 +239,19 @@ def manifest_schema() -> pa.Schema:
         pa.field("sensor_distortion", _vec(5)),
         pa.field("sensor_jpeg_quality", pa.int32()),
         pa.field("sensor_seed", pa.int64()),
+        pa.field("camera_vibration_rms_deg", _F64),
+        pa.field("camera_vibration_hz", _F64),
+        pa.field("drogue_canopy", pa.string()),
+        pa.field("drogue_tape", pa.bool_()),
+        pa.field("hose_band_colour", _vec(3)),
+        pa.field("hose_band_spacing_m", _F64),
+        pa.field("hose_band_width_m", _F64),
+        pa.field("sensor_lens_blur_px", _F64),
+        pa.field("sensor_chromatic_aberration_px", _F64),
+        pa.field("sensor_white_balance_k", _F64),
+        pa.field("sensor_tint", _F64),
+        pa.field("sensor_tone_gamma", _F64),
+        pa.field("sensor_tone_shoulder", _F64),
         pa.field("auto_exposure_ev", _F64),
         pa.field("motion_blur_px", _F64),
         pa.field("sun_in_view", pa.bool_()),

@@ -90,12 +90,13 @@ def object_labels(scene: Scene, draws: FrameDraws) -> FrameLabels:
 
 def training_image(result: RenderResult, look: FrameLook) -> tuple[np.ndarray, dict]:
     """The 8-bit sRGB training image of a :class:`~datagen.render.renderer.RenderResult`
-    (through the sensor's JPEG round trip when the look has one) and what the render
+    (through the camera's tone curve and the sensor's JPEG round trip where the look has them) and what the render
     measured, the image statistics included (:data:`datagen.dataset.columns.MEASURED_COLUMNS`)."""
     from datagen.render.sensor import jpeg_round_trip
     from datagen.render.tonemap import image_statistics, to_srgb8
 
-    srgb = to_srgb8(result.rgb)
+    tone = None if look.sensor_tone_gamma is None else (look.sensor_tone_gamma, look.sensor_tone_shoulder or 0.0)
+    srgb = to_srgb8(result.rgb, tone)
     if look.sensor_jpeg_quality is not None:
         srgb = jpeg_round_trip(srgb, look.sensor_jpeg_quality)
-    return srgb, {**(result.measured or {}), **image_statistics(srgb, result.surface)}
+    return srgb, {**(result.measured or {}), **image_statistics(srgb, result.surface, object_ids=result.object_id)}

@@ -28,9 +28,10 @@ from typing import TYPE_CHECKING, Final, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from datagen.assets.drogues import HOSE_TEXEL_M, HOSE_TEXELS, hose_band_texture
 from datagen.assets.loader import load_mesh
 from datagen.assets.models import material_class
-from datagen.assets.models.drogue import hose_faces, hose_placeholder, hose_vertices
+from datagen.assets.models.drogue import hose_faces, hose_placeholder, hose_texcoords, hose_vertices
 from datagen.core.camera import Intrinsics, distortion_margin_px
 from datagen.core.conventions import RIGID_OBJECTS, object_id
 from datagen.core.transforms import make_transform
@@ -211,8 +212,15 @@ class Renderer(RayCasting):
         hold_scene(self)
         self.release()
         description = self._description()
-        hose = mitsuba_mesh("hose", hose_placeholder(hose_points), hose_faces(hose_points),
-                            mi.load_dict(_principled(self._first.materials["hose"]["rubber"])))
+        hose_bsdf = _principled(self._first.materials["hose"]["rubber"])
+        banded = self._hose_banded
+        if banded:  # the marker bands: a texture along the hose (datagen.assets.drogues)
+            hose_bsdf["base_color"] = {"type": "bitmap", "raw": True, "wrap_mode": "clamp", "filter_type": "nearest",
+                                       "data": jit_array(mi.TensorXf, np.zeros((2, HOSE_TEXELS, 3), np.float32))}
+        placeholder = hose_placeholder(hose_points)
+        hose = mitsuba_mesh("hose", placeholder, hose_faces(hose_points), mi.load_dict(hose_bsdf),
+                            texcoords=np.zeros((len(placeholder), 2), np.float32) if banded else None)
+        self._hose_key = None
         self.scene = mi.load_dict(dict(description, hose=hose), optimize=False)
         self.params = mi.traverse(self.scene)
         self._hose_points = hose_points
@@ -274,9 +282,9 @@ class Renderer(RayCasting):
                     self._set_livery(f"{key}.bsdf", look, obj, liveries.get(obj))
                 else:
                     self._set_material(f"{key}.bsdf", look.materials[obj][cls])
-        self._set_material("hose.bsdf", look.materials["hose"]["rubber"])
         hose = hose_vertices(state.hose_points_world - origin)
         set_buffer(p, "hose.vertex_positions", hose.astype(np.float32))
+        self._set_hose(look, state.hose_points_world)
         sensor = world_from_micam(render_from_world @ state.world_from_cam)
         p["sensor.to_world"] = mi.Transform4f(sensor.tolist())
         # The earth's top under the camera (the render frame's origin is over the camera's nadir).
@@ -344,6 +352,30 @@ class Renderer(RayCasting):
         p[f"{prefix}.roughness.value"] = m.roughness
         p[f"{prefix}.metallic.value"] = m.metallic
         p[f"{prefix}.specular"] = m.specular
+
+    @property
+    def _hose_banded(self) -> bool:
+        d = self.config.randomization.drogue
+        return d.enabled and d.hose_bands
+
+    def _set_hose(self, look: FrameLook, points: NDArray[np.float64]) -> None:
+        """The hose's rubber, and where it has marker bands their texture (made once per
+        approach) and the frame's texture coordinates along it."""
+        rubber = look.materials["hose"]["rubber"]
+        if not self._hose_banded:
+            self._set_material("hose.bsdf", rubber)
+            return
+        p = self.params
+        key = (rubber.base_color, look.hose_band_colour, look.hose_band_spacing_m, look.hose_band_width_m)
+        if key != self._hose_key:
+            texture = hose_band_texture(rubber.base_color, look.hose_band_colour, look.hose_band_spacing_m,
+                                        look.hose_band_width_m)
+            p["hose.bsdf.base_color.data"] = jit_array(self._mi.TensorXf, texture)
+            self._hose_key = key
+        p["hose.bsdf.roughness.value"] = rubber.roughness
+        p["hose.bsdf.metallic.value"] = rubber.metallic
+        p["hose.bsdf.specular"] = rubber.specular
+        set_buffer(p, "hose.vertex_texcoords", hose_texcoords(points, HOSE_TEXELS * HOSE_TEXEL_M))
 
     def _set_material(self, prefix: str, m: Material) -> None:
         p = self.params

@@ -6,11 +6,17 @@ and the noise as Dr.Jit kernels on the render's device where a vectorized varian
    centred on the frame's time (:func:`image_motion`, :func:`motion_blur`);
 2. lens distortion: the pinhole render, made with a margin, resampled through OpenCV's
    Brown-Conrady model (:func:`distort_image`), the model the labels are projected with;
-3. vignetting: ``1 - v r^2`` falloff, ``r`` = 1 at the corners;
-4. veiling glare and ghosts from the sun when it is in or near the view (:func:`sun_glare`);
-5. exposure: fixed (``exposure_ev``) or metered (:func:`auto_exposure_scale`);
-6. photon shot noise and read noise at the drawn ISO (:func:`sensor_noise`);
-7. after the sRGB encoding: a JPEG round trip (:func:`jpeg_round_trip`).
+3. the lens's blur and lateral chromatic aberration (:func:`lens_blur`,
+   :func:`chromatic_aberration`: red and blue magnified about the principal point, green,
+   which carries most of the luma, where the labels project);
+4. vignetting: ``1 - v r^2`` falloff, ``r`` = 1 at the corners;
+5. veiling glare and ghosts from the sun when it is in or near the view (:func:`sun_glare`);
+6. exposure: fixed (``exposure_ev``) or metered (:func:`auto_exposure_scale`);
+7. photon shot noise and read noise at the drawn ISO (:func:`sensor_noise`);
+8. the camera's processing: a white balance set for another light than the scene's
+   (:func:`white_balance_gains`), then (with the sRGB encoding, in one table) a tone curve
+   (:func:`datagen.render.tonemap.tone_curve`);
+9. after the sRGB encoding: a JPEG round trip (:func:`jpeg_round_trip`).
 
 Each step is skipped where its draw is None (its switch off).
 """
@@ -49,15 +55,19 @@ __all__ = [
     "SensorResult",
     "apply_sensor",
     "auto_exposure_scale",
+    "chromatic_aberration",
+    "daylight_white",
     "distort_image",
     "distortion_margin_px",
     "image_motion",
     "jpeg_round_trip",
+    "lens_blur",
     "motion_blur",
     "noise_sigma",
     "sensor_noise",
     "sun_glare",
     "warm_up_on_device",
+    "white_balance_gains",
 ]
 
 #: Electrons a pixel holds at ISO 100 (a 4-5 um industrial sensor); ISO S holds 100/S of it.
@@ -287,6 +297,35 @@ def vignette(rgb: NDArray[np.float32], strength: float) -> NDArray[np.float32]:
     return rgb * (1.0 - np.float32(strength) * r2)[..., None]
 
 
+def lens_blur(rgb: NDArray[np.float32], sigma_px: float) -> NDArray[np.float32]:
+    """The lens's point spread: a Gaussian of ``sigma_px`` (its 10-90% edge width is 2.56 sigma)."""
+    import cv2
+
+    if sigma_px <= 0.0:
+        return rgb
+    return cv2.GaussianBlur(rgb, (0, 0), sigmaX=float(sigma_px), borderType=cv2.BORDER_REFLECT)
+
+
+def chromatic_aberration(rgb: NDArray[np.float32], intrinsics: Intrinsics, corner_px: float) -> NDArray[np.float32]:
+    """Lateral chromatic aberration: red magnified and blue shrunk about the principal point,
+    each by ``corner_px`` at the image's farthest corner (green stays: the labels' centres)."""
+    import cv2
+
+    if corner_px <= 0.0:
+        return rgb
+    h, w = rgb.shape[:2]
+    cx, cy = float(index_px(intrinsics.cx)), float(index_px(intrinsics.cy))  # the principal point, OpenCV's grid
+    reach = math.hypot(max(cx, w - 1 - cx), max(cy, h - 1 - cy))
+    out = rgb.copy()
+    for channel, sign in ((0, 1.0), (2, -1.0)):
+        m = 1.0 + sign * corner_px / reach  # the channel's magnification
+        affine = np.array([[1.0 / m, 0.0, cx - cx / m], [0.0, 1.0 / m, cy - cy / m]])  # destination -> source
+        out[..., channel] = cv2.warpAffine(np.ascontiguousarray(rgb[..., channel]), affine, (w, h),
+                                           flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                           borderMode=cv2.BORDER_REPLICATE)
+    return out
+
+
 def sun_glare(shape: tuple[int, int], intrinsics: Intrinsics, sun_cam: NDArray, strength: float,
               radiance: float, step: int | None = None) -> tuple[NDArray[np.float32] | None, bool]:
     """Veiling glare (a ``theta0^2 / (theta^2 + theta0^2)`` halo around the sun, theta0 = 2
@@ -398,6 +437,35 @@ def noise_sigma(signal, electrons, sqrt):
     return sqrt(signal * electrons + READ_NOISE_E**2) / electrons
 
 
+# --- the camera's processing ----------------------------------------------------------------
+#: linear sRGB (Rec. 709 primaries) from CIE XYZ.
+_SRGB_FROM_XYZ: Final = np.array([[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560],
+                                  [0.0556434, -0.2040259, 1.0572252]])
+#: The white the rendered image is balanced for (D65's correlated colour temperature, K).
+D65_K: Final = 6504.0
+
+
+def daylight_white(temperature_k: float) -> NDArray[np.float64]:
+    """Linear sRGB of the CIE daylight illuminant at ``temperature_k`` (4000-25000 K; the CIE's
+    daylight-locus chromaticity), scaled to luminance 1."""
+    t = float(np.clip(temperature_k, 4000.0, 25000.0))
+    if t <= 7000.0:
+        x = -4.6070e9 / t**3 + 2.9678e6 / t**2 + 0.09911e3 / t + 0.244063
+    else:
+        x = -2.0064e9 / t**3 + 1.9018e6 / t**2 + 0.24748e3 / t + 0.237040
+    y = -3.0 * x * x + 2.870 * x - 0.275
+    return _SRGB_FROM_XYZ @ np.array([x / y, 1.0, (1.0 - x - y) / y])
+
+
+def white_balance_gains(temperature_k: float, tint: float) -> NDArray[np.float32]:
+    """Per-channel gains of a camera white-balanced for daylight of ``temperature_k`` while the
+    scene's white is D65 (a lower temperature turns the image blue, a higher one amber), green
+    scaled by ``1 + tint`` (magenta below 0); a grey's luminance is kept."""
+    gains = daylight_white(D65_K) / daylight_white(temperature_k)
+    gains[1] *= 1.0 + tint
+    return (gains / float(_REC709 @ gains)).astype(np.float32)
+
+
 def jpeg_round_trip(srgb8: NDArray[np.uint8], quality: int) -> NDArray[np.uint8]:
     """An 8-bit RGB image through a JPEG encoder and decoder at ``quality``."""
     import cv2
@@ -429,6 +497,10 @@ def apply_sensor(rgb: NDArray[np.float32], look: FrameLook, state: FrameState, *
             warped = distort_image({"rgb": rgb, "depth": depth, "ids": ids, "surface": surface}, output, margin_px,
                                    np.asarray(look.sensor_distortion))
             rgb, depth, ids, surface = warped["rgb"], warped["depth"], warped["ids"], warped["surface"]
+    if look.sensor_lens_blur_px is not None:
+        with clock.stage("lens blur"):
+            rgb = chromatic_aberration(lens_blur(rgb, look.sensor_lens_blur_px), output,
+                                       look.sensor_chromatic_aberration_px or 0.0)
     with clock.stage("vignetting, glare, exposure"):
         if look.sensor_vignetting:
             rgb = vignette(rgb, look.sensor_vignetting)
@@ -446,4 +518,7 @@ def apply_sensor(rgb: NDArray[np.float32], look: FrameLook, state: FrameState, *
         if look.sensor_iso is not None:
             rgb = sensor_noise(rgb, look.sensor_iso, look.sensor_seed, device=device)
         rgb = np.maximum(rgb, np.float32(0.0)).astype(np.float32)
+    if look.sensor_white_balance_k is not None:  # the tone curve: in the sRGB encoding's table (to_srgb8)
+        with clock.stage("white balance"):
+            rgb *= white_balance_gains(look.sensor_white_balance_k, look.sensor_tint or 0.0)
     return SensorResult(rgb, depth, ids, surface, measured)

@@ -52,6 +52,7 @@ from datagen.core.transforms import (
     rotation_from_ypr,
 )
 from datagen.scene.chains import ChainSnapshot, simulate_chain, simulate_chains
+from datagen.scene.vibration import vibration
 
 __all__ = [
     "FrameState",
@@ -136,7 +137,7 @@ def _read_only(array: FloatArray) -> FloatArray:
     return array
 
 
-def _state(config: Config, frame_index: int, approach_index: int, snap: ChainSnapshot,
+def _state(config: Config, seed: int, frame_index: int, approach_index: int, snap: ChainSnapshot,
            earlier: bool = True) -> FrameState:
     world_from_tanker = snap.tanker.world_from_tanker(snap.time_s)
     tanker_from_receiver = make_transform(rotation_from_rotvec(snap.attitude_rotvec), snap.probe_tanker)
@@ -158,20 +159,33 @@ def _state(config: Config, frame_index: int, approach_index: int, snap: ChainSna
         world_from_tanker=world_from_tanker,
         world_from_receiver=world_from_receiver,
         world_from_drogue=world_from_drogue,
-        world_from_cam=_read_only(world_from_body @ snap.body_from_cam),
+        world_from_cam=_read_only(world_from_body @ _body_from_cam(config, seed, approach_index, snap)),
         hose_points_world=hose_world,
         ptd_receiver_m=ptd[:3],  # a view of the read-only ptd
         distance_m=float(np.linalg.norm(ptd[:3])),
         mount=config.camera.mount,
         turbulence_intensity=snap.intensity,
         bank_deg=math.degrees(snap.tanker.bank),
-        earlier_from=functools.partial(_earlier_state, config, frame_index, approach_index, snap) if earlier else None,
+        earlier_from=(functools.partial(_earlier_state, config, seed, frame_index, approach_index, snap)
+                      if earlier else None),
     )
 
 
-def _earlier_state(config: Config, frame_index: int, approach_index: int, snap: ChainSnapshot) -> FrameState:
+def _body_from_cam(config: Config, seed: int, approach_index: int, snap: ChainSnapshot) -> FloatArray:
+    """The camera on its body at the snapshot's time: the approach's mount, turned by the
+    approach's vibration at that time (:mod:`datagen.scene.vibration`)."""
+    shake = vibration(config, seed, approach_index)
+    if shake is None:
+        return snap.body_from_cam
+    turned = snap.body_from_cam.copy()
+    turned[:3, :3] = turned[:3, :3] @ shake.rotation(snap.time_s)
+    return turned
+
+
+def _earlier_state(config: Config, seed: int, frame_index: int, approach_index: int,
+                   snap: ChainSnapshot) -> FrameState:
     """The state of ``snap`` MOTION_DT_S earlier (:attr:`FrameState.earlier`)."""
-    return _state(config, frame_index, approach_index, snap.earlier(MOTION_DT_S), False)
+    return _state(config, seed, frame_index, approach_index, snap.earlier(MOTION_DT_S), False)
 
 
 class FrameStates:
@@ -216,7 +230,7 @@ class FrameStates:
             self._add(a, simulate_chain(self.config, self.seed, a))
         chain = self._chains[a]
         if isinstance(chain[j], ChainSnapshot):
-            chain[j] = _state(self.config, frame_index, a, chain[j])
+            chain[j] = _state(self.config, self.seed, frame_index, a, chain[j])
         return chain[j]
 
 

@@ -90,6 +90,19 @@ class FrameLook:
     sensor_distortion: tuple[float, float, float, float, float] | None = None  # OpenCV k1, k2, p1, p2, k3
     sensor_jpeg_quality: int | None = None
     sensor_seed: int | None = None  # seeds the sensor noise
+    camera_vibration_rms_deg: float | None = None  # the approach's vibration (datagen.scene.vibration)
+    camera_vibration_hz: float | None = None  # its power-weighted mean frequency
+    drogue_canopy: str | None = None  # datagen.assets.drogues.CANOPIES (its colours: materials)
+    drogue_tape: bool | None = None  # reflective tape at the rim
+    hose_band_colour: tuple[float, float, float] | None = None  # linear RGB of the hose's marker bands
+    hose_band_spacing_m: float | None = None
+    hose_band_width_m: float | None = None
+    sensor_lens_blur_px: float | None = None  # the lens's Gaussian point spread (sigma)
+    sensor_chromatic_aberration_px: float | None = None  # red-blue separation at the farthest corner
+    sensor_white_balance_k: float | None = None  # the daylight the camera is balanced for (the scene's: D65)
+    sensor_tint: float | None = None  # the white balance's green offset
+    sensor_tone_gamma: float | None = None
+    sensor_tone_shoulder: float | None = None
 
 
 def _uniform(rng: np.random.Generator | _Uniforms, bounds) -> float:
@@ -157,6 +170,9 @@ def draw_look(config: Config, rng: np.random.Generator) -> FrameLook:
             "fabric": Material(_hsv(rng, (0.0, 0.2), (0.55, 0.9)), _uniform(rng, (0.6, 0.9))),
             "rubber": Material(_hsv(rng, (0.0, 0.1), (0.02, 0.06)), _uniform(rng, (0.5, 0.8))),
         }
+        # The drogue's finer parts without a drogue draw (draw_world): as the fabric and metal were.
+        fabric = materials[obj]["fabric"]
+        materials[obj].update(fabric_alt=fabric, fabric_band=fabric, tape=fabric, strut=materials[obj]["metal"])
     return FrameLook(**look, haze_visibility_m=None, materials=materials)  # the air is the approach's (draw_world)
 
 
@@ -196,17 +212,20 @@ def frame_look(config: Config, state: FrameState, approaches: dict | None = None
 def draw_world(config: Config, look: FrameLook, seed: int, state: FrameState,
                approaches: dict | None = None) -> FrameLook:
     """``look`` with the frame's world drawn onto it: a backlit sun, the air, clouds, sea
-    state, liveries and the sensor, each from its own stream (:func:`datagen.core.conventions.world_rng`)
-    and only where its randomizer is on, so that one switch changes no other draw.
+    state, liveries, the drogue, the camera's vibration and the sensor, each from its own
+    stream (:func:`datagen.core.conventions.world_rng`) and only where its randomizer is on,
+    so that one switch changes no other draw.
 
-    The weather (air, clouds, sea) and the aircraft's liveries belong to the approach chain
-    (streams keyed by ``state.approach_index``): the frames of one approach see the same
-    clouds, sea and aircraft, as a camera flying it would. The sun's backlit draw and the
+    The weather (air, clouds, sea), the aircraft's liveries, the drogue and the camera's
+    vibration belong to the approach chain (streams keyed by ``state.approach_index``): the
+    frames of one approach see the same clouds, sea, aircraft and drogue, as a camera flying
+    it would. The sun's backlit draw and the
     sensor's are the frame's own. Cloud altitudes are relative to the tanker's, which is
     constant over an approach, so that the clouds stay where they are as the camera moves.
     ``approaches``: a dict keeping each chain's draws (:func:`frame_look`)."""
     from datagen.assets.rig import MOUNTS
     from datagen.core.conventions import world_rng
+    from datagen.scene.vibration import vibration
 
     r = config.randomization
     world: dict = {}
@@ -226,7 +245,16 @@ def draw_world(config: Config, look: FrameLook, seed: int, state: FrameState,
         chain = _approach_world(config, seed, state.approach_index, base)
         if approaches is not None:
             approaches[key] = chain
-    world.update(chain)
+    world.update({k: v for k, v in chain.items() if k != "drogue_draw"})
+    if "drogue_draw" in chain:
+        drawn = chain["drogue_draw"]
+        materials = {obj: dict(classes) for obj, classes in look.materials.items()}
+        materials["drogue"].update({cls: Material(*m) for cls, m in drawn.materials.items()})
+        materials["hose"]["rubber"] = Material(drawn.hose[0], drawn.hose[1], 0.0, 0.35)
+        world["materials"] = materials
+    shake = vibration(config, seed, state.approach_index)
+    if shake is not None:
+        world.update(camera_vibration_rms_deg=shake.rms_deg, camera_vibration_hz=shake.mean_frequency_hz)
     s = r.sensor
     if s.enabled:
         rng = world_rng(seed, state.frame_index, "sensor")
@@ -243,6 +271,15 @@ def draw_world(config: Config, look: FrameLook, seed: int, state: FrameState,
             sensor_jpeg_quality=quality if s.jpeg else None,
             sensor_seed=_seed(rng),
         )
+        blur, aberration = _uniform(rng, s.lens_blur_px), _uniform(rng, s.chromatic_aberration_px)
+        mired = _uniform(rng, (1e6 / s.white_balance_k[1], 1e6 / s.white_balance_k[0]))
+        tint, gamma, shoulder = _uniform(rng, s.tint), _uniform(rng, s.tone_gamma), _uniform(rng, s.tone_shoulder)
+        world.update(sensor_lens_blur_px=blur if s.lens else None,
+                     sensor_chromatic_aberration_px=aberration if s.lens else None,
+                     sensor_white_balance_k=1e6 / mired if s.colour else None,
+                     sensor_tint=tint if s.colour else None,
+                     sensor_tone_gamma=gamma if s.colour else None,
+                     sensor_tone_shoulder=shoulder if s.colour else None)
     return dataclasses.replace(look, **world) if world else look
 
 
@@ -308,6 +345,15 @@ def _approach_world(config: Config, seed: int, approach_index: int, base: float)
             livery_weathering=_uniform(rng, lv.weathering),
             livery_seed=_seed(rng),
         )
+    d = r.drogue
+    if d.enabled:
+        from datagen.assets.drogues import draw_drogue
+
+        rng = world_rng(seed, approach_index, "drogue")
+        drawn = draw_drogue(rng, _share(rng, d.canopies), d.hose_bands)
+        world.update(drogue_canopy=drawn.canopy, drogue_tape=drawn.tape, hose_band_colour=drawn.band_colour,
+                     hose_band_spacing_m=drawn.band_spacing_m, hose_band_width_m=drawn.band_width_m,
+                     drogue_draw=drawn)
     return world
 
 

@@ -40,6 +40,10 @@ MATERIAL_CLASSES: Final[dict[str, str]] = {
     "engine_inlets": "dark",
     "engine_exhausts": "dark",
     "fabric": "fabric",
+    "fabric_alt": "fabric_alt",
+    "fabric_band": "fabric_band",
+    "tape": "tape",
+    "struts": "strut",
     "hose": "rubber",
 }
 

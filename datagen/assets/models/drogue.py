@@ -4,8 +4,10 @@ The drogue frame: x forward (towards the tanker, along the hose), y left, z up,
 origin at the drogue centre on the basket axis, where the probe tip is at
 contact. The coupling (where the hose attaches, at
 :data:`datagen.assets.rig.HOSE_ATTACH_DROGUE_M`) is ahead of the centre and the
-canopy opens aft towards the receiver: 16 ribs carry a fabric canopy about
-0.7 m across at the rim.
+canopy opens aft towards the receiver: 16 struts carry a canopy of 16 fabric gores
+about 0.7 m across at the rim (a high-speed drogue's 27 inches), whose parts
+(alternate gores, the rim band, two marked gores, the rim's tape, the struts, the
+coupling) a canopy scheme colours (:mod:`datagen.assets.drogues`).
 
 The hose is not a rigid object: :func:`hose_mesh` makes a tube of fixed
 topology along the hose curve of each frame, so the renderer only updates its
@@ -25,7 +27,8 @@ from datagen.assets.models.loft import Parts, box, loft, tube, tube_rings
 from datagen.assets.rig import HOSE_ATTACH_DROGUE_M
 
 __all__ = [
-    "HOSE_RADIUS_M", "HOSE_SIDES", "build_drogue", "hose_faces", "hose_mesh", "hose_placeholder", "hose_vertices",
+    "HOSE_RADIUS_M", "HOSE_SIDES", "build_drogue", "hose_faces", "hose_mesh", "hose_placeholder", "hose_texcoords",
+    "hose_vertices",
 ]
 
 N_RIBS: Final = 16
@@ -33,6 +36,8 @@ RIM_X: Final = -0.35  # canopy rim plane, aft of the centre
 RIM_RADIUS: Final = 0.35  # 0.70 m across
 THROAT_X: Final = 0.12  # where the ribs meet the coupling
 THROAT_RADIUS: Final = 0.115
+#: The rim band's share of the canopy's length (from the rim forwards).
+BAND_SHARE: Final = 0.3
 
 #: Hose outer radius (about 7 cm across) and sides of its tube mesh.
 HOSE_RADIUS_M: Final = 0.035
@@ -75,28 +80,38 @@ def build_drogue() -> Model:
     t = 0.006
     front_x, rear_x = THROAT_X - 0.02, RIM_X
     front_r, rear_r = THROAT_RADIUS + 0.005, RIM_RADIUS
-    shell = [shell_ring(front_x, front_r + t), shell_ring(rear_x, rear_r + t),
-             shell_ring(rear_x, rear_r - t), shell_ring(front_x, front_r - t)]
+    band_x = rear_x + BAND_SHARE * (front_x - rear_x)  # where the rim band begins
+    band_r = rear_r + BAND_SHARE * (front_r - rear_r)
+    shell = [shell_ring(front_x, front_r + t), shell_ring(band_x, band_r + t), shell_ring(rear_x, rear_r + t),
+             shell_ring(rear_x, rear_r - t), shell_ring(band_x, band_r - t), shell_ring(front_x, front_r - t)]
     canopy = loft(shell, closed=True)
-    # Two panels in a contrasting colour break the basket's rotational symmetry.
+    # The gores (the 16 panels between ribs) in two alternating sets, the band at the rim,
+    # and two marked gores that break the basket's rotational symmetry: a canopy's scheme
+    # (datagen.assets.drogues) colours each set.
     panels = np.arange(len(canopy.faces))
     centroids = canopy.triangles_center
     polar = np.arctan2(centroids[:, 2], centroids[:, 1]) % (2 * np.pi)
+    gore = np.floor(polar / (2 * np.pi / N_RIBS)).astype(int) % N_RIBS
+    in_band = centroids[:, 0] < band_x
     marked = (polar > np.pi / 2 - 2 * np.pi / N_RIBS) & (polar < np.pi / 2)  # the panel left of top
     marked |= (polar > 0) & (polar < 2 * np.pi / N_RIBS)  # and the panel above the left rib
-    parts.add("fabric", canopy.submesh([panels[~marked]], append=True))
+    marked &= ~in_band
+    body = ~marked & ~in_band
+    parts.add("fabric", canopy.submesh([panels[body & (gore % 2 == 0)]], append=True))
+    parts.add("fabric_alt", canopy.submesh([panels[body & (gore % 2 == 1)]], append=True))
+    parts.add("fabric_band", canopy.submesh([panels[in_band]], append=True))
     parts.add("markings", canopy.submesh([panels[marked]], append=True))
 
-    # Ribs (struts) from the throat to the rim, and the rim band.
+    # Ribs (struts) from the throat to the rim, and the rim's band (reflective tape on many drogues).
     rib_angles = _rib_angles()
     for a in rib_angles:
         path = np.stack([_on_axis(THROAT_X, THROAT_RADIUS + 0.012, a), _on_axis(RIM_X, RIM_RADIUS + 0.012, a)])
-        parts.add("metal", tube(path, 0.008, n=8))
+        parts.add("struts", tube(path, 0.008, n=8))
     rim = trimesh.creation.torus(major_radius=RIM_RADIUS + 0.004, minor_radius=0.014, major_sections=64,
                                  minor_sections=10)
     rim.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [0, 1, 0]))
     rim.apply_translation((RIM_X, 0.0, 0.0))
-    parts.add("fabric", rim)
+    parts.add("tape", rim)
     parts.add("metal", box((0.38, 0.0, 0.085), (0.06, 0.02, 0.04)))  # latch housing on top of the coupling
     meshes = parts.build()
 
@@ -129,6 +144,16 @@ def hose_vertices(points: ArrayLike, sides: int = HOSE_SIDES) -> NDArray[np.floa
     rings = tube_rings(points, HOSE_RADIUS_M, sides)
     flat = rings.reshape(-1, 3)
     return np.concatenate([flat, rings[0].mean(axis=0)[None], rings[-1].mean(axis=0)[None]])
+
+
+def hose_texcoords(points: ArrayLike, span_m: float, sides: int = HOSE_SIDES) -> NDArray[np.float32]:
+    """Texture coordinates of :func:`hose_vertices` (same order): u is the distance along the
+    hose from its drogue end (the last point), over ``span_m``; v is 0.5."""
+    p = np.asarray(points, dtype=np.float64)
+    step = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    from_drogue = np.concatenate([np.cumsum(step[::-1])[::-1], [0.0]]) / span_m
+    u = np.concatenate([np.repeat(from_drogue, sides), from_drogue[[0, -1]]])
+    return np.column_stack([u, np.full_like(u, 0.5)]).astype(np.float32)
 
 
 def hose_placeholder(n_points: int, sides: int = HOSE_SIDES) -> NDArray[np.float64]:

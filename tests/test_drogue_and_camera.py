@@ -1,0 +1,248 @@
+"""The drogue and hose as flown (canopy schemes, marker bands), the camera's vibration, and
+the lens and processing steps of the camera model: each against what it claims."""
+
+from __future__ import annotations
+
+import math
+import typing
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from datagen.assets.drogues import (
+    CANOPIES,
+    DARK_FABRICS,
+    DROGUE_CLASSES,
+    FABRICS,
+    HOSE_BANDS_M,
+    HOSE_TEXEL_M,
+    HOSE_TEXELS,
+    draw_drogue,
+    hose_band_texture,
+)
+from datagen.assets.models.drogue import BAND_SHARE, RIM_X, THROAT_X, build_drogue, hose_texcoords
+from datagen.config import load_config, override_config
+from datagen.config.schema import CanopyName, world_off
+from datagen.core.camera import Intrinsics
+from datagen.core.conventions import object_id
+from datagen.core.transforms import rotvec_from_rotation
+from datagen.render.sensor import (
+    D65_K,
+    chromatic_aberration,
+    daylight_white,
+    lens_blur,
+    white_balance_gains,
+)
+from datagen.render.tonemap import drogue_statistics, to_srgb8, tone_curve
+from datagen.scene.approach import FrameStates
+from datagen.scene.look import _approach_world as approach_world
+from datagen.scene.look import frame_look
+from datagen.scene.vibration import MOUNT_VIBRATION, vibration
+
+_REC709 = np.array([0.2126, 0.7152, 0.0722])
+
+
+# --- the drogue ---------------------------------------------------------------------
+def test_the_configs_canopy_names_are_the_tables() -> None:
+    assert set(typing.get_args(CanopyName)) == set(CANOPIES)
+    assert all(c.fabric in FABRICS and c.trim in FABRICS for c in CANOPIES.values())
+
+
+def test_dark_canopies_take_their_configured_share_of_approaches_and_are_dark() -> None:
+    config = load_config("podcam25")
+    shares = config.randomization.drogue.canopies
+    expected = sum(v for name, v in shares.items() if CANOPIES[name].fabric in DARK_FABRICS) / sum(shares.values())
+    drawn = [approach_world(config, 11, a, 6000.0)["drogue_draw"] for a in range(600)]
+    dark = [d for d in drawn if CANOPIES[d.canopy].fabric in DARK_FABRICS]
+    assert abs(len(dark) / len(drawn) - expected) < 0.06, (len(dark) / len(drawn), expected)
+    for d in dark:
+        assert max(d.materials["fabric"][0]) <= FABRICS["dark_grey"].value[1] + 1e-9
+    light = [d for d in drawn if d.canopy in ("white", "white_red_panels")]
+    assert light and all(min(d.materials["fabric"][0]) >= 0.5 for d in light)
+
+
+def test_a_drogue_belongs_to_its_approach_and_changes_only_the_drogues_and_hoses_materials() -> None:
+    config = load_config("podcam15")
+    states = FrameStates(config)
+    k = config.frames_per_chain
+    on = [frame_look(config, states(i)) for i in (0, 1, k)]
+    off_config = override_config(config, world_off("drogue"))
+    off = [frame_look(off_config, FrameStates(off_config)(i)) for i in (0, 1, k)]
+    def drogue(look):
+        return {cls: look.materials["drogue"][cls] for cls in DROGUE_CLASSES}, look.materials["hose"]["rubber"]
+
+    assert on[0].drogue_canopy is not None and drogue(on[0]) == drogue(on[1])
+    assert on[0].hose_band_colour == on[1].hose_band_colour
+    assert drogue(on[0]) != drogue(on[2])
+    for a, b in zip(on, off, strict=True):
+        assert {o: m for o, m in a.materials.items() if o not in ("drogue", "hose")} == {
+            o: m for o, m in b.materials.items() if o not in ("drogue", "hose")}
+        assert {c: m for c, m in a.materials["drogue"].items() if c not in DROGUE_CLASSES} == {
+            c: m for c, m in b.materials["drogue"].items() if c not in DROGUE_CLASSES}
+        assert drogue(a) != drogue(b)
+        # Off: the finer parts take the frame's own fabric and metal, as the canopy and ribs did.
+        parts = b.materials["drogue"]
+        assert parts["fabric_alt"] == parts["fabric_band"] == parts["tape"] == parts["fabric"]
+        assert parts["strut"] == parts["metal"]
+
+
+@pytest.mark.parametrize("name", sorted(CANOPIES))
+def test_a_canopys_pattern_colours_its_gores_and_band_as_it_says(name: str) -> None:
+    canopy = CANOPIES[name]
+    drawn = draw_drogue(np.random.default_rng(7), name, bands=True)
+    m = drawn.materials
+    assert drawn.canopy == name
+    banded = canopy.pattern in ("band", "alternate_band")
+    alternating = canopy.pattern in ("alternate", "alternate_band")
+    assert (m["fabric_band"] != m["fabric"]) == (banded and canopy.trim != canopy.fabric)
+    assert (m["fabric_alt"] != m["fabric"]) == (alternating and canopy.trim != canopy.fabric)
+    assert m["metal"][2] == 1.0 and all(0.0 <= c <= 1.0 for c in m["fabric"][0])
+
+
+def test_the_drogue_mesh_splits_its_canopy_into_alternate_gores_a_rim_band_and_marked_gores() -> None:
+    parts = build_drogue().parts
+    assert {"fabric", "fabric_alt", "fabric_band", "markings", "tape", "struts", "metal"} <= set(parts)
+    band_x = RIM_X + BAND_SHARE * (THROAT_X - 0.02 - RIM_X)
+    assert parts["fabric_band"].triangles_center[:, 0].max() < band_x
+    for name in ("fabric", "fabric_alt", "markings"):
+        assert parts[name].triangles_center[:, 0].min() > band_x
+    # Eight gores in each alternating set, less the two marked ones (one in each set).
+    assert abs(parts["fabric"].area - parts["fabric_alt"].area) < 1e-9
+    assert parts["markings"].area == pytest.approx(2 * parts["fabric"].area / 7, rel=1e-3)
+
+
+@given(spacing=st.floats(1.0, 3.0), width=st.floats(0.1, 0.3))
+@settings(max_examples=40, deadline=None)
+def test_the_hoses_bands_have_the_drawn_spacing_and_width_within_their_reach(spacing: float, width: float) -> None:
+    texture = hose_band_texture((0.03, 0.03, 0.03), (0.7, 0.7, 0.7), spacing, width)
+    assert texture.shape == (2, HOSE_TEXELS, 3) and np.array_equal(texture[0], texture[1])
+    band = texture[0, :, 0] > 0.5
+    edges = np.flatnonzero(np.diff(band.astype(int)))
+    starts, ends = (edges[0::2] + 1) * HOSE_TEXEL_M, (edges[1::2] + 1) * HOSE_TEXEL_M
+    assert len(starts) == len(ends) >= int(HOSE_BANDS_M / spacing) - 1
+    assert np.all(np.abs((ends - starts) - width) <= HOSE_TEXEL_M + 1e-9)
+    assert np.all(np.abs(np.diff(starts) - spacing) <= HOSE_TEXEL_M + 1e-9)
+    assert not band[math.ceil(HOSE_BANDS_M / HOSE_TEXEL_M):].any()  # plain beyond the reach (and clamped)
+
+
+def test_the_hoses_texture_coordinates_are_its_length_from_the_drogue_end() -> None:
+    rng = np.random.default_rng(3)
+    points = np.cumsum(rng.normal(size=(48, 3)), axis=0)
+    span = HOSE_TEXELS * HOSE_TEXEL_M
+    uv = hose_texcoords(points, span, sides=12)
+    length = np.linalg.norm(np.diff(points, axis=0), axis=1).sum()
+    assert uv.shape == (48 * 12 + 2, 2) and np.all(uv[:, 1] == 0.5)
+    assert uv[-12 - 2, 0] == 0.0 and uv[0, 0] == pytest.approx(length / span, rel=1e-6)
+    assert np.all(np.diff(uv[:48 * 12:12, 0]) < 0)  # falling towards the drogue
+
+
+# --- the camera's vibration ----------------------------------------------------------
+@given(seed=st.integers(0, 2**31 - 1), approach=st.integers(0, 10_000),
+       mount=st.sampled_from(sorted(MOUNT_VIBRATION)), scale=st.floats(0.1, 3.0))
+@settings(max_examples=30, deadline=None)
+def test_a_vibrations_pointing_rms_is_its_drawn_rms_within_the_mounts_band(seed, approach, mount, scale) -> None:
+    config = load_config({"wingcam": "wingcam55", "dashcam": "dashcam75", "podcam": "podcam15"}[mount])
+    config = override_config(config, {"camera.vibration.scale": scale})
+    shake = vibration(config, seed, approach)
+    band = MOUNT_VIBRATION[mount]
+    assert band.rms_deg[0] * scale * (1 - 1e-9) <= shake.rms_deg <= band.rms_deg[1] * scale * (1 + 1e-9)
+    assert np.all((shake.frequency_hz >= band.frequency_hz[0]) & (shake.frequency_hz <= band.frequency_hz[1]))
+    # The RMS over a long time (many periods of the slowest component) is the drawn one.
+    turn = shake.rotvec(np.linspace(0.0, 400.0 / band.frequency_hz[0], 200_001))
+    pointing = math.degrees(math.sqrt(float(np.mean((turn[:, :2] ** 2).sum(axis=1)))))
+    roll = math.degrees(math.sqrt(float(np.mean(turn[:, 2] ** 2))))
+    assert pointing == pytest.approx(shake.rms_deg, rel=0.1)
+    assert roll == pytest.approx(band.roll_share * shake.rms_deg, rel=0.15)
+
+
+def test_vibration_turns_the_frames_camera_by_its_rotation_at_the_frames_time_and_earlier() -> None:
+    config = load_config("podcam15")
+    still = override_config(config, world_off("vibration"))
+    shake = vibration(config, config.dataset.seed, 0)
+    for i in (0, 5):
+        a, b = FrameStates(config)(i), FrameStates(still)(i)
+        assert a.approach_index == 0
+        turn = b.world_from_cam[:3, :3].T @ a.world_from_cam[:3, :3]
+        np.testing.assert_allclose(rotvec_from_rotation(turn), shake.rotvec(a.time_s), atol=1e-12)
+        np.testing.assert_array_equal(a.world_from_cam[:3, 3], b.world_from_cam[:3, 3])
+        earlier = b.earlier.world_from_cam[:3, :3].T @ a.earlier.world_from_cam[:3, :3]
+        np.testing.assert_allclose(rotvec_from_rotation(earlier), shake.rotvec(a.earlier.time_s), atol=1e-12)
+    assert vibration(still, config.dataset.seed, 0) is None
+
+
+# --- the lens and the camera's processing -------------------------------------------
+def test_the_lens_blurs_an_edge_to_a_10_90_width_of_2_56_sigma() -> None:
+    img = np.zeros((64, 400, 3), np.float32)
+    img[:, 200:] = 1.0
+    for sigma in (1.0, 2.0, 3.0):  # (below a pixel the samples are too coarse to read a width off)
+        row = lens_blur(img, sigma)[32, :, 1]
+        x = np.arange(400)
+        lo, hi = np.interp(0.1, row, x), np.interp(0.9, row, x)
+        assert hi - lo == pytest.approx(2.5631 * sigma, rel=0.08), sigma
+    assert lens_blur(img, 0.0) is img
+
+
+def test_chromatic_aberration_keeps_green_and_moves_red_out_and_blue_in_by_the_drawn_pixels() -> None:
+    k = Intrinsics.from_hfov_deg(640, 360, 55.0)
+    img = np.zeros((360, 640, 3), np.float32)
+    img[20:26, 30:36] = 1.0  # a square near the top-left corner
+    out = chromatic_aberration(img, k, 1.5)
+    np.testing.assert_array_equal(out[..., 1], img[..., 1])
+
+    def centroid(channel):
+        ys, xs = np.mgrid[0:360, 0:640]
+        w = out[..., channel]
+        return np.array([(xs * w).sum(), (ys * w).sum()]) / w.sum()
+
+    centre = np.array([k.cx, k.cy]) - 0.5
+    reach = math.hypot(centre[0], centre[1])
+    start = np.array([32.5, 22.5])
+    radial = (start - centre) / np.linalg.norm(start - centre)
+    moved = 1.5 * np.linalg.norm(start - centre) / reach
+    np.testing.assert_allclose(centroid(0) - start, moved * radial, atol=0.02)
+    np.testing.assert_allclose(centroid(2) - start, -moved * radial, atol=0.02)
+
+
+@given(temperature=st.floats(4000.0, 25000.0), tint=st.floats(-0.2, 0.2))
+def test_white_balance_keeps_a_greys_luminance(temperature: float, tint: float) -> None:
+    gains = white_balance_gains(temperature, tint)
+    assert float(_REC709 @ gains) == pytest.approx(1.0, abs=1e-6)
+
+
+def test_white_balance_is_none_at_d65_and_a_lower_setting_turns_the_image_blue() -> None:
+    np.testing.assert_allclose(white_balance_gains(D65_K, 0.0), 1.0, atol=1e-6)
+    cold, warm = white_balance_gains(5300.0, 0.0), white_balance_gains(8000.0, 0.0)
+    assert cold[2] > 1.0 > cold[0] and warm[0] > 1.0 > warm[2]
+    white = daylight_white(D65_K)
+    np.testing.assert_allclose(white / white[1], [1.0, 1.0, 1.0], atol=0.01)  # D65 is sRGB's white
+
+
+@given(gamma=st.floats(0.5, 2.0), shoulder=st.floats(0.0, 1.0))
+def test_the_tone_curve_rises_follows_the_power_below_its_knee_and_never_passes_white(gamma: float,
+                                                                                      shoulder: float) -> None:
+    x = np.linspace(0.0, 8.0, 4001)
+    y = tone_curve(x, gamma, shoulder)
+    assert np.all(np.diff(y) >= 0.0) and y.max() <= 1.0 + 1e-12
+    knee = 1.0 - 0.5 * shoulder
+    below = x ** gamma <= knee
+    np.testing.assert_allclose(y[below], x[below] ** gamma)
+
+
+def test_the_encoding_with_a_neutral_tone_is_the_plain_srgb_encoding() -> None:
+    x = np.random.default_rng(0).uniform(0.0, 1.3, size=(50, 60, 3)).astype(np.float32)
+    np.testing.assert_array_equal(to_srgb8(x, (1.0, 0.0)), to_srgb8(x))
+    assert np.all(to_srgb8(x, (1.0, 1.0)).astype(int) <= to_srgb8(x).astype(int))
+
+
+def test_a_dark_drogue_against_a_bright_sky_has_a_negative_contrast_and_its_own_luminance() -> None:
+    luma = np.full((100, 100), 0.8, np.float32)
+    ids = np.zeros((100, 100), np.uint32)
+    ids[40:60, 40:60] = object_id("drogue")
+    luma[40:60, 40:60] = 0.1
+    stats = drogue_statistics(luma, ids)
+    assert stats["drogue_luminance"] == pytest.approx(0.1)
+    assert stats["drogue_contrast"] == pytest.approx((0.1 - 0.8) / 0.9)
+    ids[:] = 0
+    assert drogue_statistics(luma, ids) == {"drogue_luminance": None, "drogue_contrast": None}
