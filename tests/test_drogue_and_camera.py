@@ -246,3 +246,84 @@ def test_a_dark_drogue_against_a_bright_sky_has_a_negative_contrast_and_its_own_
     assert stats["drogue_contrast"] == pytest.approx((0.1 - 0.8) / 0.9)
     ids[:] = 0
     assert drogue_statistics(luma, ids) == {"drogue_luminance": None, "drogue_contrast": None}
+
+
+# --- the window ---------------------------------------------------------------------------
+def test_a_pod_window_is_wet_on_its_share_of_approaches_and_a_windscreen_reflects_instead() -> None:
+    pod, cockpit = load_config("podcam15"), load_config("dashcam75")
+    share = pod.randomization.window.droplet_share
+    pods = [approach_world(pod, 5, a, 6000.0) for a in range(400)]
+    wet = np.mean([w["window_droplets"] > 0 for w in pods])
+    assert abs(wet - share) < 0.07, wet
+    lo, hi = pod.randomization.window.droplets
+    assert all(lo <= w["window_droplets"] <= hi for w in pods if w["window_droplets"])
+    assert all(w["window_reflection"] is None for w in pods)
+    screens = [approach_world(cockpit, 5, a, 6000.0) for a in range(50)]
+    assert all(w["window_droplets"] is None and w["window_reflection"] is not None for w in screens)
+
+
+def test_dirt_on_a_uniform_image_absorbs_a_share_of_the_light_by_its_field() -> None:
+    from datagen.render.window import dirty, window_field
+
+    img = np.full((90, 160, 3), 0.5, np.float32)
+    out = dirty(img, 0.8, 42)
+    field = window_field(42, 160, 90, "dirt")
+    assert field.min() == 0.0 and field.max() > 0.5  # patches, and clean glass between them
+    np.testing.assert_allclose(out, img * (1.0 - 0.15 * 0.8 * field)[..., None], rtol=1e-5)
+    assert dirty(img, 0.0, 42) is img
+
+
+def test_a_droplet_changes_only_the_pixels_within_its_disc() -> None:
+    from datagen.render.window import DROPLET_RADIUS, droplets
+
+    rng = np.random.default_rng(1)
+    img = rng.random((270, 512, 3)).astype(np.float32)
+    for seed in range(20):
+        out = droplets(img, 1, seed)
+        changed = np.argwhere(np.any(out != img, axis=-1))
+        if not len(changed):
+            continue
+        extent = changed.max(axis=0) - changed.min(axis=0) + 1
+        assert extent.max() <= 2 * DROPLET_RADIUS[1] * 512 + 3
+    assert droplets(img, 0, 3) is img
+
+
+def test_a_windscreens_reflection_only_adds_light_up_to_its_strength_of_the_mean() -> None:
+    from datagen.render.window import reflection
+
+    img = np.random.default_rng(2).random((90, 160, 3)).astype(np.float32)
+    out = reflection(img, 0.1, 9)
+    added = out - img
+    assert added.min() >= 0.0 and np.all(added.max(axis=(0, 1)) <= 0.1 * img.reshape(-1, 3).mean(axis=0) + 1e-6)
+
+
+# --- another aircraft -------------------------------------------------------------------------
+def test_the_configs_traffic_kinds_are_the_renderers() -> None:
+    from datagen.config.schema import TrafficKind
+    from datagen.render.renderer import TRAFFIC_KINDS
+
+    assert set(typing.get_args(TrafficKind)) == set(TRAFFIC_KINDS)
+
+
+@pytest.mark.parametrize("scene", ["podcam25", "dashcam75", "wingcam55"])
+def test_another_aircraft_is_in_the_cameras_nominal_view_in_range_and_clear_of_the_tanker(scene: str) -> None:
+    from datagen.assets.rig import MOUNTS
+    from datagen.scene.traffic import CLEARANCE_M, VIEW_SHARE
+
+    config = load_config(scene)
+    t = config.randomization.traffic
+    k = Intrinsics.from_hfov_deg(config.camera.width, config.camera.height, config.camera.hfov_deg)
+    mount = MOUNTS[config.camera.mount]
+    cam_from_body = np.linalg.inv(mount.body_from_cam())
+    draws = [approach_world(config, 17, a, 6000.0) for a in range(300)]
+    present = [w for w in draws if w["other_aircraft"] != "none"]
+    assert abs(len(present) / len(draws) - t.share) < 0.07
+    assert {w["other_aircraft"] for w in present} == {"receiver", "tanker"}
+    for w in present:
+        p = cam_from_body[:3, :3] @ np.asarray(w["other_aircraft_tanker_m"]) + cam_from_body[:3, 3]
+        assert p[2] > 0
+        assert abs(p[0] / p[2]) <= math.tan(k.hfov_rad / 2) * VIEW_SHARE + 1e-9
+        assert abs(p[1] / p[2]) <= math.tan(k.vfov_rad / 2) * VIEW_SHARE + 1e-9
+        assert t.range_m[0] * (1 - 1e-9) <= np.linalg.norm(p) <= t.range_m[1] * (1 + 1e-9)
+        assert abs(w["other_aircraft_heading_deg"]) <= t.heading_deg
+    assert np.mean([np.linalg.norm(w["other_aircraft_tanker_m"]) >= CLEARANCE_M for w in present]) > 0.95

@@ -716,3 +716,34 @@ def test_the_cox_munk_sea_removes_most_fireflies_from_the_tanker() -> None:
         result = Renderer(Scene.resolve(config)).render(state, look, render_seed(seed, frame), geometry=True)
         counts[model] = int((fireflies(result.rgb) & (result.object_id == object_id("tanker"))).sum())
     assert counts["uniform"] > 20 and counts["cox_munk"] * 5 < counts["uniform"], counts
+
+
+def test_another_aircraft_is_drawn_where_its_meshes_project_and_waits_hidden_without_one() -> None:
+    from datagen.scene.traffic import world_from_traffic
+
+    renderer, config = renderer_for("podcam25.yaml")
+    k, states = renderer.intrinsics, FrameStates(config)
+    for a in range(60):  # the first approach whose other aircraft is in view
+        state = states(a * config.frames_per_chain + 3)
+        look = frame_look(config, state)
+        pose = world_from_traffic(state, look)
+        if pose is None:
+            continue
+        mesh = load_mesh(object_paths(config, look.other_aircraft)[0], look.other_aircraft).combined
+        points = apply_transform(invert_rigid(state.world_from_cam) @ pose, mesh.vertices)
+        uv = project_points(points, k)
+        box = np.array([*uv.min(axis=0), *uv.max(axis=0)])
+        if (points[:, 2] > 0).all() and box[0] > 0 and box[1] > 0 and box[2] < k.width and box[3] < k.height:
+            break
+    else:
+        pytest.fail("no approach of podcam25 shows another aircraft whole")
+    renderer.pose(state, look)
+    _, with_it, _ = renderer.geometry_pass()
+    alone = dataclasses.replace(look, other_aircraft="none", other_aircraft_tanker_m=None,
+                                other_aircraft_heading_deg=None)
+    renderer.pose(state, alone)
+    _, without, _ = renderer.geometry_pass()
+    rows, cols = np.nonzero(with_it != without)
+    assert len(rows) >= 10 and np.all(with_it[rows, cols] == object_id(look.other_aircraft))
+    assert cols.min() >= box[0] - 1 and cols.max() + 1 <= box[2] + 1
+    assert rows.min() >= box[1] - 1 and rows.max() + 1 <= box[3] + 1

@@ -60,6 +60,7 @@ class Mount:
     body: Literal["receiver", "tanker"]
     position_m: tuple[float, float, float]
     direction: tuple[float, float, float]  # optical axis in the body frame
+    window: Literal["pod", "windscreen"] = "pod"  # what the camera looks through (datagen.render.window)
 
     def body_from_cam(self) -> np.ndarray:
         """Nominal ``body_from_cam`` (OpenCV camera), 4x4."""
@@ -79,7 +80,8 @@ _PODCAM_POSITION = HOSE_PORT_TANKER_M + np.array([0.4, -0.5, 0.0])
 #: tanker hose pod beside the port (rearward, aimed at the average drogue centre).
 MOUNTS: Final[dict[str, Mount]] = {
     "wingcam": Mount("wingcam", "receiver", (-8.6, RECEIVER_CENTRELINE_Y_M - 3.6, -0.9), _forward(2.0, 2.0)),
-    "dashcam": Mount("dashcam", "receiver", (-4.3, RECEIVER_CENTRELINE_Y_M, 0.75), _forward(-1.5, -1.0)),
+    "dashcam": Mount("dashcam", "receiver", (-4.3, RECEIVER_CENTRELINE_Y_M, 0.75), _forward(-1.5, -1.0),
+                     "windscreen"),
     "podcam": Mount("podcam", "tanker", tuple(float(v) for v in _PODCAM_POSITION),
                     tuple(float(v) for v in -_PODCAM_POSITION)),
 }

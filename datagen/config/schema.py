@@ -142,6 +142,8 @@ WORLD_RANDOMIZERS: Final[dict[str, dict[str, Any]]] = {
     "backlit sun": {"randomization.sky.backlit_fraction": 0.0},
     "vibration": {"camera.vibration.enabled": False},
     "drogue": {"randomization.drogue.enabled": False},
+    "window": {"randomization.window.enabled": False},
+    "traffic": {"randomization.traffic.enabled": False},
 }
 
 
@@ -632,6 +634,59 @@ class DrogueLookConfig(_Section):
     """Painted marker bands along the hose near the drogue."""
 
 
+class WindowConfig(_Section):
+    """What the camera looks through (:mod:`datagen.render.window`), drawn per approach: a pod
+    camera's window with dirt and, on some approaches, water droplets; a cockpit camera's
+    windscreen with dirt and a reflection of the cockpit. Labels do not move."""
+
+    enabled: Flag = True
+    """Draw the window; off: a clean window (none at all)."""
+
+    dirt: UnitRange = (0.0, 0.5)
+    """Strength of the dirt (0 clean; its patches scatter and absorb up to 0.75 of the light at 1)."""
+
+    droplet_share: Number = Field(0.25, ge=0.0, le=1.0)
+    """Share of approaches whose pod window carries water droplets."""
+
+    droplets: Annotated[tuple[Integer, Integer], AfterValidator(_ordered)] = (1, 25)
+    """How many droplets such a window carries (integer range)."""
+
+    reflection: UnitRange = (0.0, 0.12)
+    """Strength of a windscreen's reflection of the cockpit, as a share of the image's mean light."""
+
+    @field_validator("droplets")
+    @classmethod
+    def _count(cls, n: tuple[int, int]) -> tuple[int, int]:
+        if n[0] < 0 or n[1] > 200:
+            raise ValueError(f"must lie within [0, 200], got [{n[0]}, {n[1]}]")
+        return n
+
+
+#: The kinds of other aircraft (:mod:`datagen.scene.traffic`).
+TrafficKind = Literal["receiver", "tanker"]
+
+
+class TrafficConfig(_Section):
+    """Another aircraft in view (:mod:`datagen.scene.traffic`): on a share of approaches a
+    second receiver or tanker flies in formation with the tanker somewhere in the camera's
+    field of view; drawn and recorded, never labeled (it occludes like anything else)."""
+
+    enabled: Flag = True
+    """Draw other aircraft; off: the tanker, the receiver and the drogue are alone."""
+
+    share: Number = Field(0.25, ge=0.0, le=1.0)
+    """Share of approaches with another aircraft."""
+
+    kinds: Annotated[dict[TrafficKind, Number], AfterValidator(_shares)] = {"receiver": 0.7, "tanker": 0.3}
+    """Each kind's share of those aircraft."""
+
+    range_m: Annotated[Range, _within(10.0, 20_000.0)] = (80.0, 800.0)
+    """Its distance from the camera's nominal place, metres (log-uniform)."""
+
+    heading_deg: Number = Field(15.0, ge=0.0, le=180.0)
+    """Its heading lies within this many degrees of the tanker's."""
+
+
 class LiveryConfig(_Section):
     """Aircraft paint: generated liveries on the receiver's and tanker's painted parts."""
 
@@ -775,6 +830,12 @@ class RandomizationConfig(_Section):
 
     drogue: DrogueLookConfig = DrogueLookConfig()
     """The drogue's canopy and the hose's marker bands, per approach."""
+
+    window: WindowConfig = WindowConfig()
+    """Dirt, droplets and reflections on the window the camera looks through, per approach."""
+
+    traffic: TrafficConfig = TrafficConfig()
+    """Another aircraft in view on a share of approaches."""
 
     sensor: SensorConfig = SensorConfig()
     """The camera model after the render: exposure, noise, blur, vignetting, glare,

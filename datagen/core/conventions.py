@@ -286,9 +286,10 @@ WORLD_STREAM: Final[int] = 5
 #: The world's randomization dimensions, each with its own stream (third spawn-key element: the
 #: index here), so that switching one on or off changes no draw of another, nor of the look.
 #: The sun and the sensor are drawn per frame; clouds, sea, liveries, the atmosphere, the
-#: ground, the camera's vibration and the drogue's canopy per approach chain.
+#: ground, the camera's vibration, the drogue's canopy, the camera's window and other traffic
+#: per approach chain.
 WORLD_DIMENSIONS: Final[tuple[str, ...]] = ("sun", "clouds", "sea", "livery", "sensor", "atmosphere", "ground",
-                                            "vibration", "drogue")
+                                            "vibration", "drogue", "window", "traffic")
 
 
 def world_rng(seed: int, index: int, dimension: str) -> np.random.Generator:

@@ -51,6 +51,7 @@ from datagen.render.timing import DENOISE, PATH_TRACING, StageClock
 from datagen.render.tonemap import exposure_scale
 from datagen.render.world import CLOUD_LAYERS, SEA_COLOUR, World, earth_cap
 from datagen.scene.look import FrameLook, Material, neutral_look, sun_direction_world
+from datagen.scene.traffic import world_from_traffic
 
 if TYPE_CHECKING:
     from datagen.core.features import FeatureTable
@@ -59,6 +60,10 @@ if TYPE_CHECKING:
 
 __all__ = ["FrameRenderer", "RenderResult", "Renderer"]
 
+#: The kinds of other aircraft (datagen.scene.traffic): an instance of each object's meshes.
+TRAFFIC_KINDS: Final = ("receiver", "tanker")
+#: An other aircraft not in the frame waits this far below the sea.
+HIDDEN_DEPTH_M: Final = 5000.0
 #: The stage that sees the frame through the air.
 AERIAL_PERSPECTIVE: Final = "aerial perspective"
 #: With clouds, the render frame's origin is at a multiple of this altitude (see Renderer._render_origin).
@@ -199,6 +204,8 @@ class Renderer(RayCasting):
                 self._parts[obj].append((f"{obj}_group.{key}", cls))
             description[f"{obj}_group"] = group
             description[obj] = {"type": "instance", "shapegroup": {"type": "ref", "id": f"{obj}_group"}}
+            if obj in TRAFFIC_KINDS and config.randomization.traffic.enabled:  # another of it (scene.traffic)
+                description[f"other_{obj}"] = {"type": "instance", "shapegroup": {"type": "ref", "id": f"{obj}_group"}}
         return description
 
     def _sea_mesh(self, bsdf: dict):
@@ -285,6 +292,13 @@ class Renderer(RayCasting):
         hose = hose_vertices(state.hose_points_world - origin)
         set_buffer(p, "hose.vertex_positions", hose.astype(np.float32))
         self._set_hose(look, state.hose_points_world)
+        if self.config.randomization.traffic.enabled:
+            other = world_from_traffic(state, look)
+            for kind in TRAFFIC_KINDS:
+                # Where there is none: far below the sea, under the camera (hidden by the earth).
+                pose = (render_from_world @ other if other is not None and look.other_aircraft == kind
+                        else make_transform(np.eye(3), [0.0, 0.0, -origin[2] - HIDDEN_DEPTH_M]))
+                p[f"other_{kind}.to_world"] = mi.Transform4f(pose.tolist())
         sensor = world_from_micam(render_from_world @ state.world_from_cam)
         p["sensor.to_world"] = mi.Transform4f(sensor.tolist())
         # The earth's top under the camera (the render frame's origin is over the camera's nadir).

@@ -6,7 +6,8 @@ and the noise as Dr.Jit kernels on the render's device where a vectorized varian
    centred on the frame's time (:func:`image_motion`, :func:`motion_blur`);
 2. lens distortion: the pinhole render, made with a margin, resampled through OpenCV's
    Brown-Conrady model (:func:`distort_image`), the model the labels are projected with;
-3. the lens's blur and lateral chromatic aberration (:func:`lens_blur`,
+3. the window the camera looks through: dirt, droplets, a windscreen's reflection
+   (:mod:`datagen.render.window`), then the lens's blur and lateral chromatic aberration (:func:`lens_blur`,
    :func:`chromatic_aberration`: red and blue magnified about the principal point, green,
    which carries most of the luma, where the labels project);
 4. vignetting: ``1 - v r^2`` falloff, ``r`` = 1 at the corners;
@@ -497,6 +498,13 @@ def apply_sensor(rgb: NDArray[np.float32], look: FrameLook, state: FrameState, *
             warped = distort_image({"rgb": rgb, "depth": depth, "ids": ids, "surface": surface}, output, margin_px,
                                    np.asarray(look.sensor_distortion))
             rgb, depth, ids, surface = warped["rgb"], warped["depth"], warped["ids"], warped["surface"]
+    if look.window_seed is not None:
+        from datagen.render.window import dirty, droplets, reflection
+
+        with clock.stage("window"):
+            rgb = reflection(dirty(droplets(rgb, look.window_droplets or 0, look.window_seed),
+                                   look.window_dirt or 0.0, look.window_seed),
+                             look.window_reflection or 0.0, look.window_seed)
     if look.sensor_lens_blur_px is not None:
         with clock.stage("lens blur"):
             rgb = chromatic_aberration(lens_blur(rgb, look.sensor_lens_blur_px), output,

@@ -97,6 +97,13 @@ class FrameLook:
     hose_band_colour: tuple[float, float, float] | None = None  # linear RGB of the hose's marker bands
     hose_band_spacing_m: float | None = None
     hose_band_width_m: float | None = None
+    other_aircraft: str | None = None  # "none", "receiver" or "tanker" (datagen.scene.traffic)
+    other_aircraft_tanker_m: tuple[float, float, float] | None = None  # its place in the tanker frame
+    other_aircraft_heading_deg: float | None = None  # its heading off the tanker's
+    window_dirt: float | None = None  # dirt on the camera's window (datagen.render.window)
+    window_droplets: int | None = None  # water droplets on a pod's window (None: a windscreen)
+    window_reflection: float | None = None  # a windscreen's reflection of the cockpit (None: a pod)
+    window_seed: int | None = None  # seeds the window's fields and droplets
     sensor_lens_blur_px: float | None = None  # the lens's Gaussian point spread (sigma)
     sensor_chromatic_aberration_px: float | None = None  # red-blue separation at the farthest corner
     sensor_white_balance_k: float | None = None  # the daylight the camera is balanced for (the scene's: D65)
@@ -354,6 +361,22 @@ def _approach_world(config: Config, seed: int, approach_index: int, base: float)
         world.update(drogue_canopy=drawn.canopy, drogue_tape=drawn.tape, hose_band_colour=drawn.band_colour,
                      hose_band_spacing_m=drawn.band_spacing_m, hose_band_width_m=drawn.band_width_m,
                      drogue_draw=drawn)
+    if r.traffic.enabled:
+        from datagen.scene.traffic import draw_traffic
+
+        world.update(draw_traffic(config, world_rng(seed, approach_index, "traffic")))
+    w = r.window
+    if w.enabled:
+        from datagen.assets.rig import MOUNTS
+
+        rng = world_rng(seed, approach_index, "window")
+        dirt = _uniform(rng, w.dirt)
+        wet = bool(rng.random() < w.droplet_share)
+        count = int(rng.integers(w.droplets[0], w.droplets[1] + 1))
+        shine = _uniform(rng, w.reflection)
+        pod = MOUNTS[config.camera.mount].window == "pod"
+        world.update(window_dirt=dirt, window_droplets=(count if wet else 0) if pod else None,
+                     window_reflection=None if pod else shine, window_seed=_seed(rng))
     return world
 
 

@@ -1,0 +1,123 @@
+"""What lies between the lens and the world: the window a pod camera looks through, with dirt
+and water droplets on it, and the windscreen a cockpit camera looks through, which reflects
+the cockpit. Image arithmetic on the linear render (numpy and OpenCV), before vignetting.
+
+A window sits a few centimetres from a lens focused at infinity, so what is on it is far out
+of focus: dirt scatters part of the light passing it into a wide veil (:func:`dirty`);
+a droplet is a small lens that shows the scene behind it inverted and minified, blurred, and
+darkens at its rim where it bends light out of the aperture (:func:`droplets`); a windscreen
+adds a faint, smooth reflection of the lit cockpit (:func:`reflection`).
+
+An approach's window (:data:`datagen.scene.look.FrameLook` ``window_*``) stays as it is over
+its frames; its fields come from the recorded ``window_seed`` at any image size (positions and
+sizes are shares of the image's width). Nothing here moves a label: a feature behind a
+droplet is still where it projects.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from datagen.core.conventions import texture_rng
+
+__all__ = ["DROPLET_RADIUS", "EDGE", "VEIL_SIGMA", "dirty", "droplets", "reflection", "window_field"]
+
+#: Droplet radii, as shares of the image's width.
+DROPLET_RADIUS: Final = (0.006, 0.03)
+#: The scattered veil's Gaussian width, as a share of the image's width.
+VEIL_SIGMA: Final = 0.03
+#: A droplet's outline is blurred over this share of its radius (it is out of focus).
+EDGE: Final = 0.2
+#: The veil is computed on an image this many times smaller (it is smooth).
+VEIL_STEP: Final = 8
+
+
+@functools.lru_cache(maxsize=8)
+def window_field(seed: int, width: int, height: int, kind: str) -> NDArray[np.float32]:
+    """A smooth field in [0, 1] over the image, ``(height, width)``: octaves of bicubically
+    enlarged uniform noise from ``texture_rng(seed)`` (``kind``: another stream of the same seed),
+    soft-thresholded into patches for ``"dirt"`` and left smooth for ``"reflection"``."""
+    import cv2
+
+    rng = texture_rng(seed + {"dirt": 1, "reflection": 2}[kind])
+    total = np.zeros((height, width), np.float32)
+    weight = 0.0
+    for cells, amplitude in ((4, 1.0), (9, 0.55), (20, 0.3), (44, 0.15)):
+        grid = rng.random((max(2, round(cells * height / width)), cells)).astype(np.float32)
+        total += amplitude * cv2.resize(grid, (width, height), interpolation=cv2.INTER_CUBIC)
+        weight += amplitude
+    total /= weight
+    if kind == "dirt":  # patches: the upper part of the field, soft-edged
+        total = np.clip((total - 0.5) / 0.15, 0.0, 1.0)
+    return np.clip(total, 0.0, 1.0)
+
+
+def _veil(rgb: NDArray[np.float32]) -> NDArray[np.float32]:
+    """The image seen through a wide scattering lobe: a Gaussian of :data:`VEIL_SIGMA` of the
+    width, computed :data:`VEIL_STEP` times smaller and enlarged."""
+    import cv2
+
+    h, w = rgb.shape[:2]
+    small = cv2.resize(rgb, (max(1, w // VEIL_STEP), max(1, h // VEIL_STEP)), interpolation=cv2.INTER_AREA)
+    small = cv2.GaussianBlur(small, (0, 0), sigmaX=VEIL_SIGMA * w / VEIL_STEP, borderType=cv2.BORDER_REFLECT)
+    return cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
+
+
+def dirty(rgb: NDArray[np.float32], strength: float, seed: int) -> NDArray[np.float32]:
+    """Dirt on the window: where its field is ``d`` (:func:`window_field`), ``0.6 strength d``
+    of the light is scattered into the veil and ``0.15 strength d`` absorbed."""
+    if strength <= 0.0:
+        return rgb
+    h, w = rgb.shape[:2]
+    d = (window_field(seed, w, h, "dirt") * np.float32(strength))[..., None]
+    return (rgb * (1.0 - 0.75 * d) + 0.6 * d * _veil(rgb)).astype(np.float32)
+
+
+def droplets(rgb: NDArray[np.float32], count: int, seed: int) -> NDArray[np.float32]:
+    """``count`` water droplets on the window, each drawn from ``texture_rng(seed)``: a disc
+    whose inside shows the scene around it inverted and minified (a ball lens), blurred by the
+    defocus, with a darker rim and an outline blurred over :data:`EDGE` of its radius."""
+    import cv2
+
+    if count <= 0:
+        return rgb
+    h, w = rgb.shape[:2]
+    rng = texture_rng(seed)
+    out = rgb.copy()
+    for _ in range(int(count)):
+        cx, cy = rng.uniform(0.0, w), rng.uniform(0.0, h)
+        r = float(np.exp(rng.uniform(*np.log(DROPLET_RADIUS)))) * w
+        minify = float(rng.uniform(0.3, 0.7))
+        x0, x1 = max(int(cx - r) - 1, 0), min(int(cx + r) + 2, w)
+        y0, y1 = max(int(cy - r) - 1, 0), min(int(cy + r) + 2, h)
+        if x1 - x0 < 2 or y1 - y0 < 2:
+            continue
+        ys, xs = np.mgrid[y0:y1, x0:x1].astype(np.float32) + np.float32(0.5)
+        dx, dy = xs - np.float32(cx), ys - np.float32(cy)
+        rho = np.sqrt(dx * dx + dy * dy) / np.float32(r)
+        # Inverted and minified about the centre, reaching 1 / minify droplet radii out.
+        map_x = (np.float32(cx) - dx / np.float32(minify) - 0.5).astype(np.float32)
+        map_y = (np.float32(cy) - dy / np.float32(minify) - 0.5).astype(np.float32)
+        seen = cv2.remap(rgb, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+        seen = cv2.GaussianBlur(seen, (0, 0), sigmaX=max(0.2 * r, 0.5), borderType=cv2.BORDER_REFLECT)
+        rim = 1.0 - 0.35 * np.clip((rho - 0.6) / 0.4, 0.0, 1.0) ** 2  # light bent out near the edge
+        alpha = np.clip((1.0 - rho) / EDGE, 0.0, 1.0)[..., None]  # the outline, out of focus
+        patch = out[y0:y1, x0:x1]
+        out[y0:y1, x0:x1] = patch * (1.0 - alpha) + alpha * seen * rim[..., None]
+    return out
+
+
+def reflection(rgb: NDArray[np.float32], strength: float, seed: int) -> NDArray[np.float32]:
+    """A windscreen's reflection of the cockpit: a smooth field (:func:`window_field`), brighter
+    towards the bottom where the glare shield is, at ``strength`` of the image's mean light."""
+    if strength <= 0.0:
+        return rgb
+    h, w = rgb.shape[:2]
+    field = window_field(seed, w, h, "reflection")
+    ramp = np.linspace(0.4, 1.0, h, dtype=np.float32)[:, None]
+    mean = rgb.reshape(-1, 3).mean(axis=0).astype(np.float32)
+    return (rgb + np.float32(strength) * (field * ramp)[..., None] * mean).astype(np.float32)
