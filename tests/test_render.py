@@ -747,3 +747,22 @@ def test_another_aircraft_is_drawn_where_its_meshes_project_and_waits_hidden_wit
     assert len(rows) >= 10 and np.all(with_it[rows, cols] == object_id(look.other_aircraft))
     assert cols.min() >= box[0] - 1 and cols.max() + 1 <= box[2] + 1
     assert rows.min() >= box[1] - 1 and rows.max() + 1 <= box[3] + 1
+
+
+def test_a_cockpit_cameras_windscreen_frame_crosses_its_upper_corners_only_and_is_no_object() -> None:
+    renderer, config = renderer_for("dashcam75.yaml")
+    still = override_config(config, {"camera.mount_jitter.rotation_deg": 0.0, "camera.mount_jitter.translation_m": 0.0,
+                                     **world_off("vibration")})
+    state = FrameStates(still)(0)
+    renderer.pose(state, frame_look(config, state))
+    depth, ids, _ = renderer.geometry_pass()
+    frame = depth < 1.0  # the frame is half a metre ahead; nothing else comes that close
+    h, w = frame.shape
+    assert frame[: h // 3, : w // 4].mean() > 0.05 and frame[: h // 3, -(w // 4):].mean() > 0.05
+    assert not frame[h // 2:, w // 4: -(w // 4)].any()
+    assert np.all(ids[frame] == 0)
+    assert "windscreen_frame.to_world" in renderer.params
+    wing, wing_config = renderer_for("wingcam55.yaml")  # a pod's camera: no frame
+    wing_state = FrameStates(wing_config)(0)
+    wing.pose(wing_state, frame_look(wing_config, wing_state))
+    assert "windscreen_frame.to_world" not in wing.params

@@ -654,6 +654,9 @@ class WindowConfig(_Section):
     reflection: UnitRange = (0.0, 0.12)
     """Strength of a windscreen's reflection of the cockpit, as a share of the image's mean light."""
 
+    canopy_frame: Flag = True
+    """A cockpit camera sees its windscreen's frame at the edges of its view (it occludes features)."""
+
     @field_validator("droplets")
     @classmethod
     def _count(cls, n: tuple[int, int]) -> tuple[int, int]:

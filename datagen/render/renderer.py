@@ -32,6 +32,7 @@ from datagen.assets.drogues import HOSE_TEXEL_M, HOSE_TEXELS, hose_band_texture
 from datagen.assets.loader import load_mesh
 from datagen.assets.models import material_class
 from datagen.assets.models.drogue import hose_faces, hose_placeholder, hose_texcoords, hose_vertices
+from datagen.assets.rig import MOUNTS
 from datagen.core.camera import Intrinsics, distortion_margin_px
 from datagen.core.conventions import RIGID_OBJECTS, object_id
 from datagen.core.transforms import make_transform
@@ -62,6 +63,8 @@ __all__ = ["FrameRenderer", "RenderResult", "Renderer"]
 
 #: The kinds of other aircraft (datagen.scene.traffic): an instance of each object's meshes.
 TRAFFIC_KINDS: Final = ("receiver", "tanker")
+#: The windscreen frame's paint (a dark, matte cockpit frame).
+WINDSCREEN_FRAME: Final = Material((0.03, 0.03, 0.032), 0.6, 0.0, 0.4)
 #: An other aircraft not in the frame waits this far below the sea.
 HIDDEN_DEPTH_M: Final = 5000.0
 #: The stage that sees the frame through the air.
@@ -206,7 +209,21 @@ class Renderer(RayCasting):
             description[obj] = {"type": "instance", "shapegroup": {"type": "ref", "id": f"{obj}_group"}}
             if obj in TRAFFIC_KINDS and config.randomization.traffic.enabled:  # another of it (scene.traffic)
                 description[f"other_{obj}"] = {"type": "instance", "shapegroup": {"type": "ref", "id": f"{obj}_group"}}
+        if self._windscreen:  # a cockpit camera's windscreen frame (datagen.assets.models.windscreen)
+            from datagen.assets.models.windscreen import windscreen_frame
+
+            frame = windscreen_frame(MOUNTS[config.camera.mount])
+            self._frame = mitsuba_mesh("windscreen_frame", frame.vertices, frame.faces,
+                                       mi.load_dict(_principled(WINDSCREEN_FRAME)))
+            description["windscreen_group"] = {"type": "shapegroup", "frame": self._frame}
+            description["windscreen_frame"] = {"type": "instance",
+                                               "shapegroup": {"type": "ref", "id": "windscreen_group"}}
         return description
+
+    @property
+    def _windscreen(self) -> bool:
+        w = self.config.randomization.window
+        return w.enabled and w.canopy_frame and MOUNTS[self.config.camera.mount].window == "windscreen"
 
     def _sea_mesh(self, bsdf: dict):
         """The sea: the earth's cap (:func:`~datagen.render.world.earth_cap`) under ``bsdf``."""
@@ -241,6 +258,8 @@ class Renderer(RayCasting):
         # ("sea", *CLOUD_LAYERS), -1 for the other shapes. Tables on the device (_cast_on_device).
         objects = {registry_id(shape): object_id(obj) for (obj, _), shape in self._meshes.items()}
         objects[registry_id(hose)] = object_id("hose")
+        if self._windscreen:
+            objects[registry_id(self._frame)] = 0  # not an object of the labels: background
         layers = ("sea", *CLOUD_LAYERS)
         backgrounds = {registry_id(shape): layers.index(name)
                        for name, shape in (("sea", self._sea), *self.world.cloud_meshes.items())}
@@ -292,6 +311,8 @@ class Renderer(RayCasting):
         hose = hose_vertices(state.hose_points_world - origin)
         set_buffer(p, "hose.vertex_positions", hose.astype(np.float32))
         self._set_hose(look, state.hose_points_world)
+        if self._windscreen:
+            p["windscreen_frame.to_world"] = mi.Transform4f((render_from_world @ state.world_from("receiver")).tolist())
         if self.config.randomization.traffic.enabled:
             other = world_from_traffic(state, look)
             for kind in TRAFFIC_KINDS:
