@@ -67,14 +67,23 @@ def _veil(rgb: NDArray[np.float32]) -> NDArray[np.float32]:
     return cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
 
 
+@functools.lru_cache(maxsize=2)
+def _dirt_weights(seed: int, width: int, height: int, strength: float) -> tuple[NDArray[np.float32], ...]:
+    """``(h, w, 3)``: the share of the light dirt lets through, and the share it scatters into the veil."""
+    d = np.repeat(window_field(seed, width, height, "dirt")[..., None], 3, axis=2) * np.float32(strength)
+    return np.float32(1.0) - np.float32(0.75) * d, np.float32(0.6) * d
+
+
 def dirty(rgb: NDArray[np.float32], strength: float, seed: int) -> NDArray[np.float32]:
     """Dirt on the window: where its field is ``d`` (:func:`window_field`), ``0.6 strength d``
     of the light is scattered into the veil and ``0.15 strength d`` absorbed."""
+    import cv2
+
     if strength <= 0.0:
         return rgb
     h, w = rgb.shape[:2]
-    d = (window_field(seed, w, h, "dirt") * np.float32(strength))[..., None]
-    return (rgb * (1.0 - 0.75 * d) + 0.6 * d * _veil(rgb)).astype(np.float32)
+    passed, scattered = _dirt_weights(seed, w, h, float(strength))
+    return cv2.add(cv2.multiply(rgb, passed), cv2.multiply(_veil(rgb), scattered))
 
 
 def droplets(rgb: NDArray[np.float32], count: int, seed: int) -> NDArray[np.float32]:
@@ -111,13 +120,20 @@ def droplets(rgb: NDArray[np.float32], count: int, seed: int) -> NDArray[np.floa
     return out
 
 
+@functools.lru_cache(maxsize=2)
+def _reflection_weights(seed: int, width: int, height: int, strength: float) -> NDArray[np.float32]:
+    ramp = np.linspace(0.4, 1.0, height, dtype=np.float32)[:, None]
+    field = window_field(seed, width, height, "reflection") * ramp * np.float32(strength)
+    return np.repeat(field[..., None], 3, axis=2)
+
+
 def reflection(rgb: NDArray[np.float32], strength: float, seed: int) -> NDArray[np.float32]:
     """A windscreen's reflection of the cockpit: a smooth field (:func:`window_field`), brighter
     towards the bottom where the glare shield is, at ``strength`` of the image's mean light."""
+    import cv2
+
     if strength <= 0.0:
         return rgb
     h, w = rgb.shape[:2]
-    field = window_field(seed, w, h, "reflection")
-    ramp = np.linspace(0.4, 1.0, h, dtype=np.float32)[:, None]
-    mean = rgb.reshape(-1, 3).mean(axis=0).astype(np.float32)
-    return (rgb + np.float32(strength) * (field * ramp)[..., None] * mean).astype(np.float32)
+    mean = [float(rgb[..., c].mean(dtype=np.float64)) for c in range(3)]
+    return cv2.add(rgb, cv2.multiply(_reflection_weights(seed, w, h, float(strength)), (*mean, 0.0)))
