@@ -372,3 +372,10 @@ def test_bad_meshes_are_named(tmp_path: Path) -> None:
     empty.write_text("# nothing\nv 0 0 0\n")
     with pytest.raises(ConfigError, match=r"empty.obj: mesh contains no triangles"):
         load_mesh(empty, "drogue")
+
+
+def test_every_material_class_has_a_preview_colour() -> None:
+    from datagen.assets.models import MATERIAL_CLASSES
+    from datagen.render.views import _COLORS
+
+    assert set(MATERIAL_CLASSES.values()) <= set(_COLORS)

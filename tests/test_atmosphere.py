@@ -166,7 +166,8 @@ def test_sphere_drop_is_the_spheres_depth_below_its_top(r: float) -> None:
 def test_the_horizon_dips_by_the_earths_curvature_for_each_frames_camera(scene: str, frames) -> None:
     """Every pixel whose ray points more than a pixel above the dip arccos(R / (R + h)) of
     its frame's camera altitude sees no sea, and every pixel more than a pixel below it
-    sees the sea or something in front of it (the geometry pass, clouds off, at 640 px)."""
+    sees the sea or something in front of it, but for at most two isolated rays that slip
+    through an edge of the earth's mesh (the geometry pass, clouds off, at 640 px)."""
     from datagen.render.renderer import Renderer
     from datagen.render.world import SURFACES
     from datagen.scene.resolved import Scene
@@ -189,7 +190,14 @@ def test_the_horizon_dips_by_the_earths_curvature_for_each_frames_camera(scene: 
         sea = surface == SURFACES.index("sea")
         assert not sea[elevation > -dip + pixel].any(), (scene, i)
         below = elevation < -dip - pixel
-        assert (surface[below] != SURFACES.index("sky")).all(), (scene, i)
+        # At most a few isolated rays slip through an edge of the earth's mesh (Embree's
+        # triangle test is not watertight: dashcam75 #150 lost one of 65,500); a hole would
+        # lose a patch of them.
+        leaked = below & (surface == SURFACES.index("sky"))
+        assert leaked.sum() <= 2, (scene, i, int(leaked.sum()))
+        padded = np.pad(leaked, 1)
+        neighbours = sum(np.roll(np.roll(padded, dy, 0), dx, 1) for dy in (-1, 0, 1) for dx in (-1, 0, 1))
+        assert np.all(neighbours[1:-1, 1:-1][leaked] == 1), (scene, i)  # each alone
         tested += int(below.any() and (elevation > -dip + pixel).any())
     assert tested, "no frame showed the horizon"
 

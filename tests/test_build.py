@@ -593,7 +593,7 @@ def test_any_worker_count_with_default_threads_gives_the_same_labels_and_manifes
     for frame, row in rows[0].items():
         other = rows[1][frame]
         for column, value in row.items():
-            if column in PIXEL_COLUMNS:
+            if column in PIXEL_COLUMNS and value is not None:  # (the drogue's are null where it is not seen)
                 assert value == pytest.approx(other[column], rel=1e-5, abs=1e-9), column
             elif column not in RUN_COLUMNS:
                 assert json.dumps(value) == json.dumps(other[column]), column

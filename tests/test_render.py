@@ -22,7 +22,7 @@ from datagen.atomic import write_exr
 from datagen.config import load_config, override_config
 from datagen.config.schema import RenderConfig, world_off
 from datagen.core.camera import Intrinsics, project_points, project_xyz
-from datagen.core.conventions import EARTH_RADIUS_M, frame_rng, object_id, render_seed
+from datagen.core.conventions import EARTH_RADIUS_M, OTHER_AIRCRAFT_ID, frame_rng, object_id, render_seed
 from datagen.core.errors import DatagenError
 from datagen.core.transforms import apply_transform, invert_rigid, make_transform, rotation_from_ypr
 from datagen.render.atmosphere import dip_rad
@@ -726,7 +726,7 @@ def test_another_aircraft_is_drawn_where_its_meshes_project_and_waits_hidden_wit
     for a in range(60):  # the first approach whose other aircraft is in view
         state = states(a * config.frames_per_chain + 3)
         look = frame_look(config, state)
-        pose = world_from_traffic(state, look)
+        pose = world_from_traffic(state, look.other_aircraft_tanker_m, look.other_aircraft_heading_deg)
         if pose is None:
             continue
         mesh = load_mesh(object_paths(config, look.other_aircraft)[0], look.other_aircraft).combined
@@ -744,7 +744,7 @@ def test_another_aircraft_is_drawn_where_its_meshes_project_and_waits_hidden_wit
     renderer.pose(state, alone)
     _, without, _ = renderer.geometry_pass()
     rows, cols = np.nonzero(with_it != without)
-    assert len(rows) >= 10 and np.all(with_it[rows, cols] == object_id(look.other_aircraft))
+    assert len(rows) >= 10 and np.all(with_it[rows, cols] == OTHER_AIRCRAFT_ID)  # not the target's id
     assert cols.min() >= box[0] - 1 and cols.max() + 1 <= box[2] + 1
     assert rows.min() >= box[1] - 1 and rows.max() + 1 <= box[3] + 1
 

@@ -104,6 +104,7 @@ __all__ = [
     "MICAM_FROM_CVCAM",
     "NEAR_PLANE_M",
     "OBJECT_NAMES",
+    "OTHER_AIRCRAFT_ID",
     "PIXEL_CONVENTION",
     "RIGID_OBJECTS",
     "WORLD_DIMENSIONS",
@@ -148,8 +149,14 @@ CAMERA_MOUNTS: Final[tuple[str, ...]] = ("wingcam", "dashcam", "podcam")
 
 def object_id(name: str) -> int:
     """The ``object_id`` of an object in the EXR and the geometry pass: 1-based position in
-    :data:`OBJECT_NAMES` (0 is the background: the sea or nothing)."""
+    :data:`OBJECT_NAMES` (0 is the background: the sea or nothing; :data:`OTHER_AIRCRAFT_ID`
+    another aircraft, never labeled)."""
     return OBJECT_NAMES.index(name) + 1
+
+
+#: The ``object_id`` of another aircraft in view (:mod:`datagen.scene.traffic`): after every
+#: object's, so that no labeled object's mask or motion takes its pixels.
+OTHER_AIRCRAFT_ID: Final[int] = len(OBJECT_NAMES) + 1
 
 # --- camera frames -----------------------------------------------------------
 CV_RIGHT: Final = np.array([1.0, 0.0, 0.0])

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.core.conventions import OBJECT_NAMES, object_id, pixel_centres
+from datagen.core.conventions import OBJECT_NAMES, OTHER_AIRCRAFT_ID, object_id, pixel_centres
 from datagen.render.mitsuba import jit_array, jit_vectors, visible
 from datagen.render.procedural import drjit_ops
 from datagen.render.world import CLOUD_LAYERS, SURFACES
@@ -44,7 +44,8 @@ def _past(t, maximum):
 class RayCasting:
     """The renderer's ray casts, after it is posed: its Mitsuba ``scene``, ``world``,
     ``variant``, ``intrinsics``, the posed camera (``_world_from_cam``, ``_camera_render``),
-    the device tables its build made (``_id_table``, ``_background_codes``) and its
+    the device tables its build made (``_id_table``, ``_background_codes``), the registry ids
+    of its other aircraft's instances (``_traffic_ids``) and its
     Mitsuba and Dr.Jit modules (``_mi``, ``_dr``)."""
 
     @functools.cache  # noqa: B019 (one renderer per process; two strides at most)
@@ -122,6 +123,8 @@ class RayCasting:
                 shape = str(si.shape.id())
                 name = shape.split("_")[0]  # shape ids are object_pN or hose
                 ids[i] = object_id(name) if name in OBJECT_NAMES else 0
+                if si.instance is not None and str(si.instance.id()).startswith("other_"):
+                    ids[i] = OTHER_AIRCRAFT_ID  # another aircraft (datagen.scene.traffic)
                 background[i] = codes.get(shape, -1)
         return valid, hit_t, ids, background
 
@@ -198,6 +201,12 @@ class RayCasting:
             valid = active & si.is_valid()
             known = valid & (shape + 1 < dr.width(codes))
             ids = dr.gather(mi.UInt32, id_table, shape, valid & (shape < dr.width(id_table)))
+            if self._traffic_ids:  # another aircraft: an instance of an object's meshes (datagen.scene.traffic)
+                instance = dr.reinterpret_array(mi.UInt32, si.instance)
+                other = dr.zeros(mi.Bool, n)
+                for registry in self._traffic_ids:
+                    other |= instance == dr.opaque(mi.UInt32, registry)
+                ids = dr.select(valid & other, OTHER_AIRCRAFT_ID, ids)
             code = dr.select(known, dr.gather(mi.Int32, codes, shape + 1, known), -1)
             surface = mi.UInt32(dr.select(valid, SURFACES.index("object"), SURFACES.index("sky")))
             surface = dr.select(code == 0, SURFACES.index("sea"), surface)

@@ -157,6 +157,7 @@ class Renderer(RayCasting):
         self._meshes: dict = {}
         self._parts: dict[str, list[tuple[str, str]]] = {}  # object -> [(param key prefix, material class)]
         self._sky_probe_inputs = None
+        self._traffic_ids: tuple[int, ...] = ()
         self._hose_points = None
         self.world = World(self.config, pixel_rad=1.0 / self.output_intrinsics.fx)
 
@@ -263,6 +264,8 @@ class Renderer(RayCasting):
         layers = ("sea", *CLOUD_LAYERS)
         backgrounds = {registry_id(shape): layers.index(name)
                        for name, shape in (("sea", self._sea), *self.world.cloud_meshes.items())}
+        self._traffic_ids = tuple(registry_id(shape) for shape in self.scene.shapes()
+                                  if shape.id() in {f"other_{kind}" for kind in TRAFFIC_KINDS})
         ids = np.zeros(max(objects) + 1, dtype=np.uint32)
         ids[list(objects)] = list(objects.values())
         codes = np.full(max(backgrounds) + 2, -1, dtype=np.int32)
@@ -314,7 +317,7 @@ class Renderer(RayCasting):
         if self._windscreen:
             p["windscreen_frame.to_world"] = mi.Transform4f((render_from_world @ state.world_from("receiver")).tolist())
         if self.config.randomization.traffic.enabled:
-            other = world_from_traffic(state, look)
+            other = world_from_traffic(state, look.other_aircraft_tanker_m, look.other_aircraft_heading_deg)
             for kind in TRAFFIC_KINDS:
                 # Where there is none: far below the sea, under the camera (hidden by the earth).
                 pose = (render_from_world @ other if other is not None and look.other_aircraft == kind

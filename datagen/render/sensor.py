@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 from datagen.core.camera import Intrinsics, distortion_margin_px, undistort_px
 from datagen.core.conventions import (
     OBJECT_NAMES,
+    OTHER_AIRCRAFT_ID,
     index_px,
     object_id,
     pixel_centre,
@@ -140,6 +141,7 @@ def image_motion(state: FrameState, depth: NDArray[np.float32], ids: NDArray[np.
         body = "drogue" if name == "hose" else name  # the hose moves with its drogue
         earlier_from_now[object_id(name)] = (before.cam_from_world @ before.world_from(body)
                                              @ invert_rigid(state.world_from(body)) @ state.world_from_cam)
+    earlier_from_now[OTHER_AIRCRAFT_ID] = earlier_from_now[object_id("tanker")]  # it flies with the tanker
     for oid, m in earlier_from_now.items():
         sel = ids == oid
         if not sel.any():

@@ -27,7 +27,6 @@ from datagen.core.transforms import make_transform, rotation_from_ypr
 if TYPE_CHECKING:
     from datagen.config.schema import Config
     from datagen.scene.approach import FrameState
-    from datagen.scene.look import FrameLook
 
 __all__ = ["CLEARANCE_M", "VIEW_SHARE", "draw_traffic", "world_from_traffic"]
 
@@ -69,10 +68,11 @@ def draw_traffic(config: Config, rng: np.random.Generator) -> dict:
             "other_aircraft_heading_deg": heading if present else None}
 
 
-def world_from_traffic(state: FrameState, look: FrameLook) -> NDArray[np.float64] | None:
-    """The other aircraft's pose in the world at ``state`` (None where there is none): it
-    flies with the tanker, at its drawn place, turned by its drawn heading."""
-    if look.other_aircraft_tanker_m is None:
+def world_from_traffic(state: FrameState, place_tanker_m, heading_deg: float | None) -> NDArray[np.float64] | None:
+    """The other aircraft's pose in the world at ``state``, from its drawn place in the tanker
+    frame and heading (a look's ``other_aircraft_tanker_m`` and ``other_aircraft_heading_deg``;
+    None where there is none): it flies with the tanker."""
+    if place_tanker_m is None:
         return None
-    turn = rotation_from_ypr(math.radians(look.other_aircraft_heading_deg or 0.0), 0.0, 0.0)
-    return state.world_from_tanker @ make_transform(turn, np.asarray(look.other_aircraft_tanker_m))
+    turn = rotation_from_ypr(math.radians(heading_deg or 0.0), 0.0, 0.0)
+    return state.world_from_tanker @ make_transform(turn, np.asarray(place_tanker_m, dtype=np.float64))
