@@ -50,7 +50,7 @@ def main() -> int:
     from datagen.atomic import write_image
     from datagen.config import load_config, override_config
     from datagen.render.renderer import Renderer
-    from datagen.report.gallery import _tile
+    from datagen.report.gallery import _tile, tile_rows
     from datagen.scene.resolved import Scene
 
     size = {"width": 2 * args.tile[0], "height": 2 * args.tile[1]}
@@ -60,10 +60,7 @@ def main() -> int:
         images.append(_tile(config, Renderer(Scene.resolve(config), **size), frame, tuple(args.tile),
                             f"{scene} #{frame}: {caption}"))
         print(caption, flush=True)
-    per_row = 3
-    images += [np.zeros_like(images[0])] * (-len(images) % per_row)
-    rows = [np.concatenate(images[j:j + per_row], axis=1) for j in range(0, len(images), per_row)]
-    print(f"wrote {write_image(args.out, np.concatenate(rows, axis=0), jpeg_quality=90)}")
+    print(f"wrote {write_image(args.out, np.concatenate(tile_rows(images, 3), axis=0), jpeg_quality=90)}")
     return 0
 
 

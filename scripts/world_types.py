@@ -45,7 +45,7 @@ def main() -> int:
     from datagen.atomic import write_image
     from datagen.config import load_config, override_config
     from datagen.render.renderer import Renderer
-    from datagen.report.gallery import _tile
+    from datagen.report.gallery import _tile, tile_rows
     from datagen.scene.resolved import Scene
 
     base = load_config(SCENE)
@@ -56,10 +56,7 @@ def main() -> int:
         images.append(_tile(config, Renderer(Scene.resolve(config), **size), FRAME, tuple(args.tile),
                             f"{SCENE} #{FRAME}: {caption}"))
         print(caption, flush=True)
-    per_row = 3
-    images += [np.zeros_like(images[0])] * (-len(images) % per_row)
-    rows = [np.concatenate(images[j:j + per_row], axis=1) for j in range(0, len(images), per_row)]
-    print(f"wrote {write_image(args.out, np.concatenate(rows, axis=0), jpeg_quality=90)}")
+    print(f"wrote {write_image(args.out, np.concatenate(tile_rows(images, 3), axis=0), jpeg_quality=90)}")
     return 0
 
 

@@ -117,7 +117,8 @@ Range = Annotated[tuple[Number, Number], AfterValidator(_ordered)]
 
 
 def _within(low: float, high: float) -> AfterValidator:
-    """A :data:`Range` whose ends must lie in ``[low, high]``: every range has a documented bound."""
+    """A :data:`Range` (or an integer range) whose ends must lie in ``[low, high]``: every range
+    has a documented bound."""
     def check(bounds: tuple[float, float]) -> tuple[float, float]:
         lo, hi = bounds
         if lo < low or hi > high:
@@ -648,7 +649,7 @@ class WindowConfig(_Section):
     droplet_share: Number = Field(0.25, ge=0.0, le=1.0)
     """Share of approaches whose pod window carries water droplets."""
 
-    droplets: Annotated[tuple[Integer, Integer], AfterValidator(_ordered)] = (1, 25)
+    droplets: Annotated[tuple[Integer, Integer], AfterValidator(_ordered), _within(0, 200)] = (1, 25)
     """How many droplets such a window carries (integer range)."""
 
     reflection: UnitRange = (0.0, 0.12)
@@ -656,13 +657,6 @@ class WindowConfig(_Section):
 
     canopy_frame: Flag = True
     """A cockpit camera sees its windscreen's frame at the edges of its view (it occludes features)."""
-
-    @field_validator("droplets")
-    @classmethod
-    def _count(cls, n: tuple[int, int]) -> tuple[int, int]:
-        if n[0] < 0 or n[1] > 200:
-            raise ValueError(f"must lie within [0, 200], got [{n[0]}, {n[1]}]")
-        return n
 
 
 #: The kinds of other aircraft (:mod:`datagen.scene.traffic`).
@@ -757,7 +751,7 @@ class SensorConfig(_Section):
     tangential: Annotated[Range, _within(-0.05, 0.05)] = (-0.001, 0.001)
     """Tangential coefficients p1 and p2 (each drawn from this range)."""
 
-    jpeg_quality: Annotated[tuple[Integer, Integer], AfterValidator(_ordered)] = (70, 98)
+    jpeg_quality: Annotated[tuple[Integer, Integer], AfterValidator(_ordered), _within(1, 100)] = (70, 98)
     """JPEG quality of the compression round trip (integer range; 100 keeps the image closest)."""
 
     jpeg: Flag = True
@@ -790,13 +784,6 @@ class SensorConfig(_Section):
 
     tone_shoulder: UnitRange = (0.0, 1.0)
     """Strength of the tone curve's highlight shoulder (0: a hard clip at white)."""
-
-    @field_validator("jpeg_quality")
-    @classmethod
-    def _quality(cls, q: tuple[int, int]) -> tuple[int, int]:
-        if q[0] < 1 or q[1] > 100:
-            raise ValueError(f"must lie within [1, 100], got [{q[0]}, {q[1]}]")
-        return q
 
 
 class RandomizationConfig(_Section):

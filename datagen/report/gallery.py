@@ -23,8 +23,8 @@ from datagen.scene.resolved import Scene
 if TYPE_CHECKING:
     from datagen.config.schema import Config
 
-__all__ = ["CLOSEUP_FRAMES", "GALLERY_FRAMES", "GALLERY_SCENES", "WORLD_FRAME", "render_frames", "world_tiles",
-           "write_closeups", "write_gallery"]
+__all__ = ["CLOSEUP_FRAMES", "GALLERY_FRAMES", "GALLERY_SCENES", "WORLD_FRAME", "render_frames", "tile_rows",
+           "world_tiles", "write_closeups", "write_gallery"]
 
 #: The shipped scenes of the gallery, a row each.
 GALLERY_SCENES: Final = ("wingcam55", "podcam15", "dashcam75")
@@ -100,10 +100,14 @@ def write_gallery(configs, out: Path, *, spp: int | None = None, tile=(512, 270)
         config = override_config(configs[0], overrides)
         world.append(_tile(config, Renderer(Scene.resolve(config), spp=spp, **size), WORLD_FRAME, tile,
                            f"#{WORLD_FRAME}: {caption}"))
-    per_row = len(GALLERY_FRAMES)
-    world += [np.zeros_like(world[0])] * (-len(world) % per_row)
-    rows += [np.concatenate(world[j:j + per_row], axis=1) for j in range(0, len(world), per_row)]
+    rows += tile_rows(world, len(GALLERY_FRAMES))
     return write_image(out, np.concatenate(rows, axis=0), jpeg_quality=90)
+
+
+def tile_rows(tiles: list[np.ndarray], per_row: int) -> list[np.ndarray]:
+    """Equal-sized ``tiles`` side by side, ``per_row`` to a row, the last row padded with black."""
+    tiles = tiles + [np.zeros_like(tiles[0])] * (-len(tiles) % per_row)
+    return [np.concatenate(tiles[j:j + per_row], axis=1) for j in range(0, len(tiles), per_row)]
 
 
 #: The frames of the close-ups, one per camera type: where clouds, sea and cloud shadows
