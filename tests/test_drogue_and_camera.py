@@ -38,7 +38,7 @@ from datagen.render.sensor import (
 from datagen.render.tonemap import drogue_statistics, to_srgb8, tone_curve
 from datagen.scene.approach import FrameStates
 from datagen.scene.look import _approach_world as approach_world
-from datagen.scene.look import frame_look
+from datagen.scene.look import frame_look, sensor_draws
 from datagen.scene.vibration import MOUNT_VIBRATION, vibration
 
 _REC709 = np.array([0.2126, 0.7152, 0.0722])
@@ -327,3 +327,69 @@ def test_another_aircraft_is_in_the_cameras_nominal_view_in_range_and_clear_of_t
         assert t.range_m[0] * (1 - 1e-9) <= np.linalg.norm(p) <= t.range_m[1] * (1 + 1e-9)
         assert abs(w["other_aircraft_heading_deg"]) <= t.heading_deg
     assert np.mean([np.linalg.norm(w["other_aircraft_tanker_m"]) >= CLEARANCE_M for w in present]) > 0.95
+
+
+# --- the video link ----------------------------------------------------------------------------
+def _scene_like(h: int, w: int) -> np.ndarray:
+    """A smooth sky gradient with a sharp dark drogue-like disc and fine stripes: what a codec
+    smooths and rings."""
+    ys, xs = np.mgrid[0:h, 0:w]
+    img = np.stack([80 + 100 * ys / h, 120 + 80 * ys / h, 200 - 40 * xs / w], axis=-1)
+    disc = (xs - w / 2) ** 2 + (ys - h / 2) ** 2 < (h / 5) ** 2
+    img[disc] = (25, 25, 30)
+    img[(xs // 3) % 2 == 0 & (ys < h // 6)] += 40
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def _psnr(a: np.ndarray, b: np.ndarray) -> float:
+    return 10.0 * math.log10(255.0**2 / float(np.mean((a.astype(np.float64) - b) ** 2)))
+
+
+@pytest.mark.parametrize(("h", "w"), [(270, 512), (271, 513)])
+def test_the_video_round_trip_keeps_the_size_and_loses_more_at_a_higher_crf(h: int, w: int) -> None:
+    pytest.importorskip("av", reason="needs the video extra: pip install -e '.[video]'")
+    from datagen.render.sensor import video_round_trip
+
+    img = _scene_like(h, w)
+    out = {crf: video_round_trip(img, crf) for crf in (16, 30, 44)}
+    assert all(o.shape == img.shape and o.dtype == np.uint8 for o in out.values())
+    psnr = {crf: _psnr(o, img) for crf, o in out.items()}
+    assert psnr[16] > psnr[30] > psnr[44] > 20.0, psnr
+    assert psnr[16] > 38.0, psnr  # near transparent
+    np.testing.assert_array_equal(video_round_trip(img, 30), out[30])  # the same on every call
+
+
+def test_video_takes_its_share_of_frames_and_replaces_their_jpeg_round_trip() -> None:
+    pytest.importorskip("av", reason="needs the video extra: pip install -e '.[video]'")
+    config = override_config(load_config("wingcam55"), {"randomization": {"sensor": {"video_share": 0.4,
+                                                                                     "video_crf": [22, 26]}}})
+    seed = config.dataset.seed
+    looks = [sensor_draws(config, seed, i) for i in range(400)]
+    video = [d for d in looks if d.get("sensor_video_crf") is not None]
+    assert abs(len(video) / len(looks) - 0.4) < 0.08
+    assert {d["sensor_video_crf"] for d in video} == {22, 23, 24, 25, 26}
+    assert all(d["sensor_jpeg_quality"] is None for d in video)
+    assert all(d["sensor_jpeg_quality"] is not None for d in looks if d.get("sensor_video_crf") is None)
+    plain = [sensor_draws(load_config("wingcam55"), seed, i) for i in range(400)]
+    assert all(d.get("sensor_video_crf") is None for d in plain)
+    # The draw comes after every earlier draw of the frame's sensor stream: those are unchanged.
+    for a, b in zip(looks, plain, strict=True):
+        assert {k: v for k, v in a.items() if k not in ("sensor_video_crf", "sensor_jpeg_quality")} == {
+            k: v for k, v in b.items() if k != "sensor_jpeg_quality"}
+    # And a frame's look carries them.
+    look = frame_look(config, FrameStates(config)(int(np.flatnonzero([d.get("sensor_video_crf") for d in looks])[0])))
+    assert look.sensor_video_crf is not None and look.sensor_jpeg_quality is None
+
+
+def test_a_video_share_without_pyav_is_one_line_naming_the_key_and_the_extra(monkeypatch) -> None:
+    import importlib.util
+
+    from datagen.core.errors import ConfigError
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "av" else real(name, *a))
+    with pytest.raises(ConfigError) as caught:
+        override_config(load_config("wingcam55"), {"randomization": {"sensor": {"video_share": 0.1}}})
+    message = str(caught.value)
+    assert "randomization.sensor.video_share" in message and "datagen[video]" in message, message
+    assert "\n" not in message

@@ -87,6 +87,23 @@ def test_scoring_predictions_of_a_split_without_frames_is_one_line(small, tmp_pa
             "no val frames to score", "6 train, 0 val")
 
 
+def test_reading_a_dataset_starts_no_thread_that_could_abort_the_exit(small) -> None:
+    """Arrow's I/O pool, started by ``pq.read_table`` even single-threaded, aborted one refusal in
+    ~40 at exit (-6, "terminate called without an active exception"): reading every table of a
+    dataset (manifests, features, objects) leaves the process with the threads it had."""
+    code = ("import os, sys\n"
+            "from datagen.dataset.reader import load_dataset\n"
+            "import cv2, pyarrow.parquet\n"
+            "before = len(os.listdir('/proc/self/task'))\n"
+            "view = load_dataset(sys.argv[1])\n"
+            "assert len(view) == 6, len(view)\n"
+            "print(before, len(os.listdir('/proc/self/task')))\n")
+    run = subprocess.run([sys.executable, "-c", code, str(small)], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    before, after = map(int, run.stdout.split())
+    assert after == before, (before, after)
+
+
 def test_an_integer_written_as_an_exponent_says_what_to_write(tmp_path) -> None:
     path = write(tmp_path, "c.yaml", "name: t\ncamera: {mount: wingcam, hfov_deg: 55}\ndataset: {frames: 1e4}\n")
     refused(datagen("validate", str(path)), "dataset.frames", "must be a whole number", "write 10000")

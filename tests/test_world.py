@@ -40,8 +40,10 @@ DRAWS = {
 }
 #: Draws of a mount other than the wingcam these tests use (a cockpit's windscreen).
 OTHER_MOUNTS = {"window_reflection"}
-#: Draws only some approaches make while their randomizer is on (most have no other aircraft).
-SOMETIMES = {"other_aircraft_tanker_m", "other_aircraft_heading_deg"}
+#: Draws only some approaches make while their randomizer is on (most have no other aircraft),
+#: and the sensor's optional ones: the video round trip (``video_share`` 0) and the rolling
+#: shutter (``rolling_shutter`` off) by default.
+SOMETIMES = {"other_aircraft_tanker_m", "other_aircraft_heading_deg", "sensor_video_crf", "sensor_readout_s"}
 #: Draws a randomizer replaces when on: the sea's approach wind replaces the frame's own
 #: wind draw (waves, whitecaps and glint then agree); a backlit sun moves the sun's azimuth.
 #: The drogue's draw replaces the frame's own draws of the drogue's and the hose's materials.

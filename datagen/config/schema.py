@@ -27,6 +27,7 @@ from pydantic import (
 
 from datagen.core.camera import (
     MAX_IMAGE_PX,
+    MAX_READOUT_S,
     MIN_FOCAL_PX,
     MIN_PIXEL_ANGLE_RAD,
     Intrinsics,
@@ -757,6 +758,34 @@ class SensorConfig(_Section):
     jpeg: Flag = True
     """Round-trip the 8-bit image through JPEG at the drawn quality (the artefacts of a
     compressed video link), whatever ``render.image_format`` stores."""
+
+    rolling_shutter: Flag = False
+    """Read the rows out from the top down over ``readout_s`` instead of all at once: each
+    row shows the scene at its own time (the image warped along its true motion), and the
+    labels put each point where it was when its row was exposed
+    (:data:`datagen.core.conventions.row_time_s`)."""
+
+    readout_s: Annotated[Range, _within(0.0, MAX_READOUT_S)] = (0.005, 0.03)
+    """A rolling shutter's top-to-bottom readout time, seconds (uniform per frame)."""
+
+    video_share: Number = Field(0.0, ge=0.0, le=1.0)
+    """Share of frames round-tripped through H.264 instead of JPEG: x264 at the drawn
+    ``video_crf``, 4:2:0 chroma, the frame coded as a key frame
+    (:func:`datagen.render.sensor.video_round_trip`). Needs the ``[video]`` extra (PyAV,
+    whose bundled FFmpeg and x264 are GPL)."""
+
+    video_crf: Annotated[tuple[Integer, Integer], AfterValidator(_ordered), _within(0, 51)] = (20, 34)
+    """x264's constant rate factor of the video round trip (integer range; lower keeps more:
+    18 is near transparent, 30 a streaming link's, 40 a starved one's)."""
+
+    @field_validator("video_share")
+    @classmethod
+    def _video_installed(cls, value: float) -> float:
+        import importlib.util
+
+        if value > 0.0 and importlib.util.find_spec("av") is None:
+            raise ValueError("a video round trip needs PyAV, which is not installed: pip install 'datagen[video]'")
+        return value
 
     lens: Flag = True
     """The lens's blur and lateral chromatic aberration, drawn per frame."""

@@ -42,6 +42,13 @@ Pixels (continuous)
     functions put integer coordinates at pixel *centres*: a mark at continuous
     ``(u, v)`` is drawn at :func:`drawing_px` ``(u, v) = (u - 0.5, v - 0.5)``.
 
+Time within a frame
+    A frame's time (its poses, its labels without a rolling shutter) is the middle of its
+    exposure. A rolling shutter reads the rows out from the top down over ``readout_s``:
+    the image's continuous row ``v`` is exposed centred at the frame's time plus
+    :func:`row_time_s` ``(v, H, readout_s) = (v / H - 1/2) readout_s``; the middle of the
+    image (``v = H / 2``) at the frame's time. A global shutter's ``readout_s`` is 0.
+
 Objects and mounts
     :data:`OBJECT_NAMES` are the rigid bodies of a refueling scene, in the order
     their object ids are assigned (:func:`object_id`: 1-based; 0 is background);
@@ -218,6 +225,16 @@ def pixel_centres(width: int, height: int, stride: int = 1):
 
 
 # --- randomness --------------------------------------------------------------
+def row_time_s(v_px, height: int, readout_s):
+    """When a rolling shutter exposed the image's continuous row ``v_px`` (any array),
+    seconds after the frame's time (see Time within a frame); ``readout_s`` broadcasts.
+
+    >>> row_time_s(np.array([0.0, 540.0, 1080.0]), 1080, 0.02).tolist()
+    [-0.01, 0.0, 0.01]
+    """
+    return (np.asarray(v_px) / height - 0.5) * readout_s
+
+
 def frame_seed_sequence(seed: int, frame_index: int) -> np.random.SeedSequence:
     """The seed sequence of frame ``frame_index`` under root seed ``seed``."""
     return np.random.SeedSequence(seed, spawn_key=(frame_index,))

@@ -45,7 +45,7 @@ from typing import Final, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from datagen.core.camera import Intrinsics, project_xyz
+from datagen.core.camera import Intrinsics, RollingShutter, project_xyz
 from datagen.core.features import FeatureTable
 from datagen.core.label_boxes import Exclusion, FrameLabels, compute_labels
 
@@ -239,14 +239,16 @@ def pose_rows(objects: FrameLabels, keypoints_px: ArrayLike, flags: ArrayLike, l
 
 
 def object_boxes(table: FeatureTable, cam_from_objects: ArrayLike, intrinsics: Intrinsics, *, options: dict,
-                 distortion: ArrayLike | None = None, truncated: TruncatedObjects = "exclude") -> FrameLabels:
+                 distortion: ArrayLike | None = None, truncated: TruncatedObjects = "exclude",
+                 shutter: RollingShutter | None = None) -> FrameLabels:
     """Each object's pose box over any batch of frames (:func:`object_table` rows; ``options``:
     the keyword arguments of :func:`~datagen.core.label_boxes.compute_labels`, whose ``corrected``
     is ignored). ``truncated="clip"`` keeps an object cut by the image border or the camera
-    plane with the box of its in-view part (module docstring)."""
+    plane with the box of its in-view part (module docstring; the part's box is of the frame's
+    time, without the rolling ``shutter`` that moves every other box)."""
     cam_from_objects = np.asarray(cam_from_objects, dtype=np.float64)
     labels = compute_labels(table, cam_from_objects, intrinsics, **{**options, "corrected": False},
-                            distortion=distortion)
+                            distortion=distortion, shutter=shutter)
     if truncated == "exclude":
         return labels
     if truncated != "clip":

@@ -40,7 +40,7 @@ from typing import Final, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from datagen.core.camera import Intrinsics, depth_in_front, project_xyz
+from datagen.core.camera import Intrinsics, RollingShutter, depth_in_front, project_rolling, project_xyz
 from datagen.core.features import FeatureTable
 
 __all__ = [
@@ -279,6 +279,7 @@ def compute_labels(
     min_size_px: float | tuple[float, float] = 0.0,
     small_boxes: SmallBoxes = "grow",
     distortion: ArrayLike | None = None,
+    shutter: RollingShutter | None = None,
 ) -> FrameLabels:
     """Labels for every feature of ``features`` in one or many frames.
 
@@ -296,6 +297,9 @@ def compute_labels(
             ``"exclude"`` their features as ``too_small``.
         distortion: ``(*B, 5)`` OpenCV lens distortion per frame (``k1, k2, p1, p2, k3``),
             or None for the pinhole: points, centres and boxes are projected through it.
+        shutter: the frames' rolling shutters (readouts ``(*B,)``, object rates ``(*B, O, 4,
+            4)``), or None for a global one: each point is projected where it was when its
+            row was exposed (:func:`~datagen.core.camera.project_rolling`).
 
     Returns:
         :class:`FrameLabels` with leading shape ``B``.
@@ -320,7 +324,13 @@ def compute_labels(
     )
     if distortion is not None:  # one row per frame, against (*B, F, P + 1) coordinates
         distortion = np.asarray(distortion, dtype=np.float64)[..., None, None, :]
-    u, v = project_xyz(x, y, z, intrinsics, distortion)
+    if shutter is not None and shutter.any:
+        rate_model = shutter.cam_from_objects_per_s[..., features.object_index, :3, :, None]
+        rate = tuple(rate_model[..., i, 0, :] * px + rate_model[..., i, 1, :] * py + rate_model[..., i, 2, :] * pz
+                     + rate_model[..., i, 3, :] for i in range(3))
+        u, v, z = project_rolling(x, y, z, rate, intrinsics, distortion, shutter.readout_s[..., None, None])
+    else:
+        u, v = project_xyz(x, y, z, intrinsics, distortion)
     center = np.stack([u[..., -1], v[..., -1]], axis=-1)
     return _boxes(
         u[..., :-1],

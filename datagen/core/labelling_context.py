@@ -17,7 +17,7 @@ from typing import Final, Literal, get_args
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from datagen.core.camera import Intrinsics
+from datagen.core.camera import Intrinsics, RollingShutter
 from datagen.core.features import FeatureTable
 from datagen.core.keypoints import PoseLayout, TruncatedObjects, object_boxes, object_table
 from datagen.core.label_boxes import FrameLabels, SmallBoxes, compute_labels
@@ -116,17 +116,19 @@ class LabellingContext:
         return {"edge_margin_px": r.edge_margin_px, "corrected": r.corrected, "min_size_px": self.min_size_px,
                 "small_boxes": r.small_boxes}
 
-    def label_features(self, cam_from_objects: ArrayLike, distortion: ArrayLike | None = None) -> FrameLabels:
+    def label_features(self, cam_from_objects: ArrayLike, distortion: ArrayLike | None = None,
+                       shutter: RollingShutter | None = None) -> FrameLabels:
         """Every feature's labels (before the occlusion rule, :meth:`occlude`) in frames with
         camera-from-object transforms ``(*B, O, 4, 4)`` (``features.objects`` order), through
-        each frame's lens distortion ``(*B, 5)`` where given."""
+        each frame's lens distortion ``(*B, 5)`` and rolling shutter where given."""
         return compute_labels(self.features, cam_from_objects, self.intrinsics, **self._options(),
-                              distortion=distortion)
+                              distortion=distortion, shutter=shutter)
 
-    def label_objects(self, cam_from_objects: ArrayLike, distortion: ArrayLike | None = None) -> FrameLabels:
+    def label_objects(self, cam_from_objects: ArrayLike, distortion: ArrayLike | None = None,
+                      shutter: RollingShutter | None = None) -> FrameLabels:
         """Every labeled object's pose box in the same frames (:func:`datagen.core.keypoints.object_boxes`)."""
         return object_boxes(self.object_table, cam_from_objects, self.intrinsics, options=self._options(),
-                            distortion=distortion, truncated=self.rules.truncated_objects)
+                            distortion=distortion, truncated=self.rules.truncated_objects, shutter=shutter)
 
     def occlude(self, labels: FrameLabels, visible_fraction: ArrayLike | None) -> FrameLabels:
         """``labels`` under the occlusion rule (``labels.min_visible_fraction``): features whose

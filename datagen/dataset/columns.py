@@ -51,6 +51,7 @@ __all__ = [
     "read_features",
     "read_manifest_summary",
     "read_objects",
+    "read_parquet",
     "stored_schema",
     "stored_type",
     "write_features",
@@ -73,8 +74,9 @@ COLUMNS_SINCE: Final = {"haze_scale_height_m": "9", "cloud_type": "10", "cloud_d
                                           "other_aircraft_heading_deg", "window_dirt", "window_droplets",
                                           "window_reflection", "window_seed", "sensor_lens_blur_px",
                                           "sensor_chromatic_aberration_px", "sensor_white_balance_k", "sensor_tint",
-                                          "sensor_tone_gamma", "sensor_tone_shoulder", "drogue_luminance",
-                                          "drogue_contrast"), "11")}
+                                          "sensor_tone_gamma", "sensor_tone_shoulder", "sensor_video_crf",
+                                          "sensor_readout_s", "cam_from_tanker_per_s", "cam_from_receiver_per_s",
+                                          "cam_from_drogue_per_s", "drogue_luminance", "drogue_contrast"), "11")}
 
 #: The image statistics a manifest records per rendered frame
 #: (:func:`datagen.render.tonemap.image_statistics` measures them).
@@ -120,7 +122,8 @@ APPEARANCE: Final[dict[str, tuple[str, ...]]] = {
     "traffic": ("other_aircraft",),
     "sensor": ("sensor_iso", "sensor_exposure_time_s", "sensor_vignetting", "sensor_glare", "sensor_jpeg_quality",
                "sensor_lens_blur_px", "sensor_chromatic_aberration_px", "sensor_white_balance_k", "sensor_tint",
-               "sensor_tone_gamma", "sensor_tone_shoulder", "auto_exposure_ev", "sun_in_view"),
+               "sensor_tone_gamma", "sensor_tone_shoulder", "sensor_video_crf", "sensor_readout_s", "auto_exposure_ev",
+               "sun_in_view"),
     "image": IMAGE_STATISTICS,
     "texels": TEXEL_COLUMNS,
 }
@@ -190,6 +193,9 @@ def manifest_schema() -> pa.Schema:
         pa.field("world_from_tanker", MATRIX, nullable=False),
         pa.field("world_from_receiver", MATRIX, nullable=False),
         pa.field("world_from_drogue", MATRIX, nullable=False),
+        pa.field("cam_from_tanker_per_s", MATRIX),
+        pa.field("cam_from_receiver_per_s", MATRIX),
+        pa.field("cam_from_drogue_per_s", MATRIX),
         pa.field("ptd_receiver_m", _vec(3), nullable=False),
         pa.field("distance_m", _F64, nullable=False),
         pa.field("seed", pa.int64(), nullable=False),
@@ -263,6 +269,8 @@ def manifest_schema() -> pa.Schema:
         pa.field("sensor_tint", _F64),
         pa.field("sensor_tone_gamma", _F64),
         pa.field("sensor_tone_shoulder", _F64),
+        pa.field("sensor_video_crf", pa.int32()),
+        pa.field("sensor_readout_s", _F64),
         pa.field("auto_exposure_ev", _F64),
         pa.field("motion_blur_px", _F64),
         pa.field("sun_in_view", pa.bool_()),
@@ -365,10 +373,21 @@ def _body_points(values: object, what: str) -> NDArray[np.float64]:
     return points
 
 
+def read_parquet(source: str | Path | pa.BufferReader, columns: list[str] | None = None) -> pa.Table:
+    """A whole parquet table (a path or a buffer), read on the calling thread. pyarrow's
+    ``read_table``, and ``ParquetFile`` given a path, start Arrow's I/O thread pool even with
+    ``use_threads=False``; a worker of that pool still starting when the interpreter exits
+    aborts the process ("terminate called without an active exception", exit -6), so a
+    refusal's one line could end in a crash. A buffer read by ``ParquetFile`` starts none."""
+    if not isinstance(source, pa.BufferReader):
+        source = pa.BufferReader(Path(source).read_bytes())
+    return pq.ParquetFile(source).read(columns=columns, use_threads=False)
+
+
 def read_features(source) -> FeatureTable:
     """The :class:`FeatureTable` a dataset was labeled with, from its ``features.parquet``
     (a path or a buffer); ValueError for a point that is not finite metres."""
-    table = pq.read_table(source, use_threads=False).to_pylist()
+    table = read_parquet(source).to_pylist()
     table.sort(key=lambda r: r["class_id"])
     for r in table:
         for key in ("name", "object"):
@@ -405,7 +424,7 @@ def write_objects(path: Path, objects: Sequence[str], hulls: Mapping[str, NDArra
 def read_objects(source) -> dict[str, NDArray[np.float64]]:
     """Object name -> hull vertices ``(H, 3)``, in pose-class order, from ``objects.parquet``
     (a path or a buffer); ValueError for a vertex that is not finite metres."""
-    rows = sorted(pq.read_table(source, use_threads=False).to_pylist(), key=lambda r: r["class_id"])
+    rows = sorted(read_parquet(source).to_pylist(), key=lambda r: r["class_id"])
     return {r["object"]: _body_points(r["hull_points_m"], f"object {r['object']} hull_points_m") for r in rows}
 
 

@@ -22,7 +22,7 @@ import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
 from datagen.config.inputs import parse_yaml, read_json, read_text
-from datagen.core.camera import FOCAL_BOUNDS_PX, MAX_IMAGE_PX, Intrinsics
+from datagen.core.camera import FOCAL_BOUNDS_PX, MAX_IMAGE_PX, MAX_READOUT_S, Intrinsics, RollingShutter
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import DatagenError, shown
 from datagen.core.features import FeatureTable
@@ -36,6 +36,7 @@ from datagen.dataset.columns import (
     manifest_schema,
     read_features,
     read_objects,
+    read_parquet,
     stored_schema,
 )
 from datagen.dataset.layout import MANIFEST_NAME, SPLITS
@@ -133,6 +134,8 @@ class DatasetView(DatasetMeta):
     object_label_xyxy: NDArray[np.float64]  # (B, O, 4) its pose box, NaN where not labeled
     object_exclusion: NDArray[np.object_]  # (B, O) reason or None
     distortion: NDArray[np.float64]  # (B, 5) the lens's OpenCV coefficients, zeros for a pinhole frame
+    readout_s: NDArray[np.float64]  # (B,) a rolling shutter's readout, 0 for a global shutter
+    cam_from_per_s: dict[str, NDArray[np.float64]]  # object -> (B, 4, 4) d/dt cam_from_<object> (0: no shutter)
     appearance: dict[str, list]  # column -> per-row value (None where not drawn), of schema.APPEARANCE
 
     def __len__(self) -> int:
@@ -158,16 +161,22 @@ class DatasetView(DatasetMeta):
         """Each row's file stem (the frame's image, or label, file name without extension)."""
         return _stems(self)
 
+    def shutter(self) -> RollingShutter | None:
+        """The frames' rolling shutters (None when every frame's is global)."""
+        if not self.readout_s.any():
+            return None
+        return RollingShutter(self.readout_s, np.stack([self.cam_from_per_s[o] for o in self.features.objects], axis=1))
+
     def recompute_objects(self) -> FrameLabels:
         """Every frame's pose boxes from the poses and objects.parquet alone."""
         return self.labelling.label_objects(self.cam_from_objects(),
-                                            self.distortion if self.distortion.any() else None)
+                                            self.distortion if self.distortion.any() else None, self.shutter())
 
     def recompute(self) -> FrameLabels:
         """The labels of every frame from the poses and features.parquet alone (with the
         manifest's visibility for the optional occlusion rule)."""
         labels = self.labelling.label_features(self.cam_from_objects(),
-                                               self.distortion if self.distortion.any() else None)
+                                               self.distortion if self.distortion.any() else None, self.shutter())
         return self.labelling.occlude(labels, self.visible_fraction)
 
 
@@ -506,8 +515,7 @@ def _read_manifest(path: Path, limits: ReadLimits, columns: tuple[str, ...] | No
         raise DatagenError(f"{path}: manifest version {shown(version)}, this datagen reads "
                            f"{' and '.join(READABLE_MANIFEST_VERSIONS)}")
     try:
-        table = pq.read_table(pa.BufferReader(data), columns=[c for c in expected.names if c in schema.names],
-                              use_threads=False)  # a manifest is small; no thread outlives a refusal
+        table = read_parquet(pa.BufferReader(data), [c for c in expected.names if c in schema.names])
     except (OSError, pa.ArrowException) as exc:
         raise DatagenError(f"{path}: unreadable manifest ({type(exc).__name__})") from None
     stored = expected if version == READABLE_MANIFEST_VERSIONS[0] else stored_schema(expected)
@@ -529,6 +537,11 @@ def _read_manifest(path: Path, limits: ReadLimits, columns: tuple[str, ...] | No
                            f"({' '.join(str(exc).split())[:120]})") from None
     _check_values(table, path, limits)
     return table
+
+
+#: The largest entry of a recorded pose rate, per second (a rotation at 1e3 rad/s, a speed of
+#: 1e4 m/s: far beyond any aircraft's).
+MAX_RATE_PER_S: Final = 1.0e4
 
 
 def _check_values(table: pa.Table, path: Path, limits: ReadLimits) -> None:
@@ -575,6 +588,21 @@ def _check_values(table: pa.Table, path: Path, limits: ReadLimits) -> None:
             if bad.any():
                 refuse(column, bad, m.tolist(), f"a rigid transform (a rotation, a translation within "
                        f"{MAX_WORLD_M:g} m, last row 0 0 0 1)")
+    if "sensor_readout_s" in names:
+        r = _flat_floats(table.column("sensor_readout_s").combine_chunks())
+        bad = ~(np.isnan(r) | ((r >= 0.0) & (r <= MAX_READOUT_S)))
+        if bad.any():
+            refuse("sensor_readout_s", bad, r.tolist(), f"null or a readout from 0 to {MAX_READOUT_S:g} s")
+    for column in (f"cam_from_{o}_per_s" for o in RIGID_OBJECTS):
+        if column in names:
+            arr = table.column(column).combine_chunks()
+            m = _floats(arr, (table.num_rows, 4, 4))
+            null = np.asarray(arr.is_null().to_numpy(zero_copy_only=False), dtype=bool)
+            ok = (np.isfinite(m) & (np.abs(m) <= MAX_RATE_PER_S)).all(axis=(1, 2)) & (m[:, 3] == 0.0).all(axis=1)
+            bad = ~(null | ok)
+            if bad.any():
+                refuse(column, bad, m.tolist(), f"null or the rate of a transform (finite, each entry within "
+                       f"{MAX_RATE_PER_S:g} a second, last row 0 0 0 0)")
     if "features" in names:
         flat = table.column("features").combine_chunks().flatten()
         rows = np.repeat(np.arange(table.num_rows), np.asarray(pc.list_value_length(
@@ -672,6 +700,8 @@ def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, al
         object_label_xyxy=_floats(objects.field("label_xyxy"), (b, n_obj, 4)),
         object_exclusion=np.array(objects.field("exclusion").to_pylist(), dtype=object).reshape(b, n_obj),
         distortion=_distortion(table, b),
+        readout_s=_nulls_as_zero(table, "sensor_readout_s", (b,)),
+        cam_from_per_s={o: _nulls_as_zero(table, f"cam_from_{o}_per_s", (b, 4, 4)) for o in RIGID_OBJECTS},
         appearance={c: table.column(c).to_pylist() for cols in APPEARANCE.values() for c in cols
                     if c in table.column_names},
     )
@@ -713,6 +743,15 @@ def _records(table: pa.Table, column: str, count: int, what: str, root: Path, na
         bad = int(np.argmax(lengths != count))
         raise DatagenError(f"{root / names[bad]}: frame {table.column('frame_id')[bad]}: {lengths[bad]} {what}")
     return lists.flatten()
+
+
+def _nulls_as_zero(table, column: str, shape: tuple[int, ...]) -> NDArray[np.float64]:
+    """A float column (or fixed-size lists of floats) of ``shape``, zeros where a row is null or
+    the manifest predates the column."""
+    if column not in table.column_names:
+        return np.zeros(shape)
+    values = _floats(table.column(column).combine_chunks(), shape)
+    return np.where(np.isnan(values), 0.0, values)
 
 
 def _distortion(table, b: int) -> NDArray[np.float64]:

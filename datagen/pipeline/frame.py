@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
+from datagen.core.camera import RollingShutter
 from datagen.core.conventions import render_seed
 from datagen.core.label_boxes import FrameLabels
 from datagen.scene.approach import FrameState, FrameStates
@@ -32,7 +33,7 @@ __all__ = ["TRAINING_IMAGE_STAGE", "FrameDraws", "draw_frame", "frame_labels", "
            "training_image"]
 
 #: The stage of a rendered frame that is :func:`training_image`.
-TRAINING_IMAGE_STAGE: Final = "sRGB, JPEG round trip, statistics"
+TRAINING_IMAGE_STAGE: Final = "sRGB, JPEG or video round trip, statistics"
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,25 +56,35 @@ def draw_frame(scene: Scene, states: FrameStates, i: int, approaches: dict | Non
     return FrameDraws(i, seed, render_seed(seed, i), state, frame_look(scene.config, state, approaches))
 
 
-def _cameras(scene: Scene, draws: Sequence[FrameDraws]) -> tuple[np.ndarray, np.ndarray | None]:
+def _cameras(scene: Scene, draws: Sequence[FrameDraws]) -> tuple[np.ndarray, np.ndarray | None,
+                                                                   RollingShutter | None]:
     """``(N, O, 4, 4)`` camera-from-object transforms of frames ``draws`` (``features.objects``
-    order) and their lenses ``(N, 5)`` (None when no frame has one)."""
+    order), their lenses ``(N, 5)`` (None when no frame has one) and their rolling shutters
+    (None when no frame has one)."""
     cam_from_objects = np.stack([np.stack([d.state.cam_from_world @ d.state.world_from(o)
                                            for o in scene.features.objects]) for d in draws])
+    readouts = [d.look.sensor_readout_s for d in draws]
+    shutter = None
+    if any(r is not None for r in readouts):
+        shutter = RollingShutter(
+            np.array([r or 0.0 for r in readouts]),
+            np.stack([np.stack([d.state.cam_from_per_s(o) if r is not None else np.zeros((4, 4))
+                                for o in scene.features.objects]) for d, r in zip(draws, readouts, strict=True)]))
     lenses = [d.look.sensor_distortion for d in draws]
     if all(lens is None for lens in lenses):
-        return cam_from_objects, None
-    return cam_from_objects, np.array([(0.0,) * 5 if lens is None else lens for lens in lenses], dtype=np.float64)
+        return cam_from_objects, None, shutter
+    return (cam_from_objects, np.array([(0.0,) * 5 if lens is None else lens for lens in lenses], dtype=np.float64),
+            shutter)
 
 
 def shard_labels(scene: Scene, draws: Sequence[FrameDraws]) -> tuple[FrameLabels, FrameLabels]:
     """The feature labels (before the occlusion rule) and the objects' pose boxes of frames
     ``draws``, batched over the frames (``.frame(b)`` is frame ``b``'s; the same numbers as
     one frame at a time: the label arithmetic is element by element). Each frame is seen
-    through its look's lens distortion where it has one."""
-    cam_from_objects, distortion = _cameras(scene, draws)
-    return (scene.labelling.label_features(cam_from_objects, distortion),
-            scene.labelling.label_objects(cam_from_objects, distortion))
+    through its look's lens distortion and rolling shutter where it has them."""
+    cam_from_objects, distortion, shutter = _cameras(scene, draws)
+    return (scene.labelling.label_features(cam_from_objects, distortion, shutter),
+            scene.labelling.label_objects(cam_from_objects, distortion, shutter))
 
 
 def frame_labels(scene: Scene, draws: FrameDraws) -> FrameLabels:
@@ -90,13 +101,16 @@ def object_labels(scene: Scene, draws: FrameDraws) -> FrameLabels:
 
 def training_image(result: RenderResult, look: FrameLook) -> tuple[np.ndarray, dict]:
     """The 8-bit sRGB training image of a :class:`~datagen.render.renderer.RenderResult`
-    (through the camera's tone curve and the sensor's JPEG round trip where the look has them) and what the render
-    measured, the image statistics included (:data:`datagen.dataset.columns.MEASURED_COLUMNS`)."""
-    from datagen.render.sensor import jpeg_round_trip
+    (through the camera's tone curve and the sensor's JPEG or video round trip where the look has
+    them) and what the render measured, the image statistics included
+    (:data:`datagen.dataset.columns.MEASURED_COLUMNS`)."""
+    from datagen.render.sensor import jpeg_round_trip, video_round_trip
     from datagen.render.tonemap import image_statistics, to_srgb8
 
     tone = None if look.sensor_tone_gamma is None else (look.sensor_tone_gamma, look.sensor_tone_shoulder or 0.0)
     srgb = to_srgb8(result.rgb, tone)
     if look.sensor_jpeg_quality is not None:
         srgb = jpeg_round_trip(srgb, look.sensor_jpeg_quality)
+    if look.sensor_video_crf is not None:
+        srgb = video_round_trip(srgb, look.sensor_video_crf)
     return srgb, {**(result.measured or {}), **image_statistics(srgb, result.surface, object_ids=result.object_id)}

@@ -9,6 +9,7 @@ import dataclasses
 import numpy as np
 
 from datagen.core.camera import Intrinsics
+from datagen.core.conventions import RIGID_OBJECTS
 from datagen.dataset.columns import MEASURED_COLUMNS, FeatureColumns, matrix_field
 from datagen.scene.approach import FrameState
 from datagen.scene.look import FrameLook, sun_direction_world
@@ -46,6 +47,8 @@ def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, 
         "world_from_tanker": matrix_field(state.world_from_tanker),
         "world_from_receiver": matrix_field(state.world_from_receiver),
         "world_from_drogue": matrix_field(state.world_from_drogue),
+        **{f"cam_from_{o}_per_s": matrix_field(state.cam_from_per_s(o)) if look.sensor_readout_s is not None
+           else None for o in RIGID_OBJECTS},
         "ptd_receiver_m": state.ptd_receiver_m.tolist(),
         "distance_m": state.distance_m,
         "seed": seed,

@@ -3,7 +3,8 @@ computed, in the light's order: image arithmetic on numpy arrays, and the motion
 and the noise as Dr.Jit kernels on the render's device where a vectorized variant renders.
 
 1. motion blur: each pixel averaged along its true image motion over the exposure,
-   centred on the frame's time (:func:`image_motion`, :func:`motion_blur`);
+   centred on the frame's time (:func:`image_motion`, :func:`motion_blur`); then a
+   rolling shutter's skew: each row as it was at its own time (:func:`rolling_shutter`);
 2. lens distortion: the pinhole render, made with a margin, resampled through OpenCV's
    Brown-Conrady model (:func:`distort_image`), the model the labels are projected with;
 3. the window the camera looks through: dirt, droplets, a windscreen's reflection
@@ -17,7 +18,8 @@ and the noise as Dr.Jit kernels on the render's device where a vectorized varian
 8. the camera's processing: a white balance set for another light than the scene's
    (:func:`white_balance_gains`), then (with the sRGB encoding, in one table) a tone curve
    (:func:`datagen.render.tonemap.tone_curve`);
-9. after the sRGB encoding: a JPEG round trip (:func:`jpeg_round_trip`).
+9. after the sRGB encoding: a JPEG round trip (:func:`jpeg_round_trip`), or on a share of
+   frames an H.264 one (:func:`video_round_trip`).
 
 Each step is skipped where its draw is None (its switch off).
 """
@@ -31,7 +33,7 @@ from typing import TYPE_CHECKING, Final
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.core.camera import Intrinsics, distortion_margin_px, undistort_px
+from datagen.core.camera import Intrinsics, distort_normalized, distortion_margin_px, undistort_px
 from datagen.core.conventions import (
     OBJECT_NAMES,
     OTHER_AIRCRAFT_ID,
@@ -39,6 +41,7 @@ from datagen.core.conventions import (
     object_id,
     pixel_centre,
     pixel_centres,
+    row_time_s,
     texture_rng,
 )
 from datagen.core.transforms import invert_rigid
@@ -66,8 +69,10 @@ __all__ = [
     "lens_blur",
     "motion_blur",
     "noise_sigma",
+    "rolling_shutter",
     "sensor_noise",
     "sun_glare",
+    "video_round_trip",
     "warm_up_on_device",
     "white_balance_gains",
 ]
@@ -265,6 +270,38 @@ def warm_up_on_device() -> None:
 
 
 # --- distortion --------------------------------------------------------------------
+def rolling_shutter(images: dict[str, NDArray], velocity_px_s: NDArray[np.float32], stride: int, readout_s: float,
+                    output: Intrinsics, margin_px: int, distortion=None) -> dict[str, NDArray]:
+    """Pinhole renders (``output`` grown by ``margin_px`` on every side) as a rolling shutter
+    of ``readout_s`` sees them: each pixel shows what its point showed at its row's time
+    (:func:`datagen.core.conventions.row_time_s` of the row it lands on in the output image,
+    through the lens ``distortion`` when given), the content carried there along its image
+    velocity (``velocity_px_s`` at ``stride``: :func:`image_motion`), to first order, as the
+    labels carry each point (:func:`datagen.core.camera.project_rolling`). Bilinear for
+    ``rgb``, nearest for the geometry pass; the border reflected."""
+    import cv2
+
+    h, w = images["rgb"].shape[:2]
+    uu, vv = (c.astype(np.float64) - margin_px for c in pixel_centres(w, h))
+    if distortion is not None:
+        _, yn = distort_normalized((uu - output.cx) / output.fx, (vv - output.cy) / output.fy, distortion)
+        vv = yn * output.fy + output.cy
+    t = row_time_s(vv, output.height, readout_s).astype(np.float32)
+    v = np.repeat(np.repeat(velocity_px_s, stride, axis=0), stride, axis=1)[:h, :w]
+    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    map_x, map_y = gx - v[..., 0] * t, gy - v[..., 1] * t
+    out = {}
+    for name, img in images.items():
+        if img is None:
+            out[name] = None
+            continue
+        interp = cv2.INTER_LINEAR if name == "rgb" else cv2.INTER_NEAREST
+        src_img = img if img.dtype != np.uint32 else img.astype(np.float32)
+        warped = cv2.remap(src_img, map_x, map_y, interp, borderMode=cv2.BORDER_REFLECT)
+        out[name] = warped.astype(img.dtype) if img.dtype == np.uint32 else warped
+    return out
+
+
 def distort_image(images: dict[str, NDArray], output: Intrinsics, margin_px: int,
                   distortion) -> dict[str, NDArray]:
     """Resample pinhole renders (``output`` grown by ``margin_px`` on every side) into the
@@ -479,6 +516,33 @@ def jpeg_round_trip(srgb8: NDArray[np.uint8], quality: int) -> NDArray[np.uint8]
     return cv2.imdecode(data, cv2.IMREAD_COLOR)[..., ::-1]
 
 
+def video_round_trip(srgb8: NDArray[np.uint8], crf: int) -> NDArray[np.uint8]:
+    """An 8-bit RGB image through an H.264 encoder and decoder (PyAV's x264 and FFmpeg, one
+    thread each, so that it is the same on every machine): BT.601 limited-range 4:2:0, the
+    ``veryfast`` preset at constant rate factor ``crf``, the frame coded as a key frame (the
+    artefacts of a video link's intra coding: chroma halved, blocks smoothed by the
+    deblocking filter; a P frame's motion smear is not modelled). An odd side is padded by
+    its last row or column for the 4:2:0 planes, and cropped again."""
+    from fractions import Fraction
+
+    import av
+
+    h, w = srgb8.shape[:2]
+    even = np.pad(srgb8, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")
+    encoder = av.CodecContext.create("libx264", "w")
+    encoder.width, encoder.height, encoder.pix_fmt = even.shape[1], even.shape[0], "yuv420p"
+    encoder.time_base, encoder.thread_count = Fraction(1, 30), 1
+    encoder.options = {"crf": str(int(crf)), "preset": "veryfast"}
+    frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(even), format="rgb24").reformat(format="yuv420p")
+    packets = [*encoder.encode(frame), *encoder.encode(None)]
+    decoder = av.CodecContext.create("h264", "r")
+    decoder.thread_count = 1
+    decoded = [f for p in packets for f in decoder.decode(p)] + list(decoder.decode(None))
+    if len(decoded) != 1:
+        raise RuntimeError(f"H.264 round trip gave {len(decoded)} frames, not one")
+    return np.ascontiguousarray(decoded[0].to_ndarray(format="rgb24")[:h, :w])
+
+
 # --- the whole camera --------------------------------------------------------------------
 def apply_sensor(rgb: NDArray[np.float32], look: FrameLook, state: FrameState, *, render: Intrinsics,
                  output: Intrinsics, margin_px: int, depth, ids, surface, sun_cam: NDArray,
@@ -489,12 +553,21 @@ def apply_sensor(rgb: NDArray[np.float32], look: FrameLook, state: FrameState, *
     timed on ``clock``; ``device``: the motion blur and the noise on the render's device)."""
     clock = clock or StageClock()
     measured: dict = {"motion_blur_px": None, "auto_exposure_ev": None, "sun_in_view": None}
+    velocity = None
     if look.sensor_exposure_time_s is not None and depth is not None:
         with clock.stage("motion blur"):
-            displacement = image_motion(state, depth, ids, render, stride=MOTION_STRIDE) * np.float32(
-                look.sensor_exposure_time_s)
+            velocity = image_motion(state, depth, ids, render, stride=MOTION_STRIDE)
+            displacement = velocity * np.float32(look.sensor_exposure_time_s)
             measured["motion_blur_px"] = float(np.sqrt((displacement**2).sum(axis=-1)).max(initial=0.0))
             rgb = motion_blur(rgb, displacement, stride=MOTION_STRIDE, device=device)
+    if look.sensor_readout_s is not None and depth is not None:
+        with clock.stage("rolling shutter"):
+            if velocity is None:
+                velocity = image_motion(state, depth, ids, render, stride=MOTION_STRIDE)
+            skewed = rolling_shutter({"rgb": rgb, "depth": depth, "ids": ids, "surface": surface}, velocity,
+                                     MOTION_STRIDE, look.sensor_readout_s, output, margin_px,
+                                     None if look.sensor_distortion is None else np.asarray(look.sensor_distortion))
+            rgb, depth, ids, surface = skewed["rgb"], skewed["depth"], skewed["ids"], skewed["surface"]
     if look.sensor_distortion is not None:
         with clock.stage("lens distortion"):
             warped = distort_image({"rgb": rgb, "depth": depth, "ids": ids, "surface": surface}, output, margin_px,

@@ -105,6 +105,16 @@ class FrameState:
         return {"tanker": self.world_from_tanker, "receiver": self.world_from_receiver,
                 "drogue": self.world_from_drogue}[name]
 
+    def cam_from_per_s(self, name: str) -> FloatArray:
+        """The time derivative of ``cam_from_<name>`` at the frame's time, per second: by
+        finite difference against :attr:`earlier` (zeros without one). A rolling shutter's
+        labels move each point along it (:class:`datagen.core.camera.RollingShutter`)."""
+        before = self.earlier
+        if before is None:
+            return np.zeros((4, 4))
+        now = self.cam_from_world @ self.world_from(name)
+        return (now - before.cam_from_world @ before.world_from(name)) / (self.time_s - before.time_s)
+
 
 def tanker_drogue_rotation(drogue_offset: FloatArray) -> FloatArray:
     """Attitude of the drogue in the tanker frame: the hose tension turns it toward its average

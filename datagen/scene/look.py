@@ -89,6 +89,8 @@ class FrameLook:
     sensor_glare: float | None = None
     sensor_distortion: tuple[float, float, float, float, float] | None = None  # OpenCV k1, k2, p1, p2, k3
     sensor_jpeg_quality: int | None = None
+    sensor_video_crf: int | None = None  # x264's CRF of the frame's video round trip (instead of JPEG)
+    sensor_readout_s: float | None = None  # a rolling shutter's readout, seconds (None: a global shutter)
     sensor_seed: int | None = None  # seeds the sensor noise
     camera_vibration_rms_deg: float | None = None  # the approach's vibration (datagen.scene.vibration)
     camera_vibration_hz: float | None = None  # its power-weighted mean frequency
@@ -262,32 +264,51 @@ def draw_world(config: Config, look: FrameLook, seed: int, state: FrameState,
     shake = vibration(config, seed, state.approach_index)
     if shake is not None:
         world.update(camera_vibration_rms_deg=shake.rms_deg, camera_vibration_hz=shake.mean_frequency_hz)
-    s = r.sensor
-    if s.enabled:
-        rng = world_rng(seed, state.frame_index, "sensor")
-        k1, k2 = _uniform(rng, s.k1), _uniform(rng, s.k2)
-        p1, p2 = _uniform(rng, s.tangential), _uniform(rng, s.tangential)
-        quality = int(rng.integers(s.jpeg_quality[0], s.jpeg_quality[1] + 1))
-        iso, exposure = _log_uniform(rng, s.iso), _log_uniform(rng, s.exposure_time_s)
-        world.update(
-            sensor_iso=iso if s.noise else None,
-            sensor_exposure_time_s=exposure if s.motion_blur else None,
-            sensor_vignetting=_uniform(rng, s.vignetting),
-            sensor_glare=_uniform(rng, s.glare),
-            sensor_distortion=(k1, k2, p1, p2, 0.0) if s.distortion else None,
-            sensor_jpeg_quality=quality if s.jpeg else None,
-            sensor_seed=_seed(rng),
-        )
-        blur, aberration = _uniform(rng, s.lens_blur_px), _uniform(rng, s.chromatic_aberration_px)
-        mired = _uniform(rng, (1e6 / s.white_balance_k[1], 1e6 / s.white_balance_k[0]))
-        tint, gamma, shoulder = _uniform(rng, s.tint), _uniform(rng, s.tone_gamma), _uniform(rng, s.tone_shoulder)
-        world.update(sensor_lens_blur_px=blur if s.lens else None,
-                     sensor_chromatic_aberration_px=aberration if s.lens else None,
-                     sensor_white_balance_k=1e6 / mired if s.colour else None,
-                     sensor_tint=tint if s.colour else None,
-                     sensor_tone_gamma=gamma if s.colour else None,
-                     sensor_tone_shoulder=shoulder if s.colour else None)
+    world.update(sensor_draws(config, seed, state.frame_index))
     return dataclasses.replace(look, **world) if world else look
+
+
+def sensor_draws(config: Config, seed: int, frame_index: int) -> dict:
+    """The frame's camera draws (its ``sensor_*`` look fields), from the frame's own
+    ``sensor`` stream; empty with the sensor off. Each value is drawn whether or not its
+    switch is on (off: recorded as None), so that one switch changes no other draw, and a
+    draw added later comes after every earlier one."""
+    from datagen.core.conventions import world_rng
+
+    s = config.randomization.sensor
+    if not s.enabled:
+        return {}
+    out: dict = {}
+    rng = world_rng(seed, frame_index, "sensor")
+    k1, k2 = _uniform(rng, s.k1), _uniform(rng, s.k2)
+    p1, p2 = _uniform(rng, s.tangential), _uniform(rng, s.tangential)
+    quality = int(rng.integers(s.jpeg_quality[0], s.jpeg_quality[1] + 1))
+    iso, exposure = _log_uniform(rng, s.iso), _log_uniform(rng, s.exposure_time_s)
+    out.update(
+        sensor_iso=iso if s.noise else None,
+        sensor_exposure_time_s=exposure if s.motion_blur else None,
+        sensor_vignetting=_uniform(rng, s.vignetting),
+        sensor_glare=_uniform(rng, s.glare),
+        sensor_distortion=(k1, k2, p1, p2, 0.0) if s.distortion else None,
+        sensor_jpeg_quality=quality if s.jpeg else None,
+        sensor_seed=_seed(rng),
+    )
+    blur, aberration = _uniform(rng, s.lens_blur_px), _uniform(rng, s.chromatic_aberration_px)
+    mired = _uniform(rng, (1e6 / s.white_balance_k[1], 1e6 / s.white_balance_k[0]))
+    tint, gamma, shoulder = _uniform(rng, s.tint), _uniform(rng, s.tone_gamma), _uniform(rng, s.tone_shoulder)
+    out.update(sensor_lens_blur_px=blur if s.lens else None,
+               sensor_chromatic_aberration_px=aberration if s.lens else None,
+               sensor_white_balance_k=1e6 / mired if s.colour else None,
+               sensor_tint=tint if s.colour else None,
+               sensor_tone_gamma=gamma if s.colour else None,
+               sensor_tone_shoulder=shoulder if s.colour else None)
+    video = bool(rng.random() < s.video_share)
+    crf = int(rng.integers(s.video_crf[0], s.video_crf[1] + 1))
+    if video:  # a link compresses once: the video round trip instead of the JPEG one
+        out.update(sensor_video_crf=crf, sensor_jpeg_quality=None)
+    readout = _uniform(rng, s.readout_s)
+    out.update(sensor_readout_s=readout if s.rolling_shutter else None)
+    return out
 
 
 def _approach_world(config: Config, seed: int, approach_index: int, base: float) -> dict:
