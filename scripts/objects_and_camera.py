@@ -1,11 +1,12 @@
 """Write the world page's sheet of the objects and the camera (docs/objects-and-camera.jpg):
 frames rendered as a build renders them, once per drogue canopy scheme (podcam15 close behind
 the drogue), then the things in the way (a wet, dirty pod window; a cockpit windscreen's
-reflection with another tanker ahead; another receiver behind the drogue), then the camera's
-processing (white balance set for 5,300 K and for 8,000 K; the strongest tone curve). Each tile
-forces one draw; the rest of the frame's draws are its own.
+reflection with another tanker ahead; its frame out of focus; another receiver behind the
+drogue), then the camera's processing (white balance set for 5,300 K and for 8,000 K; the
+strongest tone curve; an H.264 round trip at CRF 40, which needs the ``[video]`` extra). Each
+tile forces one draw; the rest of the frame's draws are its own.
 
-    .venv/bin/python scripts/objects_and_camera.py          # about 8 minutes on 2 cores
+    .venv/bin/python scripts/objects_and_camera.py          # about 9 minutes on 2 cores
 """
 
 from __future__ import annotations
@@ -33,11 +34,14 @@ def tiles() -> list[tuple[str, int, str, dict]]:
          {"randomization.window.droplet_share": 1.0, "randomization.window.dirt": [0.5, 0.5]}),
         ("dashcam75", 179, "windscreen reflection, another tanker",
          {"randomization.window.reflection": [0.12, 0.12], "randomization.traffic.share": 1.0}),
+        ("dashcam75", 45, "the windscreen's frame, out of focus", {}),
         ("podcam25", 147, "another receiver", {"randomization.traffic.share": 1.0}),
         ("wingcam55", 0, "white balance set for 5,300 K", {"randomization.sensor.white_balance_k": [5300.0, 5300.0]}),
         ("wingcam55", 0, "white balance set for 8,000 K", {"randomization.sensor.white_balance_k": [8000.0, 8000.0]}),
         ("wingcam55", 0, "tone: gamma 1.15, full shoulder",
          {"randomization.sensor.tone_gamma": [1.15, 1.15], "randomization.sensor.tone_shoulder": [1.0, 1.0]}),
+        ("wingcam55", 0, "H.264 round trip at CRF 40",
+         {"randomization.sensor.video_share": 1.0, "randomization.sensor.video_crf": [40, 40]}),
     ]
     return out
 

@@ -8,7 +8,7 @@ import typing
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from datagen.assets.drogues import (
@@ -149,8 +149,14 @@ def test_a_vibrations_pointing_rms_is_its_drawn_rms_within_the_mounts_band(seed,
     band = MOUNT_VIBRATION[mount]
     assert band.rms_deg[0] * scale * (1 - 1e-9) <= shake.rms_deg <= band.rms_deg[1] * scale * (1 + 1e-9)
     assert np.all((shake.frequency_hz >= band.frequency_hz[0]) & (shake.frequency_hz <= band.frequency_hz[1]))
-    # The RMS over a long time (many periods of the slowest component) is the drawn one.
-    turn = shake.rotvec(np.linspace(0.0, 400.0 / band.frequency_hz[0], 200_001))
+    # The RMS over a long time (many periods of the slowest component) is the drawn one, where
+    # no two components of an axis beat more slowly than a tenth of that time (they would not
+    # average out in it: 8.111 and 8.117 Hz beat once in 175 s).
+    span = 400.0 / band.frequency_hz[0]
+    gaps = np.abs(shake.frequency_hz[:, None, :] - shake.frequency_hz[None, :, :])[~np.eye(len(shake.frequency_hz),
+                                                                                          dtype=bool)]
+    assume(gaps.min() > 10.0 / span)
+    turn = shake.rotvec(np.linspace(0.0, span, 200_001))
     pointing = math.degrees(math.sqrt(float(np.mean((turn[:, :2] ** 2).sum(axis=1)))))
     roll = math.degrees(math.sqrt(float(np.mean(turn[:, 2] ** 2))))
     assert pointing == pytest.approx(shake.rms_deg, rel=0.1)
@@ -273,8 +279,8 @@ def test_dirt_on_a_uniform_image_absorbs_a_share_of_the_light_by_its_field() -> 
     assert dirty(img, 0.0, 42) is img
 
 
-def test_a_droplet_changes_only_the_pixels_within_its_disc() -> None:
-    from datagen.render.window import DROPLET_RADIUS, droplets
+def test_a_droplet_changes_only_the_pixels_within_its_streak() -> None:
+    from datagen.render.window import DROPLET_RADIUS, STREAK, droplets
 
     rng = np.random.default_rng(1)
     img = rng.random((270, 512, 3)).astype(np.float32)
@@ -284,17 +290,53 @@ def test_a_droplet_changes_only_the_pixels_within_its_disc() -> None:
         if not len(changed):
             continue
         extent = changed.max(axis=0) - changed.min(axis=0) + 1
-        assert extent.max() <= 2 * DROPLET_RADIUS[1] * 512 + 3
+        assert extent.max() <= 2 * DROPLET_RADIUS[1] * STREAK[1] * 512 + 3
     assert droplets(img, 0, 3) is img
 
 
-def test_a_windscreens_reflection_only_adds_light_up_to_its_strength_of_the_mean() -> None:
+def test_droplets_are_drawn_out_along_the_airflow_by_up_to_their_streak() -> None:
+    from datagen.render.window import STREAK, droplets
+
+    img = np.random.default_rng(2).random((400, 600, 3)).astype(np.float32)
+    ratios = []
+    for seed in range(30):
+        changed = np.argwhere(np.any(droplets(img, 1, seed) != img, axis=-1))
+        if len(changed) < 50 or changed.min() <= 0 or (changed.max(axis=0) >= np.array([399, 599])).any():
+            continue  # none, too small to measure, or cut by the border
+        low, high = np.linalg.eigvalsh(np.cov(changed.T.astype(np.float64)))
+        ratios.append(float(np.sqrt(high / low)))
+    assert len(ratios) >= 10, ratios
+    assert max(ratios) <= STREAK[1] * 1.15 and max(ratios) > 2.0 and min(ratios) < 1.5, ratios
+
+
+def test_the_windscreens_frame_is_blurred_by_its_blur_circle_and_the_far_scene_kept() -> None:
+    from datagen.render.window import COCKPIT_APERTURE_M, defocus_near
+
+    h, w, fx = 120, 200, 1000.0
+    rgb = np.full((h, w, 3), 0.8, np.float32)
+    depth = np.full((h, w), np.inf, np.float32)
+    rgb[:, 90:110], depth[:, 90:110] = 0.02, 0.5  # a dark post half a metre ahead, against the sky
+    out = defocus_near(rgb, depth, fx)
+    sigma = 0.25 * fx * COCKPIT_APERTURE_M / 0.5  # 1.5 px
+    row = out[60, :, 1]
+    levels = [-(0.8 - share * 0.78) for share in (0.1, 0.9)]  # 10% and 90% of the fall, negated to rise
+    lo, hi = (np.interp(level, -row[60:100], np.arange(60, 100)) for level in levels)
+    # The post's left edge (falling from sky to post) is spread to a Gaussian's 10-90% width.
+    assert abs(abs(hi - lo) - 2.5631 * sigma) < 0.5, (lo, hi)
+    np.testing.assert_allclose(out[:, :70], rgb[:, :70], atol=1e-6)  # far from the post: as it was
+    assert out[60, 100, 1] < 0.05  # the post's middle stays dark
+    np.testing.assert_array_equal(defocus_near(rgb, np.full((h, w), 50.0, np.float32), fx), rgb)  # nothing near
+
+
+def test_a_windscreens_reflection_adds_grey_light_up_to_its_strength_of_the_mean_luminance() -> None:
+    from datagen.analysis.image_quality import luminance
     from datagen.render.window import reflection
 
-    img = np.random.default_rng(2).random((90, 160, 3)).astype(np.float32)
+    img = np.random.default_rng(2).random((90, 160, 3)).astype(np.float32) * np.float32([1.0, 0.6, 0.3])
     out = reflection(img, 0.1, 9)
     added = out - img
-    assert added.min() >= 0.0 and np.all(added.max(axis=(0, 1)) <= 0.1 * img.reshape(-1, 3).mean(axis=0) + 1e-6)
+    assert added.min() >= 0.0 and added.max() <= 0.1 * float(luminance(img).mean()) + 1e-6
+    np.testing.assert_allclose(added[..., 0], added[..., 2], atol=1e-6)  # grey, whatever the scene's colour
 
 
 # --- another aircraft -------------------------------------------------------------------------

@@ -63,8 +63,9 @@ __all__ = ["FrameRenderer", "RenderResult", "Renderer"]
 
 #: The kinds of other aircraft (datagen.scene.traffic): an instance of each object's meshes.
 TRAFFIC_KINDS: Final = ("receiver", "tanker")
-#: The windscreen frame's paint (a dark, matte cockpit frame).
-WINDSCREEN_FRAME: Final = Material((0.03, 0.03, 0.032), 0.6, 0.0, 0.4)
+#: The windscreen frame's paint: a dark, matte cockpit frame, nearly black as seen from the unlit cockpit
+#: (the render has no cockpit to shade its inner side from the sky).
+WINDSCREEN_FRAME: Final = Material((0.008, 0.008, 0.009), 0.9, 0.0, 0.02)
 #: An other aircraft not in the frame waits this far below the sea.
 HIDDEN_DEPTH_M: Final = 5000.0
 #: The stage that sees the frame through the air.

@@ -574,9 +574,11 @@ def apply_sensor(rgb: NDArray[np.float32], look: FrameLook, state: FrameState, *
                                    np.asarray(look.sensor_distortion))
             rgb, depth, ids, surface = warped["rgb"], warped["depth"], warped["ids"], warped["surface"]
     if look.window_seed is not None:
-        from datagen.render.window import dirty, droplets, reflection
+        from datagen.render.window import defocus_near, dirty, droplets, reflection
 
         with clock.stage("window"):
+            if look.window_reflection is not None:  # a windscreen: its frame, near the lens
+                rgb = defocus_near(rgb, depth, output.fx)
             rgb = reflection(dirty(droplets(rgb, look.window_droplets or 0, look.window_seed),
                                    look.window_dirt or 0.0, look.window_seed),
                              look.window_reflection or 0.0, look.window_seed)

@@ -69,6 +69,10 @@ def export_dataset(view: DatasetView, out: Path, fmt: str, progress: Callable[[i
             b = int(np.flatnonzero(view.distortion.any(axis=1))[0])
             raise DatagenError(f"{view.root / view.manifest_file[b]}: frame {view.frame_id[b]} has lens distortion; "
                                "BOP's cameras are pinholes (build with randomization.sensor.distortion off)")
+        if view.readout_s.any():
+            b = int(np.flatnonzero(view.readout_s)[0])
+            raise DatagenError(f"{view.root / view.manifest_file[b]}: frame {view.frame_id[b]} has a rolling shutter; "
+                               "BOP's poses are one instant's (build with randomization.sensor.rolling_shutter off)")
     for rel in view.image_path:  # nothing outside the dataset, nothing but the dataset's images
         _check_image(view, rel)
     for rel in view.exr_path if fmt == "bop" else []:
