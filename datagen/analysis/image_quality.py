@@ -13,6 +13,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter, median_filter, rank_filter
 
+from datagen.core.conventions import luminance
+
 __all__ = ["FIREFLY_MIN_EXCESS", "FIREFLY_RATIO", "SPECKLE_EXCESS", "fireflies", "luminance", "noise_speckles", "psnr",
            "speckles", "ssim"]
 
@@ -26,14 +28,6 @@ FIREFLY_MIN_EXCESS: Final = 0.25
 #: An 8-bit pixel is a speckle when it is brighter than the median of its 5 x 5
 #: neighbourhood by more than this many levels of 255 (in any channel).
 SPECKLE_EXCESS: Final = 32
-
-_REC709: Final = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
-
-
-def luminance(rgb: NDArray[np.floating]) -> NDArray[np.float32]:
-    """Rec. 709 luminance of linear RGB ``(H, W, 3)``."""
-    return np.asarray(rgb, dtype=np.float32) @ _REC709
-
 
 def fireflies(rgb: NDArray[np.floating]) -> NDArray[np.bool_]:
     """Pixels of a display-linear RGB image that stand far above their neighbourhood:

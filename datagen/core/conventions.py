@@ -225,6 +225,15 @@ def pixel_centres(width: int, height: int, stride: int = 1):
 
 
 # --- randomness --------------------------------------------------------------
+#: Luminance of linear RGB (Rec. 709 primaries, the renderer's ``*_rgb`` variants): its weights.
+REC709_LUMA: Final = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+
+
+def luminance(rgb):
+    """Rec. 709 luminance of linear RGB ``(..., 3)``, float32."""
+    return np.asarray(rgb, dtype=np.float32) @ REC709_LUMA
+
+
 def row_time_s(v_px, height: int, readout_s):
     """When a rolling shutter exposed the image's continuous row ``v_px`` (any array),
     seconds after the frame's time (see Time within a frame); ``readout_s`` broadcasts.

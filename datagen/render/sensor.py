@@ -37,6 +37,7 @@ from datagen.core.camera import Intrinsics, distort_normalized, distortion_margi
 from datagen.core.conventions import (
     OBJECT_NAMES,
     OTHER_AIRCRAFT_ID,
+    REC709_LUMA,
     index_px,
     object_id,
     pixel_centre,
@@ -99,7 +100,6 @@ MOTION_STRIDE: Final = 2
 #: Most samples along a pixel's motion.
 MAX_BLUR_SAMPLES: Final = 24
 
-_REC709: Final = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
 
 
 @dataclass
@@ -435,7 +435,7 @@ def auto_exposure_scale(rgb: NDArray[np.float32]) -> float:
     h, w = rgb.shape[:2]
     step = max(1, min(h, w) // 128)  # metering needs no more than ~128 x 240 samples
     sub = rgb[::step, ::step]
-    lum = sub @ _REC709
+    lum = sub @ REC709_LUMA
     y = (np.arange(sub.shape[0]) + 0.5) / sub.shape[0] - 0.5
     x = (np.arange(sub.shape[1]) + 0.5) / sub.shape[1] - 0.5
     weight = np.exp(-(x[None, :] ** 2 + y[:, None] ** 2) / (2 * 0.25**2))
@@ -503,7 +503,7 @@ def white_balance_gains(temperature_k: float, tint: float) -> NDArray[np.float32
     scaled by ``1 + tint`` (magenta below 0); a grey's luminance is kept."""
     gains = daylight_white(D65_K) / daylight_white(temperature_k)
     gains[1] *= 1.0 + tint
-    return (gains / float(_REC709 @ gains)).astype(np.float32)
+    return (gains / float(REC709_LUMA @ gains)).astype(np.float32)
 
 
 def jpeg_round_trip(srgb8: NDArray[np.uint8], quality: int) -> NDArray[np.uint8]:

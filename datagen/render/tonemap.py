@@ -11,6 +11,8 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from datagen.core.conventions import REC709_LUMA
+
 __all__ = ["MIN_OBJECT_PX", "TONE_RANGE", "WHITE_RADIANCE", "drogue_statistics", "exposure_scale", "image_statistics",
            "to_srgb8", "tone_curve"]
 
@@ -83,7 +85,7 @@ def image_statistics(srgb8: NDArray[np.uint8], surface: NDArray[np.uint8] | None
     each of ``surfaces`` (indexed by the codes of ``surface``; None without one), and the
     drogue against what is behind it (``object_ids``, same grid as the image:
     :func:`drogue_statistics`)."""
-    luma = (srgb8.astype(np.float32) @ np.array([0.2126, 0.7152, 0.0722], np.float32)) / np.float32(255.0)
+    luma = (srgb8.astype(np.float32) @ REC709_LUMA) / np.float32(255.0)
     stats: dict[str, float | None] = {"image_mean_luminance": float(luma.mean()),
                                       "image_rms_contrast": float(luma.std())}
     counts = None if surface is None else np.bincount(surface.ravel(), minlength=len(surfaces)) / surface.size

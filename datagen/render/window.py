@@ -181,7 +181,7 @@ def reflection(rgb: NDArray[np.float32], strength: float, seed: int) -> NDArray[
     grey (the cockpit's lit surfaces: a helmet, a flight suit, the sill; not the scene's colour)."""
     import cv2
 
-    from datagen.analysis.image_quality import luminance
+    from datagen.core.conventions import luminance
 
     if strength <= 0.0:
         return rgb
