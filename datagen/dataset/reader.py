@@ -699,7 +699,7 @@ def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, al
         object_tight_xyxy=_floats(objects.field("tight_xyxy"), (b, n_obj, 4)),
         object_label_xyxy=_floats(objects.field("label_xyxy"), (b, n_obj, 4)),
         object_exclusion=np.array(objects.field("exclusion").to_pylist(), dtype=object).reshape(b, n_obj),
-        distortion=_distortion(table, b),
+        distortion=_nulls_as_zero(table, "sensor_distortion", (b, 5)),  # zeros: a pinhole
         readout_s=_nulls_as_zero(table, "sensor_readout_s", (b,)),
         cam_from_per_s={o: _nulls_as_zero(table, f"cam_from_{o}_per_s", (b, 4, 4)) for o in RIGID_OBJECTS},
         appearance={c: table.column(c).to_pylist() for cols in APPEARANCE.values() for c in cols
@@ -747,23 +747,13 @@ def _records(table: pa.Table, column: str, count: int, what: str, root: Path, na
 
 def _nulls_as_zero(table, column: str, shape: tuple[int, ...]) -> NDArray[np.float64]:
     """A float column (or fixed-size lists of floats) of ``shape``, zeros where a row is null or
-    the manifest predates the column."""
+    the manifest predates the column (a row's values as they are otherwise)."""
     if column not in table.column_names:
         return np.zeros(shape)
-    values = _floats(table.column(column).combine_chunks(), shape)
-    return np.where(np.isnan(values), 0.0, values)
-
-
-def _distortion(table, b: int) -> NDArray[np.float64]:
-    """``(B, 5)`` lens coefficients from the ``sensor_distortion`` column (zeros where it is
-    null, or in a manifest from before the camera model)."""
-    out = np.zeros((b, 5))
-    if "sensor_distortion" not in table.column_names:
-        return out
-    for i, value in enumerate(table.column("sensor_distortion").to_pylist()):
-        if value is not None:
-            out[i] = value
-    return out
+    array = table.column(column).combine_chunks()
+    values = _floats(array, shape).copy()
+    values[np.asarray(array.is_null().to_numpy(zero_copy_only=False), dtype=bool)] = 0.0
+    return values
 
 
 def image_size(head: bytes) -> tuple[int, int] | None:

@@ -270,6 +270,24 @@ def warm_up_on_device() -> None:
 
 
 # --- distortion --------------------------------------------------------------------
+def _remap(images: dict[str, NDArray], map_x: NDArray[np.float32], map_y: NDArray[np.float32],
+           border: int) -> dict[str, NDArray]:
+    """Each of ``images`` resampled at ``(map_x, map_y)`` (OpenCV's grid): bilinear for ``rgb``,
+    nearest for the geometry pass (object ids through float32 and back); None stays None."""
+    import cv2
+
+    out: dict[str, NDArray] = {}
+    for name, img in images.items():
+        if img is None:
+            out[name] = None
+            continue
+        interp = cv2.INTER_LINEAR if name == "rgb" else cv2.INTER_NEAREST
+        src_img = img if img.dtype != np.uint32 else img.astype(np.float32)
+        warped = cv2.remap(src_img, map_x, map_y, interp, borderMode=border)
+        out[name] = warped.astype(img.dtype) if img.dtype == np.uint32 else warped
+    return out
+
+
 def rolling_shutter(images: dict[str, NDArray], velocity_px_s: NDArray[np.float32], stride: int, readout_s: float,
                     output: Intrinsics, margin_px: int, distortion=None) -> dict[str, NDArray]:
     """Pinhole renders (``output`` grown by ``margin_px`` on every side) as a rolling shutter
@@ -290,16 +308,7 @@ def rolling_shutter(images: dict[str, NDArray], velocity_px_s: NDArray[np.float3
     v = np.repeat(np.repeat(velocity_px_s, stride, axis=0), stride, axis=1)[:h, :w]
     gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
     map_x, map_y = gx - v[..., 0] * t, gy - v[..., 1] * t
-    out = {}
-    for name, img in images.items():
-        if img is None:
-            out[name] = None
-            continue
-        interp = cv2.INTER_LINEAR if name == "rgb" else cv2.INTER_NEAREST
-        src_img = img if img.dtype != np.uint32 else img.astype(np.float32)
-        warped = cv2.remap(src_img, map_x, map_y, interp, borderMode=cv2.BORDER_REFLECT)
-        out[name] = warped.astype(img.dtype) if img.dtype == np.uint32 else warped
-    return out
+    return _remap(images, map_x, map_y, cv2.BORDER_REFLECT)
 
 
 def distort_image(images: dict[str, NDArray], output: Intrinsics, margin_px: int,
@@ -315,16 +324,7 @@ def distort_image(images: dict[str, NDArray], output: Intrinsics, margin_px: int
     # Continuous pinhole pixels -> the render's OpenCV grid (integers at pixel centres).
     map_x = index_px(src[..., 0] + margin_px).astype(np.float32)
     map_y = index_px(src[..., 1] + margin_px).astype(np.float32)
-    out = {}
-    for name, img in images.items():
-        if img is None:
-            out[name] = None
-            continue
-        interp = cv2.INTER_LINEAR if name == "rgb" else cv2.INTER_NEAREST
-        src_img = img if img.dtype != np.uint32 else img.astype(np.float32)
-        warped = cv2.remap(src_img, map_x, map_y, interp, borderMode=cv2.BORDER_REPLICATE)
-        out[name] = warped.astype(img.dtype) if img.dtype == np.uint32 else warped
-    return out
+    return _remap(images, map_x, map_y, cv2.BORDER_REPLICATE)
 
 
 # --- lens -----------------------------------------------------------------------------
