@@ -16,7 +16,9 @@ whose mean is the reference; ``--fix-off`` adds references with the uniform glas
 of earlier datagen. References are cached under ``--cache`` (they take minutes each).
 
 Quality: PSNR and SSIM (datagen.analysis.image_quality) of the 8-bit sRGB image
-against the reference's, over the whole frame. Fireflies of a reference, in parts per
+against the reference's, over the whole frame; on the aircraft alone (the receiver's and
+the tanker's pixels), PSNR and the detail ratio (``detail_ratio``: the fine detail the
+image keeps of the reference's; under 1 the denoiser's waxy look, over 1 noise). Fireflies of a reference, in parts per
 million: ``fireflies`` (luminance above 4x the second brightest of the 8 neighbours and
 by at least a quarter of white); ``speckles`` (8-bit, brighter than the 5 x 5 median by
 more than 32 levels: noise and converged fine detail alike) and ``noise speckles`` (the
@@ -43,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from datagen.analysis.image_quality import fireflies, luminance, noise_speckles, psnr, speckles, ssim
+from datagen.analysis.image_quality import detail_ratio, fireflies, luminance, noise_speckles, psnr, speckles, ssim
 from datagen.atomic import write_bytes, write_image
 from datagen.config import load_config, override_config
 from datagen.config.schema import world_off
@@ -190,7 +192,7 @@ def main() -> None:
           f"{first.camera.width}x{first.camera.height}; every world randomizer on, camera model off; "
           f"reference {args.reference_spp} spp")
 
-    refs = {}
+    refs, aircraft = {}, {}
     for name, i in frames:
         for fix in (True, False):
             cached = reference_path(args.cache, configs[name], i, args.reference_spp, False).is_file()
@@ -201,6 +203,7 @@ def main() -> None:
                   flush=True)
             if fix:
                 refs[(name, i)] = to_srgb8((half_a + half_b) / 2)
+                aircraft[(name, i)] = np.isin(ids, [object_id("receiver"), object_id("tanker")])
     if args.crop is not None:
         write_crop(args.crop, configs[frames[0][0]], frames[0][1], args.reference_spp, args.cache)
     if args.references_only:
@@ -210,9 +213,9 @@ def main() -> None:
         old = [time_frame(override_config(configs[name], OLD_DEFAULT), i, Path(tmp))[0] for name, i in frames]
         base = float(np.mean(old))
         print(f"\nold default (16 spp, no denoiser, world off), whole frame: {base:.2f} s/frame")
-        print("\n| spp | denoise | PSNR dB (mean, min) | SSIM (mean) | s/frame whole, world on | x old default "
-              "| mi.render | denoise | rest |")
-        print("|---|---|---|---|---|---|---|---|---|")
+        print("\n| spp | denoise | PSNR dB (mean, min) | SSIM (mean) | aircraft PSNR dB | aircraft detail "
+              "| s/frame whole, world on | x old default | mi.render | denoise | rest |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|")
         for spp in args.spp:
             for mode in args.modes:
                 scores, times, stages = [], [], {}
@@ -226,13 +229,16 @@ def main() -> None:
                     scene = Scene.resolve(quiet)
                     draws = draw_frame(scene, FrameStates(quiet), i)
                     image = to_srgb8(Renderer(scene).render(draws.state, draws.look, draws.render_seed).rgb)
-                    scores.append((psnr(image, refs[(name, i)]), ssim(image, refs[(name, i)])))
+                    ref, mask = refs[(name, i)], aircraft[(name, i)]
+                    scores.append((psnr(image, ref), ssim(image, ref), psnr(image[mask], ref[mask]),
+                                   detail_ratio(image, ref, mask)))
                     if args.out is not None:
                         write_image(args.out / f"{name}-{i}-{spp}spp-{mode}.png", image[..., ::-1])
                 p = np.array([s[0] for s in scores])
                 whole = float(np.mean(times))
                 render, denoise = stages.get(PATH_TRACING, 0.0), stages.get(DENOISE, 0.0)
                 print(f"| {spp} | {mode} | {p.mean():.1f}, {p.min():.1f} | {np.mean([s[1] for s in scores]):.3f} "
+                      f"| {np.nanmean([s[2] for s in scores]):.1f} | {np.nanmean([s[3] for s in scores]):.2f} "
                       f"| {whole:.2f} | {whole / base:.2f} | {render:.2f} | {denoise:.2f} "
                       f"| {whole - render - denoise:.2f} |",
                       flush=True)

@@ -84,3 +84,20 @@ def test_the_sea_model_changes_no_other_draw_of_a_frame() -> None:
         assert b.sea_wind_speed_mps is None and 0.05 <= b.sea_roughness <= 0.25
         same = {"sea_roughness": 0.0, "sea_wind_speed_mps": None}
         assert dataclasses.replace(a, **same) == dataclasses.replace(b, **same)
+
+
+def test_the_detail_ratio_is_one_for_the_reference_under_one_blurred_and_over_one_with_noise() -> None:
+    from scipy.ndimage import gaussian_filter
+
+    from datagen.analysis.image_quality import detail_ratio
+
+    rng = np.random.default_rng(3)
+    reference = np.clip(rng.uniform(0.2, 0.8, (64, 96, 3)), 0.0, 1.0)
+    mask = np.zeros((64, 96), bool)
+    mask[10:50, 20:80] = True
+    assert detail_ratio(reference, reference, mask) == pytest.approx(1.0)
+    waxy = gaussian_filter(reference, (1.0, 1.0, 0.0))
+    assert detail_ratio(waxy, reference, mask) < 0.6
+    noisy = np.clip(reference + rng.normal(0.0, 0.1, reference.shape), 0.0, 1.0)
+    assert detail_ratio(noisy, reference, mask) > 1.05
+    assert np.isnan(detail_ratio(reference, reference, np.zeros_like(mask)))

@@ -361,21 +361,20 @@ def test_the_texel_check_fails_each_frame_whose_world_texel_exceeds_the_limit() 
     assert not labels_only.applicable and labels_only.checked == 0
 
 
-def test_a_texel_spans_its_size_times_fx_over_the_nearest_depth_of_its_surface() -> None:
-    from datagen.assets.liveries import LIVERY_TEXELS
+def test_the_sea_clouds_and_liveries_report_no_texel_where_they_are_seen_and_none_where_unseen() -> None:
     from datagen.config import load_config
     from datagen.core.conventions import object_id
     from datagen.render.world import SURFACES, World
 
     world = World(load_config("wingcam55"), pixel_rad=1e-3)
-    world._livery_bbox["tanker"] = (np.zeros(3), np.array([50.0, 40.0, 12.0]))
     depth = np.array([[5000.0, 4200.0], [80.0, np.inf]])
     ids = np.array([[0, 0], [object_id("tanker"), 0]], dtype=np.uint32)
     surface = np.array([[1, 1], [3, 0]], dtype=np.uint8)
     assert SURFACES[1] == "sea" and SURFACES[3] == "object"
     out = world.texel_footprint_px(depth, ids, surface, fx=2000.0)
-    assert out["world_texel_px"] == 0.0  # sea and clouds are procedural: no texel
-    assert out["livery_texel_px"] == pytest.approx(50.0 / LIVERY_TEXELS * 2000.0 / 80.0)
+    assert out == {"world_texel_px": 0.0, "livery_texel_px": 0.0}  # procedural: no texel anywhere
+    drogue_only = np.where(ids > 0, object_id("drogue"), 0).astype(np.uint32)
+    assert world.texel_footprint_px(depth, drogue_only, surface, fx=2000.0)["livery_texel_px"] is None
     assert world.texel_footprint_px(None, None, None, fx=2000.0) == {"world_texel_px": None,
                                                                      "livery_texel_px": None}
 

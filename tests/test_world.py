@@ -28,7 +28,8 @@ _FIELDS = [f.name for f in dataclasses.fields(FrameLook)]
 DRAWS = {
     "clouds": [f for f in _FIELDS if f.startswith("cloud_")],
     "sea": ["sea_wind_direction_deg", "sea_wave_slope_variance", "sea_whitecap_fraction", "sea_colour", "sea_seed"],
-    "livery": ["receiver_livery", "tanker_livery", "livery_weathering", "livery_seed"],
+    "livery": ["receiver_livery", "tanker_livery", "livery_weathering", "livery_seed", "aircraft_lights",
+               "aircraft_light_scale"],
     "sensor": [f for f in _FIELDS if f.startswith("sensor_")],
     "backlit sun": ["sun_backlit"],
     "haze": ["haze_visibility_m", "haze_scale_height_m"],

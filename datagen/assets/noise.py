@@ -19,7 +19,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["NOISE_BOUND", "NUMPY", "FractalField", "Ops", "Slant", "band_weight", "gradient_noise",
+__all__ = ["NOISE_BOUND", "NUMPY", "FractalField", "Ops", "Slant", "band_weight", "cell_value", "gradient_noise",
            "gradient_noise_slope", "ramp", "row_params", "series"]
 
 #: |gradient_noise| never exceeds this: Perlin's noise with unit gradients peaks at sqrt(1/2)
@@ -104,6 +104,13 @@ def _gradient(h, ops: Ops):
     """A corner's random gradient: two 16-bit halves of its hash, each in [-1, 1]."""
     scale, one = ops.f32(2.0 / 65535.0), ops.f32(1.0)
     return ops.to_f32(h & ops.u32(0xFFFF)) * scale - one, ops.to_f32(h >> ops.u32(16)) * scale - one
+
+
+def cell_value(i, j, seed, ops: Ops = NUMPY):
+    """A value in [-1, 1] per cell ``(i, j)`` of an integer lattice (``i``, ``j`` already
+    floored float32 arrays; ``seed`` a uint32 made by ``ops``): the same hash as the noise's corners."""
+    h = _hash(ops.to_u32(i) * ops.u32(_HX), ops.to_u32(j) * ops.u32(_HY), seed, ops)
+    return _gradient(h, ops)[0]
 
 
 def ramp(value, start, width: float, ops: Ops = NUMPY):

@@ -696,13 +696,25 @@ class LiveryConfig(_Section):
     """Schemes drawn from (equally likely)."""
 
     panel_lines: Flag = True
-    """Dark panel lines and rivet rows."""
+    """Panels along the structure: dark seams, rivet rows and panel-to-panel tones."""
 
     markings: Flag = True
-    """National roundels and aircraft numbers."""
+    """National roundels and aircraft numbers on the markings' decals."""
+
+    surface_detail: Flag = True
+    """The skin's normal: its ripple, the seams' grooves, the rivets' heads (a ``normalmap``)."""
 
     weathering: UnitRange = (0.0, 0.7)
-    """Grime and fading strength (0 clean, 1 heavily weathered)."""
+    """Grime, streaks, soot and fading strength (0 clean, 1 heavily weathered)."""
+
+    lights: Flag = True
+    """Navigation lights (wingtips, tail) and flashing anti-collision beacons."""
+
+    lights_share: Number = Field(0.75, ge=0.0, le=1.0)
+    """Share of approaches flown with the lights on."""
+
+    light_scale: Annotated[Range, _within(0.0, 100.0)] = (0.5, 3.0)
+    """A steady light's radiance over that of a white diffuser in the frame's daylight (beacons 3x)."""
 
 
 class SensorConfig(_Section):

@@ -60,11 +60,11 @@ __all__ = [
 ]
 
 #: Version of the manifest and feature-table schemas (bumped on any incompatible change).
-MANIFEST_VERSION: Final = "11"
+MANIFEST_VERSION: Final = "12"
 #: The manifest versions this datagen reads: 7 stored fixed-size lists as they are
 #: (:func:`stored_type`); a column added since a version is read as nulls from it
 #: (:data:`COLUMNS_SINCE`).
-READABLE_MANIFEST_VERSIONS: Final = ("7", "8", "9", "10", MANIFEST_VERSION)
+READABLE_MANIFEST_VERSIONS: Final = ("7", "8", "9", "10", "11", MANIFEST_VERSION)
 #: Columns added after version 7, with the version that added them.
 COLUMNS_SINCE: Final = {"haze_scale_height_m": "9", "cloud_type": "10", "cloud_deck_thickness_m": "10",
                          "cloud_layer_thickness_m": "10", "ground_type": "10", "ground_seed": "10",
@@ -76,7 +76,8 @@ COLUMNS_SINCE: Final = {"haze_scale_height_m": "9", "cloud_type": "10", "cloud_d
                                           "sensor_chromatic_aberration_px", "sensor_white_balance_k", "sensor_tint",
                                           "sensor_tone_gamma", "sensor_tone_shoulder", "sensor_video_crf",
                                           "sensor_readout_s", "cam_from_tanker_per_s", "cam_from_receiver_per_s",
-                                          "cam_from_drogue_per_s", "drogue_luminance", "drogue_contrast"), "11")}
+                                          "cam_from_drogue_per_s", "drogue_luminance", "drogue_contrast"), "11"),
+                         "aircraft_lights": "12", "aircraft_light_scale": "12"}
 
 #: The image statistics a manifest records per rendered frame
 #: (:func:`datagen.render.tonemap.image_statistics` measures them).
@@ -115,7 +116,7 @@ APPEARANCE: Final[dict[str, tuple[str, ...]]] = {
     "ground": ("ground_type",),
     "sea": ("sea_wind_speed_mps", "sea_roughness", "sea_wind_direction_deg", "sea_wave_slope_variance",
             "sea_whitecap_fraction"),
-    "livery": ("receiver_livery", "tanker_livery", "livery_weathering"),
+    "livery": ("receiver_livery", "tanker_livery", "livery_weathering", "aircraft_lights", "aircraft_light_scale"),
     "drogue": ("drogue_canopy", "drogue_tape", "hose_band_spacing_m", "drogue_luminance", "drogue_contrast"),
     "camera": ("camera_vibration_rms_deg", "camera_vibration_hz", "motion_blur_px"),
     "window": ("window_dirt", "window_droplets", "window_reflection"),
@@ -242,6 +243,8 @@ def manifest_schema() -> pa.Schema:
         pa.field("tanker_livery", pa.string()),
         pa.field("livery_weathering", _F64),
         pa.field("livery_seed", pa.int64()),
+        pa.field("aircraft_lights", pa.bool_()),
+        pa.field("aircraft_light_scale", _F64),
         pa.field("sensor_iso", _F64),
         pa.field("sensor_exposure_time_s", _F64),
         pa.field("sensor_vignetting", _F64),

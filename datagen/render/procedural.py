@@ -26,7 +26,7 @@ import numpy as np
 from datagen.assets.noise import FADE_LO, NUMPY, Ops, Slant, row_params
 from datagen.render.mitsuba import jit_array
 
-__all__ = ["drjit_ops", "evaluate", "mask_class", "texture_class"]
+__all__ = ["body_texture_class", "drjit_ops", "evaluate", "mask_class", "texture_class"]
 
 #: The area a texture's field is evaluated on: its surface's render-frame x and y (metres).
 PLANE_AXES: Final = (0, 1)
@@ -234,6 +234,82 @@ def texture_class(variant: str):
 
     assert mi.variant() == variant
     return FieldTexture
+
+
+@functools.cache
+def body_texture_class(variant: str):
+    """A :class:`mitsuba.Texture` on an object's surface whose value is ``shade(point, ops)``
+    for a :class:`~datagen.assets.liveries.PaintPoint`: the mesh's texture coordinates as
+    ``(s, t)``, the point and its normal in the object's body frame (the owner sets the
+    frame's ``body_from_render``, a 4x4, and the camera's render-frame position ``camera``;
+    both reach the kernel as opaque values), and a pixel's footprint there: its distance
+    times ``pixel_rad`` across the view, and its extents along ``s`` and ``t``, stretched
+    along the view's direction on the surface by 1 / cosine (at most 1 /
+    :data:`~datagen.assets.liveries.MIN_COSINE`): the shading frame's first axis is ``s``
+    (Mitsuba aligns it with the texture coordinates' ``dp/du``)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from datagen.assets.liveries import MIN_COSINE, PaintPoint
+
+    class BodyTexture(mi.Texture):
+        def __init__(self, props=None, *, pixel_rad: float = 1e-3, colour: bool = False):
+            super().__init__(props if props is not None else mi.Properties())
+            self.pixel_rad = float(pixel_rad)
+            self.colour = colour
+            self.camera = (0.0, 0.0, 0.0)
+            self.body_from_render = np.eye(4)
+            self.shade = None  # (PaintPoint, ops) -> value (a tuple of three when colour)
+
+        def _point(self, si) -> PaintPoint:
+            ops = drjit_ops()
+            m = np.asarray(self.body_from_render, dtype=np.float64)
+            if ops is NUMPY:  # a scalar variant: one point
+                p = np.array([si.p.x, si.p.y, si.p.z], dtype=np.float64)
+                body = m[:3, :3] @ p + m[:3, 3]
+                nz = float(m[2, :3] @ np.array([si.n.x, si.n.y, si.n.z]))
+                wi = np.array([si.wi[0], si.wi[1], si.wi[2]], dtype=np.float64)
+                across = np.linalg.norm(p - np.asarray(self.camera)) * self.pixel_rad
+                along = across * np.sqrt(1.0 + np.square(wi[:2] / max(abs(wi[2]), MIN_COSINE)))
+                return PaintPoint(np.float32(si.uv.x), np.float32(si.uv.y), *(np.float32(c) for c in body),
+                                  np.float32(nz), np.float32(across), np.float32(along[0]), np.float32(along[1]))
+            c = [dr.opaque(mi.Float, float(v)) for v in m[:3].reshape(-1)]
+            p = si.p
+            body = [c[4 * i] * p.x + c[4 * i + 1] * p.y + c[4 * i + 2] * p.z + c[4 * i + 3] for i in range(3)]
+            nz = c[8] * si.n.x + c[9] * si.n.y + c[10] * si.n.z
+            camera = mi.Point3f(*(dr.opaque(mi.Float, float(v)) for v in self.camera))
+            across = dr.norm(p - camera) * self.pixel_rad
+            inverse = 1.0 / dr.maximum(dr.abs(si.wi.z), MIN_COSINE)
+            along_s = across * dr.sqrt(1.0 + dr.square(si.wi.x * inverse))
+            along_t = across * dr.sqrt(1.0 + dr.square(si.wi.y * inverse))
+            return PaintPoint(si.uv.x, si.uv.y, *body, nz, across, along_s, along_t)
+
+        def _value(self, si):
+            with np.errstate(over="ignore"):
+                return self.shade(self._point(si), drjit_ops())
+
+        def eval(self, si, active=True):
+            v = self._value(si)
+            return mi.Color3f(*v) if self.colour else mi.Color3f(v)
+
+        def eval_1(self, si, active=True):
+            v = self._value(si)
+            return mi.luminance(mi.Color3f(*v)) if self.colour else v
+
+        def eval_3(self, si, active=True):
+            return self.eval(si, active)
+
+        def mean(self):
+            return 0.5
+
+        def is_spatially_varying(self):
+            return True
+
+        def to_string(self):
+            return "BodyTexture[]"
+
+    assert mi.variant() == variant
+    return BodyTexture
 
 
 @functools.cache

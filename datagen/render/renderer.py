@@ -45,6 +45,7 @@ from datagen.render.mitsuba import (
     set_buffer,
     world_from_micam,
 )
+from datagen.render.paintwork import Paintwork
 from datagen.render.raycast import RayCasting
 from datagen.render.runtime import hold_scene, use_variant
 from datagen.render.sky import sky_class
@@ -149,6 +150,7 @@ class Renderer(RayCasting):
         self._meshes_loaded = {obj: load_mesh(scene.mesh_path(obj), obj) for obj in RIGID_OBJECTS}
         self._mi, self._dr = mi, dr
         self._camera_render = np.zeros(3)
+        self._irradiance = None  # the frame's sun and sky irradiance (where the clouds or the lights need it)
 
     # -- scene construction (deferred until the hose's point count is known) --------------
     def release(self) -> None:
@@ -161,6 +163,7 @@ class Renderer(RayCasting):
         self._traffic_ids: tuple[int, ...] = ()
         self._hose_points = None
         self.world = World(self.config, pixel_rad=1.0 / self.output_intrinsics.fx)
+        self.paintwork = Paintwork(self.config, pixel_rad=1.0 / self.output_intrinsics.fx)
 
     def _description(self) -> dict:
         """The scene's ``mi.load_dict`` entries, the hose aside (its Mitsuba objects made here)."""
@@ -195,12 +198,13 @@ class Renderer(RayCasting):
             for i, (part, tm) in enumerate(mesh.parts.items()):
                 cls = material_class(part)
                 key = f"{obj}_p{i}"  # unique: scalar variants tell objects apart by shape id
-                if self.world.wears_livery(obj, cls):
-                    vertices, faces, uv = self.world.livery_part(obj, mesh, tm)
-                    bsdf = mi.load_dict(dict(_principled(first.materials[obj][cls]),
-                                             base_color=self.world.livery_base_color()))
+                wear = self.paintwork.wears(obj, cls)
+                if wear is not None:  # the paintwork's (datagen.render.paintwork): one BSDF per object
+                    self.paintwork.airframe(obj, mesh)
+                    vertices, faces, uv = self.paintwork.part(obj, mesh, wear, tm)
+                    bsdf = self.paintwork.bsdf(obj, wear, _principled(first.materials[obj][cls]))
                     shape = mitsuba_mesh(f"{obj}.{part}", vertices, faces, bsdf, texcoords=uv)
-                    cls = "livery"
+                    cls = wear if all(c != wear for _, c in self._parts[obj]) else "shared"
                 else:
                     bsdf = mi.load_dict(_principled(first.materials[obj][cls]))
                     shape = mitsuba_mesh(f"{obj}.{part}", tm.vertices, tm.faces, bsdf)
@@ -303,15 +307,21 @@ class Renderer(RayCasting):
         sun = sun_direction_world(state, look)
         self.sky.set(sun, look.turbidity, look.sun_scale, look.sky_scale)
         with clock.stage("cloud-lighting probe"):
-            irradiance = self._sky_irradiance(sun) if self.world.clouds else None
-        liveries = self.world.livery_textures(look)
+            irradiance = self._sky_irradiance(sun) if self.world.clouds or self.paintwork.lights else None
+        render_from_body = {}
         for obj in RIGID_OBJECTS:
-            p[f"{obj}.to_world"] = mi.Transform4f((render_from_world @ state.world_from(obj)).tolist())
+            render_from_body[obj] = render_from_world @ state.world_from(obj)
+            p[f"{obj}.to_world"] = mi.Transform4f(render_from_body[obj].tolist())
             for key, cls in self._parts[obj]:
                 if cls == "livery":
-                    self._set_livery(f"{key}.bsdf", look, obj, liveries.get(obj))
-                else:
+                    self._set_livery(self.paintwork.material_prefix(f"{key}.bsdf", cls), look, obj)
+                elif cls == "markings":
+                    self._set_paint(f"{key}.bsdf", look.materials[obj][cls])
+                    p[f"{key}.bsdf.roughness.value"] = look.materials[obj][cls].roughness
+                elif cls != "shared":
                     self._set_material(f"{key}.bsdf", look.materials[obj][cls])
+        self.paintwork.apply(look, render_from_body, self._camera_render)
+        self._irradiance = irradiance
         hose = hose_vertices(state.hose_points_world - origin)
         set_buffer(p, "hose.vertex_positions", hose.astype(np.float32))
         self._set_hose(look, state.hose_points_world)
@@ -380,15 +390,15 @@ class Renderer(RayCasting):
         in_sun = directions @ np.asarray(sun, np.float64) > math.cos(math.radians(SUN_CONE_DEG))
         return e[in_sun].sum(axis=0), e[~in_sun].sum(axis=0)
 
-    def _set_livery(self, prefix: str, look: FrameLook, obj: str, texture) -> None:
-        """A painted part under its object's livery: the texture is the base colour; the
-        paint's draws (or, for bare metal, the metal's) give the rest."""
-        p = self.params
+    def _set_livery(self, prefix: str, look: FrameLook, obj: str) -> None:
+        """An object's painted parts under its livery (their colour and roughness are the
+        paintwork's textures): the paint's draws (or, for bare metal, the metal's) give the rest."""
         bare = getattr(look, f"{obj}_livery", None) == "bare_metal"
-        m = look.materials[obj]["metal" if bare else "paint"]
-        if texture is not None:
-            p[f"{prefix}.base_color.data"] = texture
-        p[f"{prefix}.roughness.value"] = m.roughness
+        self._set_paint(prefix, look.materials[obj]["metal" if bare else "paint"])
+
+    def _set_paint(self, prefix: str, m: Material) -> None:
+        """A principled BSDF's scalar draws (its colour and roughness being textures)."""
+        p = self.params
         p[f"{prefix}.metallic.value"] = m.metallic
         p[f"{prefix}.specular"] = m.specular
 
@@ -456,6 +466,8 @@ class Renderer(RayCasting):
             with clock.stage(DENOISE):
                 rgb = self._denoised(image, beauty)
             denoise_s = clock.seconds[DENOISE]
+        with clock.stage("lights"):
+            self._draw_lights(rgb, state, look)
         if self.sensor is None:
             with clock.stage("exposure"):
                 rgb *= exposure_scale(look.exposure_ev)
@@ -473,6 +485,32 @@ class Renderer(RayCasting):
                            device=not self.variant.startswith("scalar"))
         return RenderResult(out.rgb, out.depth, out.object_id, render_s, denoise_s, out.surface,
                             {**out.measured, **texels}, clock.seconds)
+
+    def _draw_lights(self, rgb: NDArray[np.float32], state: FrameState, look: FrameLook) -> None:
+        """The aircraft's lit lights (:meth:`Paintwork.light_spots`) added to the linear image
+        where the camera sees them: in front of it and nothing hit on the way."""
+        from datagen.core.camera import project_points
+        from datagen.render.paintwork import LIGHT_STANDOFF_M, add_light_spots
+
+        spots = self.paintwork.light_spots(look, {obj: state.world_from(obj) for obj in RIGID_OBJECTS},
+                                           state.time_s, self._irradiance)
+        if not spots:
+            return
+        world = np.array([p for p, _ in spots])
+        cam = (state.cam_from_world @ np.c_[world, np.ones(len(world))].T).T[:, :3]
+        front = cam[:, 2] > 1.0
+        if not front.any():
+            return
+        world, cam = world[front], cam[front]
+        radiance = np.array([r for (_, r), f in zip(spots, front, strict=True) if f])
+        origin = self._world_from_cam[:3, 3]
+        towards = world - origin
+        distance = np.linalg.norm(towards, axis=1)
+        t, _, _ = self.cast(self._camera_render, (towards / distance[:, None]).astype(np.float32))
+        seen = t >= distance - LIGHT_STANDOFF_M  # the lens stands off the skin: what it stands on is behind it
+        if seen.any():
+            add_light_spots(rgb, project_points(cam[seen], self.intrinsics), distance[seen], radiance[seen],
+                            self.intrinsics.fx)
 
     def _set_air(self, state: FrameState, look: FrameLook) -> None:
         """The frame's air as the render's kernel inputs (:mod:`datagen.render.aerial`); a

@@ -21,8 +21,8 @@ holds nothing of it (no mesh, texture or kernel). Texture contents change per fr
 - Ground: where the approach's ground type (:class:`~datagen.assets.ground.Ground`) has
   land, the same surface takes the land's albedo, relief normal and matte roughness in
   place of the sea's (one kernel whatever the type: open sea is a ground with no land).
-- Liveries: the painted parts of the receiver and the tanker get texture coordinates
-  (:func:`~datagen.assets.liveries.triplanar_uv`) and a base-colour texture per object.
+- Liveries are the paintwork's (:mod:`datagen.render.paintwork`); the world reports their
+  texel (none: they are procedural too).
 """
 
 from __future__ import annotations
@@ -36,16 +36,14 @@ from numpy.typing import NDArray
 
 from datagen.assets.clouds import CLOUD_FORMS, CloudLayer, CloudLight
 from datagen.assets.ground import GROUND_TYPES, LAND_ROUGHNESS, NO_SHORE, Ground
-from datagen.assets.liveries import LIVERY_TEXELS, livery, triplanar_uv
 from datagen.assets.sea import SeaSurface, SeaWaves
 from datagen.core.conventions import EARTH_RADIUS_M, texture_rng
-from datagen.render.mitsuba import jit_array
 from datagen.scene.look import FrameLook
 
 if TYPE_CHECKING:
     from datagen.config.schema import Config
 
-__all__ = ["CLOUD_LAYERS", "CLOUD_SIZE_M", "EARTH_CAP_M", "LIVERY_OBJECTS", "SEA_COLOUR", "SURFACES", "World",
+__all__ = ["CLOUD_LAYERS", "CLOUD_SIZE_M", "EARTH_CAP_M", "SEA_COLOUR", "SURFACES", "World",
            "earth_cap", "sphere_drop"]
 
 #: The cloud layers' shape names (in the scene) and the FrameLook fields that place them
@@ -76,8 +74,6 @@ CULL_OCTAVES: Final = 7
 CULL_SAMPLES: Final = 32
 #: Bound on the slope of one octave of gradient noise, per lattice unit (measured: 2.4).
 NOISE_SLOPE_BOUND: Final = 3.0
-#: The objects that wear a livery (on their painted parts).
-LIVERY_OBJECTS: Final = ("receiver", "tanker")
 #: The sea mesh's parameter prefix (the mesh in its shape group, which an instance places).
 SEA_KEY: Final = "sea_group.sea"
 #: What a pixel's ray meets first, as the geometry pass classifies it (index = code).
@@ -163,14 +159,11 @@ class World:
         #: Any world piece on (the renderer then classifies every pixel's surface).
         self.any = self.clouds or self.earth or self.livery
         self._ground: Ground | None = None
-        self._livery_bbox: dict[str, tuple[NDArray, NDArray]] = {}
         self.pixel_rad = pixel_rad  # the angle one pixel subtends (1 / fx): procedural textures filter to it
         self._cloud_layers: dict[str, CloudLayer] = {}
         self._cloud_textures: dict = {}  # layer name -> (opacity, radiance) procedural textures
         self._cloudy: dict[str, NDArray[np.bool_]] = {}
         self._cloud_key: tuple | None = None
-        self._livery_key: tuple | None = None
-        self._liveries: dict = {}
         self._sea_key: tuple | None = None
         self._sea_texture = None  # the sea's procedural albedo (whitecaps, colour), where either is on
         self._wave_textures = None  # the sea's procedural (normals, roughness), where waves are on
@@ -263,46 +256,7 @@ class World:
         clouds): what each frame's layer draws, asked at any render-frame point."""
         return tuple(self._cloud_textures[name][0] for name in CLOUD_LAYERS) if self._cloud_textures else ()
 
-    def wears_livery(self, obj: str, material_class: str) -> bool:
-        return self.livery and obj in LIVERY_OBJECTS and material_class == "paint"
-
-    def livery_part(self, obj: str, mesh, tm) -> tuple[NDArray, NDArray, NDArray]:
-        """Unwelded vertices, faces and texture coordinates of a painted part of ``obj``
-        (``mesh``: the whole object, whose bounding box the texture spans)."""
-        if obj not in self._livery_bbox:
-            vertices = np.concatenate([np.asarray(p.vertices) for p in mesh.parts.values()])
-            self._livery_bbox[obj] = (vertices.min(axis=0), vertices.max(axis=0))
-        lo, hi = self._livery_bbox[obj]
-        return triplanar_uv(tm.vertices, tm.faces, lo, hi)
-
-    @staticmethod
-    def livery_base_color() -> dict:
-        import mitsuba as mi
-
-        return {"type": "bitmap", "data": jit_array(mi.TensorXf, np.full((LIVERY_TEXELS,) * 2 + (3,), 0.5)),
-                "raw": True, "wrap_mode": "clamp", "filter_type": "bilinear"}
-
     # -- per frame -----------------------------------------------------------------------
-    def livery_textures(self, look: FrameLook):
-        """``{object: TensorXf}`` of the frame's liveries (empty when liveries are off)."""
-        import mitsuba as mi
-
-        if not self.livery or look.livery_seed is None:
-            return {}
-        key = (look.livery_seed, look.receiver_livery, look.tanker_livery, look.livery_weathering)
-        if key == self._livery_key:
-            return self._liveries  # an approach's aircraft, painted once
-        lv = self.config.randomization.livery
-        rng = texture_rng(look.livery_seed)
-        out = {}
-        for obj in LIVERY_OBJECTS:
-            lo, hi = self._livery_bbox.get(obj, (np.zeros(3), np.ones(3)))
-            scheme = getattr(look, f"{obj}_livery")
-            out[obj] = jit_array(mi.TensorXf, livery(rng, scheme, look.livery_weathering, hi - lo,
-                                                              panel_lines=lv.panel_lines, markings=lv.markings))
-        self._livery_key, self._liveries = key, out
-        return out
-
     def apply(self, params, look: FrameLook, camera_z_m: float, irradiance=None,
               camera_render=(0.0, 0.0, 0.0), sun_direction=(0.0, 0.0, 1.0)) -> None:
         """Set the frame's clouds and sea (the render frame has its origin at altitude
@@ -380,8 +334,8 @@ class World:
         """The largest on-screen size (px) of a texel the frame shows, from its geometry pass
         (z-depth, object ids, surfaces): a texel ``s`` metres across at z-depth ``z`` spans
         at most ``s fx / z`` pixels. ``world_texel_px``: the sea's and the clouds' (0: they
-        are procedural, no texel anywhere); ``livery_texel_px``: the liveries. None where
-        none is seen."""
+        are procedural, no texel anywhere); ``livery_texel_px``: the liveries' (0 as well:
+        :mod:`datagen.assets.liveries`). None where none is seen."""
         out: dict[str, float | None] = {"world_texel_px": None, "livery_texel_px": None}
         if depth is None or surface is None:
             return out
@@ -389,10 +343,10 @@ class World:
             out["world_texel_px"] = 0.0
         if self.livery and ids is not None:
             from datagen.core.conventions import object_id
+            from datagen.render.paintwork import LIVERY_OBJECTS
 
-            worst = [float(np.max(hi - lo)) / LIVERY_TEXELS * fx / float(depth[ids == object_id(obj)].min())
-                     for obj, (lo, hi) in self._livery_bbox.items() if (ids == object_id(obj)).any()]
-            out["livery_texel_px"] = max(worst) if worst else None
+            if np.isin(ids, [object_id(obj) for obj in LIVERY_OBJECTS]).any():
+                out["livery_texel_px"] = 0.0
         return out
 
     def cloud_layer(self, name: str) -> CloudLayer | None:

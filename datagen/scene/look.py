@@ -83,6 +83,8 @@ class FrameLook:
     tanker_livery: str | None = None
     livery_weathering: float | None = None
     livery_seed: int | None = None
+    aircraft_lights: bool | None = None  # the navigation lights and beacons are on this approach
+    aircraft_light_scale: float | None = None  # a steady light's radiance over a white diffuser's in daylight
     sensor_iso: float | None = None
     sensor_exposure_time_s: float | None = None
     sensor_vignetting: float | None = None
@@ -373,6 +375,9 @@ def _approach_world(config: Config, seed: int, approach_index: int, base: float)
             livery_weathering=_uniform(rng, lv.weathering),
             livery_seed=_seed(rng),
         )
+        if lv.lights:
+            world.update(aircraft_lights=bool(rng.uniform() < lv.lights_share),
+                         aircraft_light_scale=_uniform(rng, lv.light_scale))
     d = r.drogue
     if d.enabled:
         from datagen.assets.drogues import draw_drogue
