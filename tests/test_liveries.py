@@ -119,6 +119,7 @@ def test_each_piece_of_a_mesh_is_mapped_along_its_own_axis() -> None:
         np.testing.assert_allclose(np.abs(ds[long_edges]), np.abs(dp[long_edges]), atol=1e-3)
 
 
+@pytest.mark.render
 @pytest.mark.parametrize("scheme", SCHEMES)
 def test_the_kernel_paints_the_same_livery_as_numpy(scheme: str) -> None:
     mi = pytest.importorskip("mitsuba")
@@ -306,6 +307,7 @@ def test_beacons_flash_a_fifth_of_the_time_and_the_steady_lights_always_shine() 
     assert paintwork.light_spots(dark, {"receiver": np.eye(4)}, 0.0, daylight) == []
 
 
+@pytest.mark.render
 def test_a_frames_lights_are_drawn_where_they_project_and_change_nothing_else() -> None:
     pytest.importorskip("mitsuba")
     from datagen.config import load_config, override_config

@@ -592,12 +592,14 @@ def test_scalar_fallback_agrees_with_the_vectorized_variant() -> None:
 
 def test_denoise_off_leaves_the_path_tracers_image_unchanged(one_thread) -> None:
     """With render.denoise off a frame is Mitsuba's own render times the exposure, bit for
-    bit (what every build wrote before denoising existed)."""
+    bit (what every build wrote before denoising existed); the aircraft's lights, which are
+    added after the render (tests/test_liveries.py), off."""
     from datagen.render.tonemap import exposure_scale
 
     config = override_config(load_config("wingcam55"), {"camera.width": 160, "camera.height": 84,
                                                         "render.spp": 2, "render.denoise": "off",
-                                                        "randomization.sensor.enabled": False})
+                                                        "randomization.sensor.enabled": False,
+                                                        "randomization.livery.lights": False})
     renderer = Renderer(Scene.resolve(config))
     state = frame_state(config, 3)
     look = frame_look(config, state)
