@@ -448,6 +448,12 @@ def _principal_axes(points: NDArray) -> NDArray[np.float64]:
     return axes
 
 
+def _unwelded(tri: NDArray, uv: NDArray) -> tuple[NDArray[np.float32], NDArray[np.uint32], NDArray[np.float32]]:
+    """Vertices, faces and texture coordinates of triangles ``tri`` (F, 3, 3) with per-corner ``uv`` (F, 3, 2)."""
+    verts = tri.reshape(-1, 3).astype(np.float32)
+    return verts, np.arange(len(verts), dtype=np.uint32).reshape(-1, 3), uv.reshape(-1, 2).astype(np.float32)
+
+
 def structure_uv(vertices: NDArray, faces: NDArray) -> tuple[NDArray[np.float32], NDArray[np.uint32],
                                                                 NDArray[np.float32]]:
     """Unwelded vertices, faces and structural coordinates ``(s, t)`` in metres of a mesh.
@@ -474,9 +480,7 @@ def structure_uv(vertices: NDArray, faces: NDArray) -> tuple[NDArray[np.float32]
     e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
     flip = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0.0
     uv[flip, :, 1] *= -1.0
-    verts = tri.reshape(-1, 3).astype(np.float32)
-    out_faces = np.arange(len(verts), dtype=np.uint32).reshape(-1, 3)
-    return verts, out_faces, uv.reshape(-1, 2).astype(np.float32)
+    return _unwelded(tri, uv)
 
 
 def decal_uv(vertices: NDArray, faces: NDArray, body_centre: NDArray) -> tuple[
@@ -508,8 +512,7 @@ def decal_uv(vertices: NDArray, faces: NDArray, body_centre: NDArray) -> tuple[
         a, b = (p @ along) / half[0], (p @ up) / half[1]
         long_ = half[0] > 1.5 * half[1]
         uv[sel] = np.stack([a + (NUMBER_U if long_ else 0.0), b], axis=-1)
-    verts = tri.reshape(-1, 3).astype(np.float32)
-    return verts, np.arange(len(verts), dtype=np.uint32).reshape(-1, 3), uv.reshape(-1, 2).astype(np.float32)
+    return _unwelded(tri, uv)
 
 
 def exhaust_sites(vertices: NDArray, faces: NDArray) -> tuple[tuple[float, float, float, float], ...]:

@@ -159,6 +159,39 @@ def _series_loop(ops: Ops, rows: dict[str, np.ndarray], term, footprint_m, outpu
 
 
 @functools.cache
+def _shaded_texture(variant: str):
+    """The base of this module's textures: ``eval`` and its kin from the subclass's
+    ``_value(si)`` (a ``Color3f`` where ``colour``, else a ``Float``)."""
+    import mitsuba as mi
+
+    class ShadedTexture(mi.Texture):
+        colour = False
+
+        def eval(self, si, active=True):
+            v = self._value(si)
+            return v if self.colour else mi.Color3f(v)
+
+        def eval_1(self, si, active=True):
+            v = self._value(si)
+            return mi.luminance(v) if self.colour else v
+
+        def eval_3(self, si, active=True):
+            return self.eval(si, active)
+
+        def mean(self):
+            return 0.5
+
+        def is_spatially_varying(self):
+            return True
+
+        def to_string(self):
+            return f"{type(self).__name__}[]"
+
+    assert mi.variant() == variant
+    return ShadedTexture
+
+
+@functools.cache
 def texture_class(variant: str):
     """A :class:`mitsuba.Texture` whose value is ``shade(x, y, footprint_m, ops)``, a
     callable the owner sets (and replaces per frame) on the instance's ``shade``; the
@@ -172,7 +205,7 @@ def texture_class(variant: str):
     import drjit as dr
     import mitsuba as mi
 
-    class FieldTexture(mi.Texture):
+    class FieldTexture(_shaded_texture(variant)):
         def __init__(self, props=None, *, pixel_rad: float = 1e-3, colour: bool = False, slant: bool = False,
                      front_only: bool = False):
             super().__init__(props if props is not None else mi.Properties())
@@ -212,25 +245,6 @@ def texture_class(variant: str):
             with np.errstate(over="ignore"):
                 return self.shade(*self._at(si), drjit_ops())
 
-        def eval(self, si, active=True):
-            v = self._value(si)
-            return v if self.colour else mi.Color3f(v)
-
-        def eval_1(self, si, active=True):
-            v = self._value(si)
-            return mi.luminance(v) if self.colour else v
-
-        def eval_3(self, si, active=True):
-            return self.eval(si, active)
-
-        def mean(self):
-            return 0.5
-
-        def is_spatially_varying(self):
-            return True
-
-        def to_string(self):
-            return "FieldTexture[]"
 
     assert mi.variant() == variant
     return FieldTexture
@@ -252,7 +266,7 @@ def body_texture_class(variant: str):
 
     from datagen.assets.liveries import MIN_COSINE, PaintPoint
 
-    class BodyTexture(mi.Texture):
+    class BodyTexture(_shaded_texture(variant)):
         def __init__(self, props=None, *, pixel_rad: float = 1e-3, colour: bool = False):
             super().__init__(props if props is not None else mi.Properties())
             self.pixel_rad = float(pixel_rad)
@@ -286,27 +300,8 @@ def body_texture_class(variant: str):
 
         def _value(self, si):
             with np.errstate(over="ignore"):
-                return self.shade(self._point(si), drjit_ops())
-
-        def eval(self, si, active=True):
-            v = self._value(si)
-            return mi.Color3f(*v) if self.colour else mi.Color3f(v)
-
-        def eval_1(self, si, active=True):
-            v = self._value(si)
-            return mi.luminance(mi.Color3f(*v)) if self.colour else v
-
-        def eval_3(self, si, active=True):
-            return self.eval(si, active)
-
-        def mean(self):
-            return 0.5
-
-        def is_spatially_varying(self):
-            return True
-
-        def to_string(self):
-            return "BodyTexture[]"
+                v = self.shade(self._point(si), drjit_ops())
+            return mi.Color3f(*v) if self.colour else v
 
     assert mi.variant() == variant
     return BodyTexture
