@@ -1,9 +1,9 @@
 """Write the world page's sheet of the aircraft's surfaces (docs/liveries.jpg): crops at full
 resolution (no scaling: one image pixel is one sheet pixel) of frames rendered as a build
-renders them, camera model on, each forcing one livery scheme: the tanker seen from podcam15's
-pod 30-40 m behind it (the wing's panels, the fuselage's seams, the markings) and the
-receiver's nose from wingcam55's wing a few metres away (panels, rivet rows). Each crop is
-centred on the pixels of its aircraft.
+renders them, camera model on, each forcing one livery scheme: the tanker's rear fuselage and
+engines seen from wingcam55's wing pod 30-40 m behind it (the seams, panel tones, soot) and
+the receiver's spine and intakes seen from podcam15's pod on the tanker a few metres above
+(panels, rivet rows, the markings). Each crop is centred on a point of its aircraft's pixels.
 
     .venv/bin/python scripts/liveries.py          # about 10 minutes on 2 cores
 """
@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "liveries.jpg"
 SCHEMES = ("grey_camouflage", "two_tone", "high_visibility", "bare_metal")
 #: (scene, frame, the object the crop centres on, where in it: a share of its pixels' box).
-VIEWS = (("podcam15", 22, "tanker", (0.55, 0.55)), ("wingcam55", 14, "receiver", (0.75, 0.45)))
+VIEWS = (("wingcam55", 14, "tanker", (0.49, 0.69)), ("podcam15", 30, "receiver", (0.53, 0.45)))
 
 
 def tiles() -> list[tuple[str, int, str, tuple[float, float], str, dict]]:

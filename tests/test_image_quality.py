@@ -101,3 +101,22 @@ def test_the_detail_ratio_is_one_for_the_reference_under_one_blurred_and_over_on
     noisy = np.clip(reference + rng.normal(0.0, 0.1, reference.shape), 0.0, 1.0)
     assert detail_ratio(noisy, reference, mask) > 1.05
     assert np.isnan(detail_ratio(reference, reference, np.zeros_like(mask)))
+
+
+def test_detail_rms_is_zero_on_a_smooth_ramp_grows_with_a_patterns_contrast_and_reads_only_the_mask() -> None:
+    from datagen.analysis.image_quality import detail_rms
+
+    ramp = np.broadcast_to(np.linspace(0.2, 0.8, 96)[None, :, None], (64, 96, 3)).copy()
+    inside = np.zeros((64, 96), bool)
+    inside[16:48, 24:72] = True
+    assert detail_rms(ramp, inside) == pytest.approx(0.0, abs=1e-9)
+    checks = (np.indices((64, 96)).sum(axis=0) % 2).astype(float)[..., None]
+    weak, strong = ramp + 0.02 * checks, ramp + 0.04 * checks
+    assert detail_rms(strong, inside) == pytest.approx(2.0 * detail_rms(weak, inside), rel=1e-6)
+    outside_only = ramp.copy()
+    outside_only[~inside] += 0.04 * checks[~inside]
+    interior = np.zeros_like(inside)
+    interior[22:42, 30:66] = True  # farther from the pattern than the blur reaches (3.5 sigma)
+    assert detail_rms(outside_only, interior) == pytest.approx(0.0, abs=1e-9)
+    assert detail_rms(strong, interior) > 0.01
+    assert np.isnan(detail_rms(ramp, np.zeros_like(inside)))

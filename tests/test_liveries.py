@@ -161,6 +161,76 @@ def test_the_kernel_paints_the_same_livery_as_numpy(scheme: str) -> None:
             assert np.mean(diff > 1e-4) < 2e-3 and diff.max() < 0.7, (name, float(np.mean(diff > 1e-4)))
 
 
+@pytest.mark.render
+def test_a_twins_hits_are_painted_in_its_own_body_frame_and_the_targets_in_the_targets() -> None:
+    mi = pytest.importorskip("mitsuba")
+    import drjit as dr
+
+    from datagen.core.transforms import make_transform
+    from datagen.render.procedural import body_texture_class
+    from datagen.render.runtime import use_variant
+
+    variant = use_variant("llvm_ad_rgb")
+    livery = _livery("high_visibility", seed=11)
+    texture = body_texture_class(variant)(pixel_rad=1.0 / 2000.0, colour=True)
+    texture.shade = livery.albedo
+    twin_shape = mi.load_dict({"type": "sphere"})
+    texture.twin = int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(twin_shape))[0])
+    offset = np.array([90.0, -40.0, 25.0])  # the twin flies here, the target at the render frame's origin
+    texture.body_from_render = np.eye(4)
+    texture.twin_body_from_render = np.linalg.inv(make_transform(np.eye(3), offset))
+    rng = np.random.default_rng(8)
+    n = 4_000
+    body = rng.uniform(-15.0, 15.0, (n, 3))
+    body[:, 2] = rng.uniform(-2.0, 2.0, n)
+    on_twin = rng.uniform(size=n) < 0.5
+    render = body + np.where(on_twin[:, None], offset, 0.0)
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.p = mi.Point3f(*(mi.Float(c.astype(np.float32)) for c in render.T))
+    si.uv = mi.Point2f(mi.Float(body[:, 0].astype(np.float32)), mi.Float(body[:, 1].astype(np.float32)))
+    si.n = mi.Normal3f(0.0, 0.0, 1.0)
+    si.wi = mi.Vector3f(0.0, 0.0, 1.0)
+    twin_ptr = mi.UInt32(texture.twin)
+    si.instance = dr.reinterpret_array(mi.ShapePtr, dr.select(mi.Bool(on_twin), twin_ptr, mi.UInt32(0)))
+    texture.camera = (0.0, 0.0, 0.0)
+    got = np.stack([np.asarray(c) for c in texture.eval(si)], axis=-1)
+    distance = np.linalg.norm(render, axis=1)
+    p = PaintPoint(*(body[:, :2].T.astype(np.float32)), *(body.T.astype(np.float32)), np.ones(n, np.float32),
+                   (distance / 2000.0).astype(np.float32))
+    expected = np.stack(livery.albedo(p), axis=-1)
+    assert np.mean(np.abs(got - expected).max(axis=-1) > 1e-3) < 5e-3  # both painted where they are
+    # The same points read in the target's frame wear other paint: the twin's frame made the difference.
+    texture.twin = None
+    target_frame = np.stack([np.asarray(c) for c in texture.eval(si)], axis=-1)
+    assert np.mean(np.abs(target_frame[on_twin] - expected[on_twin]).max(axis=-1) > 1e-3) > 0.2
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31), scheme=st.sampled_from(SCHEMES))
+def test_a_panels_tone_and_gloss_are_one_value_over_the_whole_brick_panel_and_change_at_its_seams(
+        seed: int, scheme: str) -> None:
+    livery = _livery(scheme, seed=seed)
+    ps, pt = livery.panel_m
+    rng = np.random.default_rng(seed)
+    row = int(rng.integers(-8, 8)) * 2 + 1  # an odd row: its panels sit half a panel along
+    k = int(rng.integers(-8, 8))
+    # Points spread over that panel's interior, away from its seams by 5% of a panel.
+    s = ((k + 0.5) + rng.uniform(0.05, 0.95, 200)) * ps
+    t = (row + rng.uniform(0.05, 0.95, 200)) * pt
+    zero = np.zeros(200, np.float32)
+    tiny = np.full(200, 1e-4, np.float32)
+
+    def value(s, t):
+        return livery._panel_value(PaintPoint(s.astype(np.float32), t.astype(np.float32), zero, zero, zero,
+                                              zero + 1, tiny), NUMPY)
+
+    inside = value(s, t)
+    assert np.ptp(inside) == 0.0
+    # Across the panel's seam along s the next panel has a value of its own: drawn over 16 panels, some differ.
+    steps = [value(s + j * ps, t)[0] for j in range(1, 17)]
+    assert len(set(np.round(steps, 6).tolist()) | {round(float(inside[0]), 6)}) > 4
+
+
 def test_counter_shading_paints_the_underside_lighter_than_the_top() -> None:
     livery = _livery("two_tone", weathering=0.0)
     rng = np.random.default_rng(2)

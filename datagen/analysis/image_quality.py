@@ -15,8 +15,8 @@ from scipy.ndimage import gaussian_filter, median_filter, rank_filter
 
 from datagen.core.conventions import luminance
 
-__all__ = ["DETAIL_SIGMA_PX", "FIREFLY_MIN_EXCESS", "FIREFLY_RATIO", "SPECKLE_EXCESS", "detail_ratio", "fireflies",
-           "luminance", "noise_speckles", "psnr", "speckles", "ssim"]
+__all__ = ["DETAIL_SIGMA_PX", "FIREFLY_MIN_EXCESS", "FIREFLY_RATIO", "SPECKLE_EXCESS", "detail_ratio", "detail_rms",
+           "fireflies", "luminance", "noise_speckles", "psnr", "speckles", "ssim"]
 
 #: A pixel is a firefly when its luminance exceeds the second brightest of its 8
 #: neighbours by this factor ...
@@ -102,19 +102,21 @@ def ssim(image: NDArray, reference: NDArray) -> float:
 DETAIL_SIGMA_PX: Final = 1.5
 
 
-def detail_ratio(image: NDArray, reference: NDArray, mask: NDArray[np.bool_]) -> float:
-    """How much of the reference's fine detail ``image`` keeps where ``mask`` is: the RMS of
-    its luminance's high-pass (the image less its Gaussian blur of :data:`DETAIL_SIGMA_PX`)
-    over the reference's, on the 8-bit (or [0, 1]) encodings. 1: as detailed; under 1: smoothed
-    (a denoiser's waxy look); over 1: noisier. NaN where the mask is empty or the
-    reference has no detail there."""
+def detail_rms(image: NDArray, mask: NDArray[np.bool_]) -> float:
+    """The fine detail of ``image`` where ``mask`` is: the RMS of its luminance's high-pass
+    (the image less its Gaussian blur of :data:`DETAIL_SIGMA_PX`) on the 8-bit (or [0, 1])
+    encoding. NaN where the mask is empty."""
     m = np.asarray(mask, dtype=bool)
     if not m.any():
         return float("nan")
+    y = luminance(_unit(image))
+    return float(np.sqrt(np.mean((y - gaussian_filter(y, DETAIL_SIGMA_PX, truncate=3.5))[m] ** 2)))
 
-    def high_pass(a: NDArray) -> NDArray[np.float64]:
-        y = luminance(_unit(a))
-        return y - gaussian_filter(y, DETAIL_SIGMA_PX, truncate=3.5)
 
-    ref = float(np.sqrt(np.mean(high_pass(reference)[m] ** 2)))
-    return float("nan") if ref == 0.0 else float(np.sqrt(np.mean(high_pass(image)[m] ** 2)) / ref)
+def detail_ratio(image: NDArray, reference: NDArray, mask: NDArray[np.bool_]) -> float:
+    """How much of the reference's fine detail ``image`` keeps where ``mask`` is: its
+    :func:`detail_rms` over the reference's. 1: as detailed; under 1: smoothed (a denoiser's
+    waxy look); over 1: noisier. NaN where the mask is empty or the reference has no detail
+    there."""
+    ref = detail_rms(reference, mask)
+    return float("nan") if not ref > 0.0 else detail_rms(image, mask) / ref

@@ -115,6 +115,7 @@ class Livery:
     rivet_radius_m: float
     rivet_offset_m: float  # a rivet row's distance from its seam
     tone: float  # panel-to-panel tone variation (relative)
+    gloss: float  # panel-to-panel roughness variation (relative; the same panels as the tone's)
     seed: int
     grime: FractalField
     streaks: FractalField  # along the airflow (body x)
@@ -170,10 +171,11 @@ class Livery:
             bands=tuple(bands),
             band_width_m=float(rng.uniform(0.04, 0.1) * length_m), tip_m=tip, centre_y_m=float(centre_y_m),
             panel_m=(float(rng.uniform(0.6, 1.5)), float(rng.uniform(0.4, 1.0))),
-            seam_m=float(rng.uniform(0.003, 0.007)), seam_dark=float(rng.uniform(0.25, 0.55)),
+            seam_m=float(rng.uniform(0.004, 0.01)), seam_dark=float(rng.uniform(0.35, 0.65)),
             rivet_pitch_m=float(rng.uniform(0.025, 0.045)), rivet_radius_m=float(rng.uniform(0.0025, 0.004)),
             rivet_offset_m=float(rng.uniform(0.012, 0.02)),
-            tone=float(rng.uniform(0.04, 0.08) if scheme == "bare_metal" else rng.uniform(0.01, 0.03)),
+            tone=float(rng.uniform(0.06, 0.12) if scheme == "bare_metal" else rng.uniform(0.025, 0.06)),
+            gloss=float(rng.uniform(0.1, 0.3)),
             seed=int(rng.integers(0, 2**32)),
             grime=FractalField.drawn(rng, rng.uniform(1.5, 3.5), 4, 0.55),
             streaks=FractalField.drawn(rng, rng.uniform(2.0, 4.0), 4, 0.6, stretch=8.0),
@@ -207,14 +209,29 @@ class Livery:
         w1 = w1 + _soft_step(lateral, ops.param_f32(self.tip_m), wide, ops)
         return ops.clip(w1, 0.0, 1.0), w2
 
+    def _bricks(self, p: PaintPoint, ops: Ops):
+        """``(s, row)``: ``p.s`` shifted by half a panel in every other row of panels (brick
+        rows), and the row's index."""
+        f = ops.f32
+        ps, pt = (ops.param_f32(v) for v in self.panel_m)
+        row = ops.floor(p.t / pt)
+        half = ops.floor(row * f(0.5))
+        return p.s + (row - half * f(2.0)) * ps * f(0.5), row
+
+    def _panel_value(self, p: PaintPoint, ops: Ops):
+        """A value in [-1, 1] per panel (a panel's own tone and gloss), faded to 0 where a
+        pixel spans panels."""
+        ps, pt = self.panel_m
+        s, row = self._bricks(p, ops)
+        value = cell_value(ops.floor(s / ops.param_f32(ps)), row, ops.param_u32(self.seed), ops)
+        return value * band_weight(ops.param_f32(min(ps, pt)), p.longest(ops), ops)
+
     def _panels(self, p: PaintPoint, ops: Ops):
         """``(seam, rivet, s_signed, t_signed)``: a pixel's coverage by seams and by rivet heads
         (mean-filtered where it cannot hold them), and the offsets from the nearest seams."""
         f = ops.f32
         ps, pt = (ops.param_f32(v) for v in self.panel_m)
-        row = ops.floor(p.t / pt)
-        half = ops.floor(row * f(0.5))
-        s = p.s + (row - half * f(2.0)) * ps * f(0.5)  # brick rows: every other row offset by half a panel
+        s, _ = self._bricks(p, ops)
         ds = s - ps * ops.floor(s / ps + f(0.5))
         dt = p.t - pt * ops.floor(p.t / pt + f(0.5))
         width = ops.param_f32(self.seam_m)
@@ -275,10 +292,7 @@ class Livery:
         shade = f(1.0) + p.x * f(0.0)
         if self.panel_lines:
             seam, rivet, _, _ = self._panels(p, ops)
-            ps, pt = self.panel_m
-            tone = cell_value(ops.floor(p.s / ops.param_f32(ps)), ops.floor(p.t / ops.param_f32(pt)),
-                              ops.param_u32(self.seed), ops)
-            tone = tone * ops.param_f32(self.tone) * band_weight(ops.param_f32(min(ps, pt)), p.longest(ops), ops)
+            tone = self._panel_value(p, ops) * ops.param_f32(self.tone)
             shade = (shade + tone) * (f(1.0) - ops.param_f32(self.seam_dark) * seam) * (f(1.0) + f(0.08) * rivet)
         dirt, soot = self._weather(p, ops)
         shade = shade * (f(1.0) - f(0.55) * dirt) * (f(1.0) - f(0.85) * soot)
@@ -287,14 +301,15 @@ class Livery:
         return tuple(ops.clip((c + (grey - c) * fade) * shade, 0.0, 1.0) for c in colour)
 
     def roughness(self, base: float, p: PaintPoint, ops: Ops = NUMPY):
-        """The paint's roughness at ``p``: the drawn ``base``, rougher where grimy or sooty and
-        in the seams (the grime without its streaks: one field less in the kernel)."""
+        """The paint's roughness at ``p``: the drawn ``base``, varied from panel to panel,
+        rougher where grimy or sooty and in the seams (the grime without its streaks: one field
+        less in the kernel)."""
         f = ops.f32
         grime, soot = self._weather(p, ops, streaks=False)
         r = ops.param_f32(base) * (f(1.0) + f(0.6) * grime) + f(0.35) * soot
         if self.panel_lines:
             seam = self._panels(p, ops)[0]
-            r = r + f(0.2) * seam
+            r = r * (f(1.0) + ops.param_f32(self.gloss) * self._panel_value(p, ops)) + f(0.2) * seam
         return ops.clip(r, 0.02, 1.0)
 
     def normal(self, p: PaintPoint, ops: Ops = NUMPY) -> tuple:

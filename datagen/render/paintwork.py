@@ -20,7 +20,8 @@ daylight (``aircraft_light_scale`` times the luminance of the sky's and the sun'
 irradiance over pi, the radiance of a white diffuser lit by it; beacons 3 times that); the
 beacons flash; they are not dimmed by the air (at most a few hundred metres away, they
 would lose a few per cent). Another aircraft in view (:mod:`datagen.scene.traffic`) is an
-instance of the same shapes: it wears the same paint, evaluated in the target's body frame,
+instance of the same shapes: it wears the same paint, evaluated in its own body frame (the
+textures tell its hits by the instance a ray met; a scalar variant paints it in the target's),
 and carries no lights.
 """
 
@@ -191,15 +192,26 @@ class Paintwork:
             self._key = key
         return self._drawn
 
-    def apply(self, look: FrameLook, render_from_body: dict[str, NDArray], camera_render) -> None:
-        """Pose the frame's paint (``render_from_body``: each object's 4x4; the camera at
-        ``camera_render``)."""
+    def bind_twins(self, registry_ids: dict[str, int]) -> None:
+        """Name each object's twin, another instance of its shapes (:mod:`datagen.scene.traffic`),
+        by its Mitsuba registry id: the textures paint its hits in its own body frame."""
+        for obj, textures in self._textures.items():
+            for texture in textures.values():
+                texture.twin = registry_ids.get(obj)
+
+    def apply(self, look: FrameLook, render_from_body: dict[str, NDArray], camera_render,
+              render_from_twin: dict[str, NDArray] | None = None) -> None:
+        """Pose the frame's paint (``render_from_body``: each object's 4x4, and its twin's in
+        ``render_from_twin`` where it has one; the camera at ``camera_render``)."""
         drawn = self.drawn(look)
         for obj, (livery, markings) in drawn.items():
             textures = self._textures.get(obj, {})
             body_from_render = np.linalg.inv(render_from_body[obj])
+            twin = (render_from_twin or {}).get(obj)
             for texture in textures.values():
                 texture.body_from_render = body_from_render
+                if twin is not None:
+                    texture.twin_body_from_render = np.linalg.inv(twin)
                 texture.camera = tuple(float(c) for c in camera_render)
             base = look.materials[obj]["metal" if livery.scheme == "bare_metal" else "paint"].roughness
             if "albedo" in textures:

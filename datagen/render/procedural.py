@@ -273,6 +273,10 @@ def body_texture_class(variant: str):
             self.colour = colour
             self.camera = (0.0, 0.0, 0.0)
             self.body_from_render = np.eye(4)
+            # Another instance of the same shapes (datagen.scene.traffic): its registry id and
+            # its own body frame, so that it wears the paint where it is.
+            self.twin: int | None = None
+            self.twin_body_from_render = np.eye(4)
             self.shade = None  # (PaintPoint, ops) -> value (a tuple of three when colour)
 
         def _point(self, si) -> PaintPoint:
@@ -288,6 +292,10 @@ def body_texture_class(variant: str):
                 return PaintPoint(np.float32(si.uv.x), np.float32(si.uv.y), *(np.float32(c) for c in body),
                                   np.float32(nz), np.float32(across), np.float32(along[0]), np.float32(along[1]))
             c = [dr.opaque(mi.Float, float(v)) for v in m[:3].reshape(-1)]
+            if self.twin is not None:  # the twin's hits: its body frame (the instance a ray met)
+                on_twin = dr.reinterpret_array(mi.UInt32, si.instance) == dr.opaque(mi.UInt32, self.twin)
+                twin = np.asarray(self.twin_body_from_render, dtype=np.float64)[:3].reshape(-1)
+                c = [dr.select(on_twin, dr.opaque(mi.Float, float(t)), a) for a, t in zip(c, twin)]
             p = si.p
             body = [c[4 * i] * p.x + c[4 * i + 1] * p.y + c[4 * i + 2] * p.z + c[4 * i + 3] for i in range(3)]
             nz = c[8] * si.n.x + c[9] * si.n.y + c[10] * si.n.z

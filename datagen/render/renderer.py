@@ -269,8 +269,10 @@ class Renderer(RayCasting):
         layers = ("sea", *CLOUD_LAYERS)
         backgrounds = {registry_id(shape): layers.index(name)
                        for name, shape in (("sea", self._sea), *self.world.cloud_meshes.items())}
-        self._traffic_ids = tuple(registry_id(shape) for shape in self.scene.shapes()
-                                  if shape.id() in {f"other_{kind}" for kind in TRAFFIC_KINDS})
+        twins = {shape.id()[len("other_"):]: registry_id(shape) for shape in self.scene.shapes()
+                 if shape.id() in {f"other_{kind}" for kind in TRAFFIC_KINDS}}
+        self._traffic_ids = tuple(twins.values())
+        self.paintwork.bind_twins(twins)
         ids = np.zeros(max(objects) + 1, dtype=np.uint32)
         ids[list(objects)] = list(objects.values())
         codes = np.full(max(backgrounds) + 2, -1, dtype=np.int32)
@@ -320,13 +322,7 @@ class Renderer(RayCasting):
                     p[f"{key}.bsdf.roughness.value"] = look.materials[obj][cls].roughness
                 elif cls != "shared":
                     self._set_material(f"{key}.bsdf", look.materials[obj][cls])
-        self.paintwork.apply(look, render_from_body, self._camera_render)
-        self._irradiance = irradiance
-        hose = hose_vertices(state.hose_points_world - origin)
-        set_buffer(p, "hose.vertex_positions", hose.astype(np.float32))
-        self._set_hose(look, state.hose_points_world)
-        if self._windscreen:
-            p["windscreen_frame.to_world"] = mi.Transform4f((render_from_world @ state.world_from("receiver")).tolist())
+        render_from_twin = {}
         if self.config.randomization.traffic.enabled:
             other = world_from_traffic(state, look.other_aircraft_tanker_m, look.other_aircraft_heading_deg)
             for kind in TRAFFIC_KINDS:
@@ -334,6 +330,14 @@ class Renderer(RayCasting):
                 pose = (render_from_world @ other if other is not None and look.other_aircraft == kind
                         else make_transform(np.eye(3), [0.0, 0.0, -origin[2] - HIDDEN_DEPTH_M]))
                 p[f"other_{kind}.to_world"] = mi.Transform4f(pose.tolist())
+                render_from_twin[kind] = pose
+        self.paintwork.apply(look, render_from_body, self._camera_render, render_from_twin)
+        self._irradiance = irradiance
+        hose = hose_vertices(state.hose_points_world - origin)
+        set_buffer(p, "hose.vertex_positions", hose.astype(np.float32))
+        self._set_hose(look, state.hose_points_world)
+        if self._windscreen:
+            p["windscreen_frame.to_world"] = mi.Transform4f((render_from_world @ state.world_from("receiver")).tolist())
         sensor = world_from_micam(render_from_world @ state.world_from_cam)
         p["sensor.to_world"] = mi.Transform4f(sensor.tolist())
         # The earth's top under the camera (the render frame's origin is over the camera's nadir).
