@@ -3,7 +3,8 @@ surfaces in frames rendered as a build renders them (the configs' sampling and d
 world randomizer on, the camera model off as in ``bench_quality.py``, so that only rendering
 is measured), and how much of a converged reference's detail each keeps.
 
-    python bench/bench_detail.py render --out DIR [--frames wingcam55:14 podcam15:30 dashcam75:12] [--scale 0.5] [--reference-spp 0]
+    python bench/bench_detail.py render --out DIR [--frames wingcam55:14 podcam15:30 dashcam75:12]
+        [--scale 0.5] [--reference-spp 0]
     PYTHONPATH=<other checkout> python bench/bench_detail.py render --out DIR_OTHER ...
     python bench/bench_detail.py compare DIR DIR_OTHER
 
@@ -81,7 +82,8 @@ def compare(a: Path, b: Path) -> None:
         return binary_erosion(aircraft, iterations=SURFACE_INSET_PX)
 
     print(f"machine: {platform.machine()}, {os.cpu_count()} CPUs")
-    print(f"| frame | surface px | detail {a.name} | detail {b.name} | ratio | kept of the reference's {a.name} / {b.name} |")
+    print(f"| frame | surface px | detail {a.name} | detail {b.name} | ratio "
+          f"| kept of the reference's {a.name} / {b.name} |")
     print("|---|---|---|---|---|---|")
     ratios = []
     for path in sorted(a.glob("*.npz")):
