@@ -3,11 +3,17 @@
     python bench/bench_render.py [--config scenes/wingcam55.yaml] [--spp 4 16 64] [--frames 3]
                                  [--every 1] [--variant auto] [--denoise off|oidn]
     python bench/bench_render.py --randomizers [--frames 8]
+    python bench/bench_render.py --size 64x34 --spp 1 --frames 16 --every 7 --threads 1   # the fixed per-frame cost
 
 ``--randomizers`` times the world's randomizers at the config's spp: every one off
 (today's images), each one alone, and all on, one mode after another (a process holds
 one scene at a time); it prints each mode's mean and median whole-frame time, its ratio
 to all-off, and the process's peak RSS.
+
+``--size WxH`` renders at another resolution (the same field of view): at 64x34 and 1 spp
+the render's own work is negligible and what remains is the fixed per-frame cost (tracing
+the kernel, posing, the camera model's fixed costs). ``--threads`` sizes Dr.Jit's thread pool
+(one, with ``taskset -c 0``, for the one-core figures).
 
 ``--variant cuda_ad_rgb`` renders and denoises on the GPU where one is (nothing else
 changes: the denoiser takes the render's Dr.Jit tensors on their device).
@@ -51,8 +57,18 @@ def main() -> None:
     parser.add_argument("--variant", default=None)
     parser.add_argument("--denoise", default=None, choices=["off", "oidn"], help="override render.denoise")
     parser.add_argument("--randomizers", action="store_true", help="time each world randomizer and all of them")
+    parser.add_argument("--size", default=None, help="WxH: render at this resolution instead of the config's")
+    parser.add_argument("--threads", type=int, default=None, help="Dr.Jit threads (default: every core)")
     args = parser.parse_args()
     config = load_config(args.config)
+    if args.size is not None:
+        width, height = (int(v) for v in args.size.lower().split("x"))
+        config = override_config(config, {"camera.width": width, "camera.height": height})
+    if args.threads is not None:
+        from datagen.render.runtime import set_threads, use_variant
+
+        use_variant(args.variant or config.render.variant)
+        set_threads(args.threads)
     if args.denoise is not None:
         config = override_config(config, {"render.denoise": args.denoise})
     if args.randomizers:
