@@ -65,9 +65,8 @@ def main() -> None:
         width, height = (int(v) for v in args.size.lower().split("x"))
         config = override_config(config, {"camera.width": width, "camera.height": height})
     if args.threads is not None:
-        from datagen.render.runtime import set_threads, use_variant
+        from datagen.render.runtime import set_threads
 
-        use_variant(args.variant or config.render.variant)
         set_threads(args.threads)
     if args.denoise is not None:
         config = override_config(config, {"render.denoise": args.denoise})

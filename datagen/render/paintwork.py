@@ -208,10 +208,11 @@ class Paintwork:
             textures = self._textures.get(obj, {})
             body_from_render = np.linalg.inv(render_from_body[obj])
             twin = (render_from_twin or {}).get(obj)
+            twin_from_render = None if twin is None else np.linalg.inv(twin)
             for texture in textures.values():
                 texture.body_from_render = body_from_render
-                if twin is not None:
-                    texture.twin_body_from_render = np.linalg.inv(twin)
+                if twin_from_render is not None:
+                    texture.twin_body_from_render = twin_from_render
                 texture.camera = tuple(float(c) for c in camera_render)
             base = look.materials[obj]["metal" if livery.scheme == "bare_metal" else "paint"].roughness
             if "albedo" in textures:
