@@ -4,7 +4,7 @@ world randomizer on, the camera model off as in ``bench_quality.py``, so that on
 is measured), and how much of a converged reference's detail each keeps.
 
     python bench/bench_detail.py render --out DIR [--frames wingcam55:14 podcam15:30 dashcam75:12]
-        [--scale 0.5] [--reference-spp 0]
+        [--scale 0.5] [--reference-spp 0] [--variant llvm_ad_rgb]
     PYTHONPATH=<other checkout> python bench/bench_detail.py render --out DIR_OTHER ...
     python bench/bench_detail.py compare DIR DIR_OTHER
 
@@ -36,7 +36,7 @@ SURFACE_INSET_PX = 7
 CHUNK_SPP = 64
 
 
-def render(out: Path, frames: list[str], scale: float, reference_spp: int) -> None:
+def render(out: Path, frames: list[str], scale: float, reference_spp: int, variant: str = "llvm_ad_rgb") -> None:
     """Each frame's 8-bit image and object ids, and its reference when asked, into ``out``."""
     from datagen.config import load_config, override_config
     from datagen.pipeline.frame import draw_frame
@@ -46,7 +46,7 @@ def render(out: Path, frames: list[str], scale: float, reference_spp: int) -> No
     from datagen.scene.approach import FrameStates
     from datagen.scene.resolved import Scene
 
-    use_variant("llvm_ad_rgb")
+    use_variant(variant)
     set_threads(os.cpu_count() or 1)
     out.mkdir(parents=True, exist_ok=True)
     for item in frames:
@@ -97,6 +97,8 @@ def compare(a: Path, b: Path) -> None:
                 for d, m in ((x, mx), (y, my))]
         print(f"| {path.stem} | {int(mx.sum())} / {int(my.sum())} | {dx * 255:.2f} | {dy * 255:.2f} | {dx / dy:.2f} "
               f"| {' / '.join(kept)} |")
+    if not ratios:
+        raise SystemExit(f"no frame is in both {a} and {b}")
     print(f"geometric mean ratio {float(np.exp(np.mean(np.log(ratios)))):.2f} (detail in 8-bit levels)")
 
 
@@ -108,12 +110,13 @@ def main() -> None:
     r.add_argument("--frames", nargs="+", default=["wingcam55:14", "podcam15:30", "dashcam75:12"])
     r.add_argument("--scale", type=float, default=0.5)
     r.add_argument("--reference-spp", type=int, default=0, help="also a converged reference at this many spp")
+    r.add_argument("--variant", default="llvm_ad_rgb", help="the Mitsuba variant (cuda_ad_rgb on a GPU)")
     c = sub.add_parser("compare", help="the aircraft's surface detail in two directories")
     c.add_argument("a", type=Path)
     c.add_argument("b", type=Path)
     args = parser.parse_args()
     if args.command == "render":
-        render(args.out, args.frames, args.scale, args.reference_spp)
+        render(args.out, args.frames, args.scale, args.reference_spp, args.variant)
     else:
         compare(args.a, args.b)
 

@@ -1,7 +1,7 @@
 """Rendering cost per frame at the config's full resolution (2048x1080 by default).
 
     python bench/bench_render.py [--config scenes/wingcam55.yaml] [--spp 4 16 64] [--frames 3]
-                                 [--every 1] [--variant auto] [--denoise off|oidn]
+                                 [--every 1] [--variant auto] [--denoise off|oidn] [--guides]
     python bench/bench_render.py --randomizers [--frames 8]
     python bench/bench_render.py --size 64x34 --spp 1 --frames 16 --every 7 --threads 1   # the fixed per-frame cost
 
@@ -56,6 +56,8 @@ def main() -> None:
                         "approach chains (frame_per_approach frames each)")
     parser.add_argument("--variant", default=None)
     parser.add_argument("--denoise", default=None, choices=["off", "oidn"], help="override render.denoise")
+    parser.add_argument("--guides", action="store_true", help="render.denoise_guides on: the denoiser's albedo "
+                        "and normal guides")
     parser.add_argument("--randomizers", action="store_true", help="time each world randomizer and all of them")
     parser.add_argument("--size", default=None, help="WxH: render at this resolution instead of the config's")
     parser.add_argument("--threads", type=int, default=None, help="Dr.Jit threads (default: every core)")
@@ -70,6 +72,8 @@ def main() -> None:
         set_threads(args.threads)
     if args.denoise is not None:
         config = override_config(config, {"render.denoise": args.denoise})
+    if args.guides:
+        config = override_config(config, {"render.denoise_guides": True})
     if args.randomizers:
         randomizers(config, args)
         return

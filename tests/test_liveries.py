@@ -231,6 +231,33 @@ def test_a_panels_tone_and_gloss_are_one_value_over_the_whole_brick_panel_and_ch
     assert len(set(np.round(steps, 6).tolist()) | {round(float(inside[0]), 6)}) > 4
 
 
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31), scheme=st.sampled_from(SCHEMES))
+def test_a_seam_is_edged_by_a_wider_band_of_sealant_that_darkens_the_paint_by_its_drawn_share(
+        seed: int, scheme: str) -> None:
+    livery = _livery(scheme, seed=seed, weathering=0.0)
+    assert livery.seam_m < livery.sealant_m and 0.0 < livery.sealant_dark < 1.0
+    ps, pt = livery.panel_m
+    rng = np.random.default_rng(seed)
+    row, k = int(rng.integers(-8, 8)) * 2, int(rng.integers(-8, 8))  # an even row: no brick offset
+    s = np.full(2, (k + 0.5) * ps, np.float32)  # mid-panel along s, far from its seams and rivets
+    # Beside the seam between rows: in the sealant, clear of the seam's gap and its rivet row; and
+    # 10 cm into the same panel.
+    t = np.array([row * pt + 0.0065, row * pt + 0.1], np.float32)
+    zero, tiny = np.zeros(2, np.float32), np.full(2, 1e-4, np.float32)
+    band, inside = np.stack(livery.albedo(PaintPoint(s, t, zero, zero, zero, zero + 1, tiny), NUMPY), -1)
+    assert band == pytest.approx(inside * (1.0 - livery.sealant_dark), rel=1e-4)
+
+
+def test_the_sealant_is_drawn_from_the_liverys_own_seed_not_from_the_approachs_stream() -> None:
+    """So that the markings and the other aircraft's livery, drawn after it, are what they were."""
+    livery = Livery.drawn(np.random.default_rng(5), "grey_camouflage", 0.3, length_m=40.0, span_m=40.0,
+                          nose_x_m=20.0)
+    own = np.random.default_rng((livery.seed, 1))
+    assert livery.sealant_m == own.uniform(0.02, 0.04)
+    assert livery.sealant_dark == own.uniform(0.12, 0.25) + 0.15 * 0.3
+
+
 def test_counter_shading_paints_the_underside_lighter_than_the_top() -> None:
     livery = _livery("two_tone", weathering=0.0)
     rng = np.random.default_rng(2)

@@ -18,7 +18,7 @@ the exhausts), and the pixel's footprint there.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Final
 
 import numpy as np
@@ -111,6 +111,8 @@ class Livery:
     panel_m: tuple[float, float]  # panel pitch along s and t
     seam_m: float  # a seam's width
     seam_dark: float  # how much a seam darkens the paint
+    sealant_m: float  # the band of sealant and grime along a seam, wider than its gap
+    sealant_dark: float  # how much that band darkens the paint
     rivet_pitch_m: float
     rivet_radius_m: float
     rivet_offset_m: float  # a rivet row's distance from its seam
@@ -166,7 +168,7 @@ class Livery:
         bands += [1e6] * (MAX_BANDS - len(bands))
         sites = tuple(exhausts[:MAX_EXHAUSTS]) + ((1e6, 0.0, 0.0, 0.1),) * (MAX_EXHAUSTS - len(exhausts[:MAX_EXHAUSTS]))
         w = float(weathering)
-        return cls(
+        livery = cls(
             scheme=scheme, colours=colours, pattern=pattern, pattern_gain=gain, shading=shading, cuts=cuts,
             bands=tuple(bands),
             band_width_m=float(rng.uniform(0.04, 0.1) * length_m), tip_m=tip, centre_y_m=float(centre_y_m),
@@ -174,16 +176,21 @@ class Livery:
             seam_m=float(rng.uniform(0.004, 0.01)), seam_dark=float(rng.uniform(0.35, 0.65)),
             rivet_pitch_m=float(rng.uniform(0.025, 0.045)), rivet_radius_m=float(rng.uniform(0.0025, 0.004)),
             rivet_offset_m=float(rng.uniform(0.012, 0.02)),
-            tone=float(rng.uniform(0.06, 0.12) if scheme == "bare_metal" else rng.uniform(0.025, 0.06)),
-            gloss=float(rng.uniform(0.1, 0.3)),
+            tone=float(rng.uniform(0.05, 0.1) if scheme == "bare_metal" else rng.uniform(0.015, 0.04)),
+            gloss=float(rng.uniform(0.05, 0.15)),
             seed=int(rng.integers(0, 2**32)),
             grime=FractalField.drawn(rng, rng.uniform(1.5, 3.5), 4, 0.55),
             streaks=FractalField.drawn(rng, rng.uniform(2.0, 4.0), 4, 0.6, stretch=8.0),
             weathering=w, exhausts=sites, soot=float(np.clip(w + rng.uniform(0.1, 0.5), 0.0, 1.0)),
             ripple=FractalField.drawn(rng, rng.uniform(0.5, 1.5), 3, 0.5),
             ripple_rad=float(rng.uniform(0.004, 0.015)), groove=float(rng.uniform(0.2, 0.5)),
-            panel_lines=panel_lines,
+            panel_lines=panel_lines, sealant_m=0.0, sealant_dark=0.0,
         )
+        # The sealant's draws come from the livery's own seed, not ``rng``: every draw here and
+        # after (the markings, the other aircraft's livery) stays what it was without them.
+        own = np.random.default_rng((livery.seed, 1))
+        return replace(livery, sealant_m=float(own.uniform(0.02, 0.04)),
+                       sealant_dark=float(own.uniform(0.12, 0.25) + 0.15 * w))
 
     # -- the pieces -----------------------------------------------------------------------
     def _pattern(self, p: PaintPoint, ops: Ops):
@@ -234,11 +241,8 @@ class Livery:
         s, _ = self._bricks(p, ops)
         ds = s - ps * ops.floor(s / ps + f(0.5))
         dt = p.t - pt * ops.floor(p.t / pt + f(0.5))
-        width = ops.param_f32(self.seam_m)
         fs, ft = p.extent("s"), p.extent("t")
-        seam_s = _line(ops.abs(ds), width, fs, ops, pitch=ps)
-        seam_t = _line(ops.abs(dt), width, ft, ops, pitch=pt)
-        seam = seam_s + seam_t - seam_s * seam_t
+        seam = self._seam_lines(ds, dt, ops.param_f32(self.seam_m), p, ops)
         pitch, radius, offset = (ops.param_f32(v) for v in (self.rivet_pitch_m, self.rivet_radius_m,
                                                              self.rivet_offset_m))
         rivet = p.x * f(0.0)
@@ -252,6 +256,14 @@ class Livery:
             rivet = rivet + disc * share
         rivet = rivet * band_weight(pitch, wide, ops)
         return seam, rivet, ds, dt
+
+    def _seam_lines(self, ds, dt, width, p: PaintPoint, ops: Ops):
+        """A pixel's coverage by lines ``width`` wide centred on the seams (``ds``, ``dt``: the
+        offsets from the nearest seams of :meth:`_panels`), mean-filtered where it cannot hold them."""
+        ps, pt = (ops.param_f32(v) for v in self.panel_m)
+        along_s = _line(ops.abs(ds), width, p.extent("s"), ops, pitch=ps)
+        along_t = _line(ops.abs(dt), width, p.extent("t"), ops, pitch=pt)
+        return along_s + along_t - along_s * along_t
 
     def _weather(self, p: PaintPoint, ops: Ops, streaks: bool = True):
         """``(dirt, soot)`` in [0, 1]: grime and (``streaks``) streaks along the airflow, soot
@@ -291,9 +303,11 @@ class Livery:
         colour = self.paint(p, ops)
         shade = f(1.0) + p.x * f(0.0)
         if self.panel_lines:
-            seam, rivet, _, _ = self._panels(p, ops)
+            seam, rivet, ds, dt = self._panels(p, ops)
+            sealant = self._seam_lines(ds, dt, ops.param_f32(self.sealant_m), p, ops)
             tone = self._panel_value(p, ops) * ops.param_f32(self.tone)
-            shade = (shade + tone) * (f(1.0) - ops.param_f32(self.seam_dark) * seam) * (f(1.0) + f(0.08) * rivet)
+            shade = (shade + tone) * (f(1.0) - ops.param_f32(self.seam_dark) * seam) * (f(1.0) + f(0.08) * rivet) \
+                * (f(1.0) - ops.param_f32(self.sealant_dark) * sealant)
         dirt, soot = self._weather(p, ops)
         shade = shade * (f(1.0) - f(0.55) * dirt) * (f(1.0) - f(0.85) * soot)
         fade = f(0.3) * ops.param_f32(self.weathering)  # faded paint drifts to grey

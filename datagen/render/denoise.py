@@ -1,10 +1,13 @@
 """Denoising of the linear image with Intel Open Image Denoise (``mitsuba-oidn``).
 
 OIDN's ``RT`` filter takes the noisy linear radiance (``hdr``) and, optionally, the
-first hit's albedo and shading normal as guides (noisy at the same spp, so it
-prefilters them). It runs on the device of the arrays it is given (the CPU for
-numpy arrays) on Dr.Jit's thread pool, so :func:`datagen.render.runtime.set_threads`
-sizes it too: with one thread its output is the same bytes every time.
+first hit's albedo and shading normal as guides. Those are noisy at the same spp (the
+pixel's samples land on different texels), so each is filtered first and the beauty then
+filtered with them as clean guides (OIDN's prefiltering, which keeps more of a surface's
+fine detail than noisy guides do: the performance page has the figures). It runs on
+the device of the arrays it is given (the CPU for numpy arrays) on Dr.Jit's thread pool,
+so :func:`datagen.render.runtime.set_threads` sizes it too: with one thread its output
+is the same bytes every time.
 """
 
 from __future__ import annotations
@@ -43,9 +46,12 @@ def denoise(rgb, albedo=None, normal=None, *, quality: str = "high"):
     tensors are filtered on the CPU, Dr.Jit CUDA tensors on their GPU; the result is of
     the input's kind."""
     oidn = _oidn()
-    guides = {"albedo": albedo, "normal": normal} if albedo is not None and normal is not None else {}
     q = {"fast": oidn.Quality.Fast, "balanced": oidn.Quality.Balanced, "high": oidn.Quality.High}[quality]
-    return oidn.denoise(rgb, hdr=True, quality=q, **guides)
+    if albedo is None or normal is None:
+        return oidn.denoise(rgb, hdr=True, quality=q)
+    # The guides' own noise filtered out first (LDR: albedo in [0, 1], normals in [-1, 1]).
+    albedo, normal = (oidn.denoise(guide, hdr=False, quality=q) for guide in (albedo, normal))
+    return oidn.denoise(rgb, albedo=albedo, normal=normal, hdr=True, quality=q, clean_aux=True)
 
 
 def guided_integrator(integrator: dict) -> dict:
