@@ -33,7 +33,7 @@ from datagen.core.training import TrainView
 from datagen.dataset.columns import MANIFEST_VERSION, features_schema, manifest_schema, read_features
 from datagen.dataset.layout import SPLITS
 from datagen.pipeline.build import build_dataset
-from datagen.pipeline.executors import PROGRESS_EVERY_S, _run_group
+from datagen.pipeline.executors import PROGRESS_EVERY_S, THREAD_VARIABLES, _run_group, worker_environment
 from datagen.pipeline.folder import DatasetLock
 from datagen.pipeline.plan import dataset_layout, frame_split, plan_shards
 from datagen.pipeline.writer import MAX_GROUP_SHARDS, ShardWriter, shard_groups
@@ -116,6 +116,38 @@ def test_labels_only_builds_in_shard_groups_write_what_each_shard_writes_alone(t
         ShardWriter(scene, layout, render=False).run(job)
     assert label_files(alone) == label_files(tmp_path / "grouped")
     assert comparable(alone) == comparable(tmp_path / "grouped")
+
+
+def _thread_environment() -> dict[str, str | None]:
+    return {name: os.environ.get(name) for name in THREAD_VARIABLES}
+
+
+def test_a_spawned_worker_gets_its_share_of_blas_and_openmp_threads_unless_the_user_set_them(monkeypatch) -> None:
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    for name in THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("OMP_NUM_THREADS", "7")  # the user's own choice stays
+    with worker_environment(3), ProcessPoolExecutor(1, mp_context=mp.get_context("spawn")) as pool:
+        seen = pool.submit(_thread_environment).result()
+    assert seen == {"OMP_NUM_THREADS": "7", "OPENBLAS_NUM_THREADS": "3", "MKL_NUM_THREADS": "3"}
+    assert _thread_environment() == {"OMP_NUM_THREADS": "7", "OPENBLAS_NUM_THREADS": None, "MKL_NUM_THREADS": None}
+
+
+@pytest.mark.render
+def test_a_workers_thread_count_sizes_opencvs_pool_as_well_as_drjits() -> None:
+    import cv2
+
+    from datagen.render.runtime import set_threads, thread_count
+
+    before = thread_count()
+    try:
+        for n in (1, 3):
+            set_threads(n)
+            assert (thread_count(), cv2.getNumThreads()) == (n, n)
+    finally:
+        set_threads(before)
 
 
 def test_a_worker_sends_its_frames_in_few_messages_and_all_of_them_at_each_shards_end(tmp_path: Path) -> None:

@@ -6,7 +6,8 @@ in spawned processes (one scene and one Mitsuba thread pool of ``cores / workers
 each; one worker runs in the build's own process); ``ray`` runs them as Ray tasks on the
 cluster at ``RAY_ADDRESS``, else a local one.
 A worker process is set up in one place, :func:`_bootstrap`: signals, dying with
-its parent, Mitsuba's thread count, and its :class:`~datagen.pipeline.writer.ShardWriter`
+its parent, Mitsuba's and OpenCV's thread counts (and numpy's BLAS and OpenMP's, from
+the environment it is spawned with: :func:`worker_environment`), and its :class:`~datagen.pipeline.writer.ShardWriter`
 (one scene per process, reused by every shard it runs). Labels and manifest rows
 depend on (scene, frame index) only, never on the executor or the worker count.
 """
@@ -29,8 +30,8 @@ from datagen.pipeline.progress import ShardSummary
 from datagen.pipeline.writer import FramesDone, ShardWriter, shard_groups
 from datagen.scene.resolved import Scene
 
-__all__ = ["EXECUTORS", "Executor", "ExecutorName", "LocalExecutor", "RayExecutor", "ctrl_c_flag", "local_threads",
-           "ray_cluster", "run_local", "run_ray"]
+__all__ = ["EXECUTORS", "THREAD_VARIABLES", "Executor", "ExecutorName", "LocalExecutor", "RayExecutor", "ctrl_c_flag",
+           "local_threads", "ray_cluster", "run_local", "run_ray", "worker_environment"]
 
 ExecutorName = Literal["local", "ray"]
 
@@ -74,6 +75,24 @@ def _bootstrap(scene: Scene, layout: Layout, threads: int, render: bool, queue) 
     _die_with_parent()
     _Worker.queue = queue
     _Worker.args = (scene, layout, threads, render)
+
+
+#: The thread pools a native library sizes from its environment when it loads: a spawned
+#: worker gets its share of the cores in each (numpy's BLAS, OpenMP) unless the user set them.
+THREAD_VARIABLES: Final = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+@contextlib.contextmanager
+def worker_environment(threads: int):
+    """:data:`THREAD_VARIABLES` set to ``threads`` for the processes spawned inside (each
+    one the user has not set), restored after."""
+    added = [name for name in THREAD_VARIABLES if name not in os.environ]
+    os.environ.update({name: str(max(1, int(threads))) for name in added})
+    try:
+        yield
+    finally:
+        for name in added:
+            os.environ.pop(name, None)
 
 
 #: A worker sends its frame count to the parent at most this often (and after each shard).
@@ -179,7 +198,8 @@ def run_local(scene: Scene, layout: Layout, jobs: list[ShardJob], workers: int, 
     executor = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_bootstrap,
                                    initargs=(scene, layout, threads, render, queue))
     try:
-        pending = {executor.submit(_pool_run, group): group for group in groups}
+        with worker_environment(threads):  # the workers are spawned by the first submits
+            pending = {executor.submit(_pool_run, group): group for group in groups}
         while pending:
             finished, _ = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
             drain()

@@ -75,10 +75,14 @@ def use_variant(requested: str = "auto") -> str:
 
 
 def set_threads(threads: int) -> None:
-    """Size Dr.Jit's thread pool (one thread gives byte-identical renders)."""
+    """Size Dr.Jit's thread pool (one thread gives byte-identical renders) and OpenCV's (the
+    camera model's blurs and remaps), so that workers sharing a machine each keep to their
+    share of its cores."""
+    import cv2
     import drjit as dr
 
     dr.set_thread_count(max(1, int(threads)))
+    cv2.setNumThreads(max(1, int(threads)))
 
 
 def thread_count() -> int:
