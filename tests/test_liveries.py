@@ -24,6 +24,7 @@ from datagen.assets.liveries import (
     structure_uv,
 )
 from datagen.assets.noise import FADE_LO, NUMPY
+from datagen.core.conventions import SEALANT_PART, texture_part_rng
 from tests.strategies import rotations
 
 SCHEMES = ("grey_camouflage", "two_tone", "high_visibility", "bare_metal")
@@ -253,7 +254,7 @@ def test_the_sealant_is_drawn_from_the_liverys_own_seed_not_from_the_approachs_s
     """So that the markings and the other aircraft's livery, drawn after it, are what they were."""
     livery = Livery.drawn(np.random.default_rng(5), "grey_camouflage", 0.3, length_m=40.0, span_m=40.0,
                           nose_x_m=20.0)
-    own = np.random.default_rng((livery.seed, 1))
+    own = texture_part_rng(livery.seed, SEALANT_PART)
     assert livery.sealant_m == own.uniform(0.02, 0.04)
     assert livery.sealant_dark == own.uniform(0.12, 0.25) + 0.15 * 0.3
 

@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.assets.noise import NUMPY, FractalField, Ops, band_weight, cell_value
+from datagen.core.conventions import SEALANT_PART, texture_part_rng
 
 __all__ = [
     "DIGIT_SEGMENTS",
@@ -188,7 +189,7 @@ class Livery:
         )
         # The sealant's draws come from the livery's own seed, not ``rng``: every draw here and
         # after (the markings, the other aircraft's livery) stays what it was without them.
-        own = np.random.default_rng((livery.seed, 1))
+        own = texture_part_rng(livery.seed, SEALANT_PART)
         return replace(livery, sealant_m=float(own.uniform(0.02, 0.04)),
                        sealant_dark=float(own.uniform(0.12, 0.25) + 0.15 * w))
 

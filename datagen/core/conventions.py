@@ -114,6 +114,7 @@ __all__ = [
     "OTHER_AIRCRAFT_ID",
     "PIXEL_CONVENTION",
     "RIGID_OBJECTS",
+    "SEALANT_PART",
     "WORLD_DIMENSIONS",
     "WORLD_STREAM",
     "approach_rng",
@@ -129,6 +130,7 @@ __all__ = [
     "random_features_rng",
     "render_seed",
     "split_uniform",
+    "texture_part_rng",
     "texture_rng",
     "world_rng",
 ]
@@ -338,3 +340,14 @@ def texture_rng(texture_seed: int) -> np.random.Generator:
     livery, a frame's sensor noise) from its seed, itself drawn from a :func:`world_rng`
     stream and recorded in the manifest (so that the texture can be remade from the row)."""
     return np.random.default_rng(texture_seed)
+
+
+#: The part number of a livery's seam sealant, drawn after the livery (:func:`texture_part_rng`).
+SEALANT_PART: Final[int] = 1
+
+
+def texture_part_rng(texture_seed: int, part: int) -> np.random.Generator:
+    """The RNG of a part of a procedural texture drawn after the texture itself (a livery's
+    seam sealant: :data:`SEALANT_PART`), apart from :func:`texture_rng`'s stream: adding a part
+    shifts none of the texture's draws, nor any draw after them."""
+    return np.random.default_rng((texture_seed, part))  # entropy (seed, part): never texture_rng's
