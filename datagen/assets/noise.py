@@ -40,7 +40,8 @@ class Ops:
 
     ``f32``/``u32`` make a constant of the build (a literal in a kernel); ``param_f32``/
     ``param_u32`` a value that changes between frames or approaches (an opaque input of a
-    kernel, so that a new value compiles no new kernel)."""
+    kernel, so that a new value compiles no new kernel; one already on the device passes
+    as it is)."""
 
     floor: object
     to_u32: object  # float (already floored) -> uint32, wrapping negatives

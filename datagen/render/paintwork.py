@@ -217,7 +217,8 @@ class Paintwork:
             base = look.materials[obj]["metal" if livery.scheme == "bare_metal" else "paint"].roughness
             if "albedo" in textures:
                 textures["albedo"].shade = livery.albedo
-                textures["roughness"].shade = functools.partial(_roughness, livery, float(base))
+                textures["roughness"].set_value("base", base)
+                textures["roughness"].shade = functools.partial(_roughness, livery, textures["roughness"].frame_values)
             if "normal" in textures:
                 textures["normal"].shade = functools.partial(_normal, livery)
             if "markings" in textures:
@@ -281,8 +282,9 @@ def _flat(p: PaintPoint, ops):
     return zero + ops.f32(0.5), zero + ops.f32(0.5), zero + ops.f32(1.0)
 
 
-def _roughness(livery: Livery, base: float, p: PaintPoint, ops):
-    return livery.roughness(base, p, ops)
+def _roughness(livery: Livery, values: dict, p: PaintPoint, ops):
+    """The livery's roughness over the frame's drawn roughness of its paint (``values["base"]``)."""
+    return livery.roughness(values["base"], p, ops)
 
 
 def _normal(livery: Livery, p: PaintPoint, ops):

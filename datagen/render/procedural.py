@@ -64,8 +64,8 @@ def _ops(variant: str) -> Ops:
         clip=dr.clip,
         f32=float,
         u32=int,
-        param_f32=lambda v: dr.opaque(mi.Float, float(v)),
-        param_u32=lambda v: dr.opaque(mi.UInt32, int(v)),
+        param_f32=lambda v: v if isinstance(v, mi.Float) else dr.opaque(mi.Float, float(v)),
+        param_u32=lambda v: v if isinstance(v, mi.UInt32) else dr.opaque(mi.UInt32, int(v)),
         sin=dr.sin,
         sqrt=dr.sqrt,
         exp=dr.exp,
@@ -191,6 +191,28 @@ def _shaded_texture(variant: str):
     return ShadedTexture
 
 
+def _opaque_point(xyz: tuple[float, float, float]):
+    """``xyz`` as a ``mi.Point3f`` of opaque values (the current variant's; ``None`` under a
+    scalar variant, which reads the host copy)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    if mi.variant().startswith("scalar"):
+        return None
+    return mi.Point3f(*(dr.opaque(mi.Float, c) for c in xyz))
+
+
+def _opaque_rows(matrix: np.ndarray) -> tuple | None:
+    """The first three rows of a 4x4 as twelve opaque ``mi.Float`` values, row by row
+    (``None`` under a scalar variant)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    if mi.variant().startswith("scalar"):
+        return None
+    return tuple(dr.opaque(mi.Float, float(v)) for v in matrix[:3].reshape(-1))
+
+
 @functools.cache
 def texture_class(variant: str):
     """A :class:`mitsuba.Texture` whose value is ``shade(x, y, footprint_m, ops)``, a
@@ -216,6 +238,17 @@ def texture_class(variant: str):
             self.camera = (0.0, 0.0, 0.0)
             self.shade = None  # (x, y, footprint_m, ops) -> value (Float, or Color3f when colour)
 
+        @property
+        def camera(self) -> tuple[float, float, float]:
+            """The camera's render-frame position (set per frame; held as opaque device values
+            made when set, so that the render reads it as data)."""
+            return self._camera
+
+        @camera.setter
+        def camera(self, value) -> None:
+            self._camera = tuple(float(c) for c in value)
+            self._camera_jit = _opaque_point(self._camera)
+
         def _at(self, si):
             """``(x, y, footprint_m)`` of the point ``si``, for ``shade``."""
             ops = drjit_ops()
@@ -230,8 +263,7 @@ def texture_class(variant: str):
                     height = max(abs(view[2]), distance / SLANT_STRETCH_MAX)
                     footprint = Slant(footprint, np.float32(view[0] / height), np.float32(view[1] / height))
                 return np.float32(p[0]), np.float32(p[1]), footprint
-            camera = mi.Point3f(*(dr.opaque(mi.Float, float(c)) for c in self.camera))
-            view = si.p - camera
+            view = si.p - self._camera_jit
             distance = dr.norm(view)
             footprint = distance * self.pixel_rad
             if self.front_only:
@@ -275,14 +307,65 @@ def body_texture_class(variant: str):
             self.body_from_render = np.eye(4)
             # Another instance of the same shapes (datagen.scene.traffic): its registry id and
             # its own body frame, so that it wears the paint where it is.
-            self.twin: int | None = None
+            self.twin = None
             self.twin_body_from_render = np.eye(4)
             self.shade = None  # (PaintPoint, ops) -> value (a tuple of three when colour)
+            self._frame_values: dict = {}
+
+        @property
+        def frame_values(self) -> dict:
+            """Numbers a ``shade`` reads that change from frame to frame (:meth:`set_value`):
+            one dict for the texture's life, which a ``shade`` may hold."""
+            return self._frame_values
+
+        def set_value(self, name: str, value: float) -> None:
+            """Set ``frame_values[name]``: an opaque device value (a scalar variant's: float32)."""
+            scalar = mi.variant().startswith("scalar")
+            self._frame_values[name] = np.float32(value) if scalar else dr.opaque(mi.Float, float(value))
+
+        # Each per-frame value is held as opaque device values made when it is set, so that
+        # the render reads it as data (the host copy serves a scalar variant).
+        @property
+        def camera(self) -> tuple[float, float, float]:
+            return self._camera
+
+        @camera.setter
+        def camera(self, value) -> None:
+            self._camera = tuple(float(c) for c in value)
+            self._camera_jit = _opaque_point(self._camera)
+
+        @property
+        def body_from_render(self) -> np.ndarray:
+            return self._body_from_render
+
+        @body_from_render.setter
+        def body_from_render(self, value) -> None:
+            self._body_from_render = np.asarray(value, dtype=np.float64)
+            self._body_jit = _opaque_rows(self._body_from_render)
+
+        @property
+        def twin_body_from_render(self) -> np.ndarray:
+            return self._twin_body_from_render
+
+        @twin_body_from_render.setter
+        def twin_body_from_render(self, value) -> None:
+            self._twin_body_from_render = np.asarray(value, dtype=np.float64)
+            self._twin_jit = _opaque_rows(self._twin_body_from_render)
+
+        @property
+        def twin(self) -> int | None:
+            return self._twin
+
+        @twin.setter
+        def twin(self, value: int | None) -> None:
+            self._twin = None if value is None else int(value)
+            scalar = mi.variant().startswith("scalar")
+            self._twin_id = None if self._twin is None or scalar else dr.opaque(mi.UInt32, self._twin)
 
         def _point(self, si) -> PaintPoint:
             ops = drjit_ops()
-            m = np.asarray(self.body_from_render, dtype=np.float64)
             if ops is NUMPY:  # a scalar variant: one point
+                m = self.body_from_render
                 p = np.array([si.p.x, si.p.y, si.p.z], dtype=np.float64)
                 body = m[:3, :3] @ p + m[:3, 3]
                 nz = float(m[2, :3] @ np.array([si.n.x, si.n.y, si.n.z]))
@@ -291,16 +374,14 @@ def body_texture_class(variant: str):
                 along = across * np.sqrt(1.0 + np.square(wi[:2] / max(abs(wi[2]), MIN_COSINE)))
                 return PaintPoint(np.float32(si.uv.x), np.float32(si.uv.y), *(np.float32(c) for c in body),
                                   np.float32(nz), np.float32(across), np.float32(along[0]), np.float32(along[1]))
-            c = [dr.opaque(mi.Float, float(v)) for v in m[:3].reshape(-1)]
-            if self.twin is not None:  # the twin's hits: its body frame (the instance a ray met)
-                on_twin = dr.reinterpret_array(mi.UInt32, si.instance) == dr.opaque(mi.UInt32, self.twin)
-                twin = np.asarray(self.twin_body_from_render, dtype=np.float64)[:3].reshape(-1)
-                c = [dr.select(on_twin, dr.opaque(mi.Float, float(t)), a) for a, t in zip(c, twin)]
+            c = list(self._body_jit)
+            if self._twin_id is not None:  # the twin's hits: its body frame (the instance a ray met)
+                on_twin = dr.reinterpret_array(mi.UInt32, si.instance) == self._twin_id
+                c = [dr.select(on_twin, t, a) for a, t in zip(c, self._twin_jit)]
             p = si.p
             body = [c[4 * i] * p.x + c[4 * i + 1] * p.y + c[4 * i + 2] * p.z + c[4 * i + 3] for i in range(3)]
             nz = c[8] * si.n.x + c[9] * si.n.y + c[10] * si.n.z
-            camera = mi.Point3f(*(dr.opaque(mi.Float, float(v)) for v in self.camera))
-            across = dr.norm(p - camera) * self.pixel_rad
+            across = dr.norm(p - self._camera_jit) * self.pixel_rad
             inverse = 1.0 / dr.maximum(dr.abs(si.wi.z), MIN_COSINE)
             along_s = across * dr.sqrt(1.0 + dr.square(si.wi.x * inverse))
             along_t = across * dr.sqrt(1.0 + dr.square(si.wi.y * inverse))
