@@ -161,11 +161,22 @@ def _series_loop(ops: Ops, rows: dict[str, np.ndarray], term, footprint_m, outpu
 @functools.cache
 def _shaded_texture(variant: str):
     """The base of this module's textures: ``eval`` and its kin from the subclass's
-    ``_value(si)`` (a ``Color3f`` where ``colour``, else a ``Float``)."""
+    ``_value(si)`` (a ``Color3f`` where ``colour``, else a ``Float``), and the camera's
+    render-frame position ``camera`` (set per frame; held as opaque device values made when
+    set, so that the render reads it as data: ``_camera_jit``)."""
     import mitsuba as mi
 
     class ShadedTexture(mi.Texture):
         colour = False
+
+        @property
+        def camera(self) -> tuple[float, float, float]:
+            return self._camera
+
+        @camera.setter
+        def camera(self, value) -> None:
+            self._camera = tuple(float(c) for c in value)
+            self._camera_jit = _opaque_point(self._camera)
 
         def eval(self, si, active=True):
             v = self._value(si)
@@ -237,17 +248,6 @@ def texture_class(variant: str):
             self.front_only = front_only
             self.camera = (0.0, 0.0, 0.0)
             self.shade = None  # (x, y, footprint_m, ops) -> value (Float, or Color3f when colour)
-
-        @property
-        def camera(self) -> tuple[float, float, float]:
-            """The camera's render-frame position (set per frame; held as opaque device values
-            made when set, so that the render reads it as data)."""
-            return self._camera
-
-        @camera.setter
-        def camera(self, value) -> None:
-            self._camera = tuple(float(c) for c in value)
-            self._camera_jit = _opaque_point(self._camera)
 
         def _at(self, si):
             """``(x, y, footprint_m)`` of the point ``si``, for ``shade``."""
@@ -324,16 +324,7 @@ def body_texture_class(variant: str):
             self._frame_values[name] = np.float32(value) if scalar else dr.opaque(mi.Float, float(value))
 
         # Each per-frame value is held as opaque device values made when it is set, so that
-        # the render reads it as data (the host copy serves a scalar variant).
-        @property
-        def camera(self) -> tuple[float, float, float]:
-            return self._camera
-
-        @camera.setter
-        def camera(self, value) -> None:
-            self._camera = tuple(float(c) for c in value)
-            self._camera_jit = _opaque_point(self._camera)
-
+        # the render reads it as data (the host copy serves a scalar variant), as the camera is.
         @property
         def body_from_render(self) -> np.ndarray:
             return self._body_from_render
