@@ -1,7 +1,7 @@
 """Rendering cost per frame at the config's full resolution (2048x1080 by default).
 
     python bench/bench_render.py [--config scenes/wingcam55.yaml] [--spp 4 16 64] [--frames 3]
-                                 [--every 1] [--variant auto] [--denoise off|oidn] [--guides]
+                                 [--every 1] [--variant auto] [--denoise off|oidn] [--guides] [--frozen]
     python bench/bench_render.py --randomizers [--frames 8]
     python bench/bench_render.py --size 64x34 --spp 1 --frames 16 --every 7 --threads 1   # the fixed per-frame cost
 
@@ -13,7 +13,8 @@ to all-off, and the process's peak RSS.
 ``--size WxH`` renders at another resolution (the same field of view): at 64x34 and 1 spp
 the render's own work is negligible and what remains is the fixed per-frame cost (tracing
 the kernel, posing, the camera model's fixed costs). ``--threads`` sizes Dr.Jit's thread pool
-(one, with ``taskset -c 0``, for the one-core figures).
+(one, with ``taskset -c 0``, for the one-core figures). ``--frozen`` turns the frozen render
+on (:mod:`datagen.render.frozen`): the path tracing recorded once and replayed.
 
 ``--variant cuda_ad_rgb`` renders and denoises on the GPU where one is (nothing else
 changes: the denoiser takes the render's Dr.Jit tensors on their device).
@@ -61,6 +62,8 @@ def main() -> None:
     parser.add_argument("--randomizers", action="store_true", help="time each world randomizer and all of them")
     parser.add_argument("--size", default=None, help="WxH: render at this resolution instead of the config's")
     parser.add_argument("--threads", type=int, default=None, help="Dr.Jit threads (default: every core)")
+    parser.add_argument("--frozen", action="store_true", help="render.frozen on: the path tracing recorded once "
+                        "and replayed (datagen.render.frozen)")
     args = parser.parse_args()
     config = load_config(args.config)
     if args.size is not None:
@@ -74,6 +77,8 @@ def main() -> None:
         config = override_config(config, {"render.denoise": args.denoise})
     if args.guides:
         config = override_config(config, {"render.denoise_guides": True})
+    if args.frozen:
+        config = override_config(config, {"render.frozen": True})
     if args.randomizers:
         randomizers(config, args)
         return
@@ -106,7 +111,8 @@ def main() -> None:
                   f"denoise {denoise_s / k:5.2f} s/frame, whole frame {total_s / k:6.2f} s/frame, "
                   f"host work (outside mi.render and the denoiser) {(total_s - render_s - denoise_s) / k:5.2f} s/frame "
                   f"= {100 * (1 - (render_s + denoise_s) / total_s):4.1f}%, "
-                  f"kernels compiled after warm-up {compiles}, peak RSS {peak:,.0f} MiB")
+                  f"kernels compiled after warm-up {compiles}, render recordings {renderer.recordings} "
+                  f"({renderer.refused_recordings} refused, those frames traced), peak RSS {peak:,.0f} MiB")
             rest = rest_of_frame(stages)
             print("    stages: " + ", ".join(f"{name} {t / k:.3f} s" for name, t in rest)
                   + f" ({sum(t for _, t in rest) / total_s:.0%} of the frame)")

@@ -247,7 +247,10 @@ def test_a_seam_is_edged_by_a_wider_band_of_sealant_that_darkens_the_paint_by_it
     t = np.array([row * pt + 0.0065, row * pt + 0.1], np.float32)
     zero, tiny = np.zeros(2, np.float32), np.full(2, 1e-4, np.float32)
     band, inside = np.stack(livery.albedo(PaintPoint(s, t, zero, zero, zero, zero + 1, tiny), NUMPY), -1)
-    assert band == pytest.approx(inside * (1.0 - livery.sealant_dark), rel=1e-4)
+    # A channel the panel's tone lifts past 1 is clipped there inside the panel, not in the band.
+    unclipped = inside < np.float32(1.0)
+    assert unclipped.any()
+    assert band[unclipped] == pytest.approx(inside[unclipped] * (1.0 - livery.sealant_dark), rel=1e-4)
 
 
 def test_the_sealant_is_drawn_from_the_liverys_own_seed_not_from_the_approachs_stream() -> None:

@@ -896,6 +896,14 @@ class RenderConfig(_Section):
     integrator; the beauty image is unchanged by it). Off by default: measured, they
     gain 0.1-0.3 dB and double the time in ``mi.render``."""
 
+    frozen: Flag = False
+    """Record the path tracing once and replay it for later frames (Dr.Jit's ``dr.freeze``;
+    a JIT variant): the frame's values reach the recording as data, so a replay makes the
+    traced render's image bit for bit (``bench/bench_freeze.py``; ``tests/test_frozen.py``,
+    two approaches with every randomizer on) without tracing the kernel again. Off by
+    default: Dr.Jit records again at most approach boundaries (its dry run of the replay
+    fails), and each new recording compiles kernels anew (docs/performance.md)."""
+
     denoise_quality: Literal["fast", "balanced", "high"] = "high"
     """OIDN's filter quality: ``fast`` takes about half the time of ``high``."""
 

@@ -114,6 +114,7 @@ class ShardWriter:
         self._stages: dict[str, float] = {}  # the last rendered frame's seconds per stage
         self._census = None  # the kernels each rendered frame launches (datagen.render.runtime.KernelCensus)
         self._first_frame = True  # this process has rendered no frame yet
+        self._recordings = 0  # the frozen render's recordings so far (datagen.render.frozen)
         if render:
             from datagen.render.renderer import Renderer  # Mitsuba only when rendering
             from datagen.render.runtime import KernelCensus
@@ -145,6 +146,7 @@ class ShardWriter:
         self._stop = stop or (lambda: False)
         rows, excluded, labels = [], Counter(), 0
         rendered, render_s, denoise_s, frame_s, blank, blank_frames, compiled = 0, 0.0, 0.0, 0.0, 0, 0, 0
+        recorded = 0
         stages: Counter = Counter()  # seconds per stage of the rendered frames
         self.states.prefetch(job.frames)  # the shard's approach chains, simulated together
         approaches = {} if approaches is None else approaches  # each chain's weather and liveries, drawn once
@@ -165,6 +167,9 @@ class ShardWriter:
                     rendered += 1
                     new = self._census.new_kernels()
                     compiled += 0 if self._first_frame else new  # the first frame compiles (or loads) them all
+                    recordings = self.renderer.recordings
+                    recorded += 0 if self._first_frame else recordings - self._recordings  # the first frame records
+                    self._recordings = recordings
                     self._first_frame = False
                     render_s += row["render_s"]
                     blank += self._blank
@@ -177,7 +182,7 @@ class ShardWriter:
         self._wait_for_writes(0)
         summary = ShardSummary(job.name, len(job.frames), labels, dict(excluded), rendered, render_s, denoise_s,
                                frame_s, stages=dict(stages), blank=blank, blank_frames=blank_frames,
-                               compiled=compiled, per_class=per_class.tolist())
+                               compiled=compiled, recorded=recorded, per_class=per_class.tolist())
         write_manifest(self.layout.manifest(job), rows, summary.counts())
         summary.wall_s = time.perf_counter() - start
         return summary

@@ -119,8 +119,9 @@ def aerial_class(variant: str):
             def cast(origin, active):
                 """(distance, 0 where nothing is met; the cloud layer met: its index in
                 ``("sea", *CLOUD_LAYERS)``, 0 or -1 for anything else) along ``d``."""
-                si = scene.ray_intersect(mi.Ray3f(origin, d), ray_flags=mi.RayFlags.Minimal, coherent=True,
-                                         active=active)
+                # The preliminary intersection: the distance and the shape met, without the
+                # surface interaction (a call per shape a frozen render cannot record).
+                si = scene.ray_intersect_preliminary(mi.Ray3f(origin, d), coherent=True, active=active)
                 hit = active & si.is_valid()
                 shape = dr.reinterpret_array(mi.UInt32, si.shape)
                 known = hit & (shape + 1 < dr.width(codes))

@@ -65,10 +65,34 @@ def jit_array(cls, values: ArrayLike):
     """``values`` as the Dr.Jit array type ``cls`` (``mi.Float``, ``mi.UInt32``,
     ``mi.TensorXf``, a scalar variant's dynamic arrays), made from :func:`aligned` memory
     of its own element type (memory of another type would be converted by a copy wherever
-    numpy put it): how every numpy array reaches Dr.Jit."""
+    numpy put it): how every numpy array reaches Dr.Jit.
+
+    Under a JIT variant the values are then copied into memory Dr.Jit allocated: Dr.Jit maps
+    numpy memory into an array without copying, and a recording of the render
+    (``dr.freeze``, :mod:`datagen.render.frozen`) replays with the memory a mapped array
+    had when it recorded, not the array it is given (measured, Dr.Jit 1.5: stale values,
+    and a loop bound read from freed memory that never ended); an array in Dr.Jit's own
+    memory it takes as the input it is."""
     import drjit as dr
 
-    return cls(aligned(values, np.uint32 if dr.type_v(cls) == dr.VarType.UInt32 else np.float32))
+    out = cls(aligned(values, np.uint32 if dr.type_v(cls) == dr.VarType.UInt32 else np.float32))
+    if not dr.is_jit_v(cls):
+        return out
+    if dr.is_tensor_v(cls):
+        return cls(_owned(out.array), out.shape)
+    return _owned(out)
+
+
+def _owned(mapped):
+    """A flat JIT array's values in memory Dr.Jit allocated (a scatter: Dr.Jit folds a copy
+    it can see through, such as ``zeros + a`` or a gather of every index, back to ``a``)."""
+    import drjit as dr
+
+    n = dr.width(mapped)
+    out = dr.zeros(type(mapped), n)
+    dr.scatter(out, mapped, dr.arange(dr.uint32_array_t(type(mapped)), n))
+    dr.eval(out)
+    return out
 
 
 def aligned(values: ArrayLike, dtype=np.float32) -> NDArray:

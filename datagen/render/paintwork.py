@@ -199,6 +199,10 @@ class Paintwork:
             for texture in textures.values():
                 texture.twin = registry_ids.get(obj)
 
+    def textures(self) -> tuple:
+        """Every procedural texture of the paintwork (each object's albedo, roughness, normal, markings)."""
+        return tuple(t for textures in self._textures.values() for t in textures.values())
+
     def apply(self, look: FrameLook, render_from_body: dict[str, NDArray], camera_render,
               render_from_twin: dict[str, NDArray] | None = None) -> None:
         """Pose the frame's paint (``render_from_body``: each object's 4x4, and its twin's in

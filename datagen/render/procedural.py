@@ -64,8 +64,8 @@ def _ops(variant: str) -> Ops:
         clip=dr.clip,
         f32=float,
         u32=int,
-        param_f32=lambda v: v if isinstance(v, mi.Float) else dr.opaque(mi.Float, float(v)),
-        param_u32=lambda v: v if isinstance(v, mi.UInt32) else dr.opaque(mi.UInt32, int(v)),
+        param_f32=lambda v: v if isinstance(v, mi.Float) else _param(mi.Float, float(v)),
+        param_u32=lambda v: v if isinstance(v, mi.UInt32) else _param(mi.UInt32, int(v)),
         sin=dr.sin,
         sqrt=dr.sqrt,
         exp=dr.exp,
@@ -74,6 +74,126 @@ def _ops(variant: str) -> Ops:
         select=dr.select,
     )
     return dataclasses.replace(ops, series_loop=functools.partial(_series_loop, ops), only_where=_only_where)
+
+
+class _Reading:
+    """A texture's kernel being traced (:meth:`ShadedTexture._value`): where its values come from.
+
+    ``collect``: a dry trace (:meth:`ShadedTexture.prepare`) that notes every value and table
+    the texture's ``shade`` asks for, in the order asked (what it makes of them is never
+    evaluated); otherwise the values come from the device values those notes made (an
+    opaque scalar each, as each value was when made inside the render: the same kernel),
+    and the tables from the device arrays, in the same order: the kernel reads them as
+    data, so that a recording of it (``dr.freeze``) replays with the next approach's values."""
+
+    def __init__(self, texture, collect: bool) -> None:
+        self.texture, self.collect = texture, collect
+        self.values: dict = {"f32": [], "u32": []}
+        self.tables: list = []
+        self.read = {"f32": 0, "u32": 0, "tables": 0}
+
+    def __enter__(self) -> _Reading:
+        _READING.append(self)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        _READING.pop()
+
+    def param(self, cls, value):
+        import drjit as dr
+
+        kind = "u32" if dr.type_v(cls) == dr.VarType.UInt32 else "f32"
+        i = self.read[kind]
+        self.read[kind] += 1
+        if self.collect:
+            self.values[kind].append(value)
+            # A read like the render's, from a stand-in: Dr.Jit then sees the same expressions.
+            return dr.gather(cls, _stand_in(cls), i)
+        held = self.texture._book[kind]
+        if i >= len(held):
+            self.check()
+        return held[i]
+
+    def table(self, cls, values: np.ndarray):
+        i = self.read["tables"]
+        self.read["tables"] += 1
+        if self.collect:  # uploaded after the dry trace (not inside its loops)
+            self.tables.append((cls, values))
+            return _stand_in(cls)
+        return self.texture._book["tables"][i]
+
+    def check(self) -> None:
+        """Every value the notes hold was read, and no more (a ``shade`` whose asks depend on
+        anything but its own state would read another value's slot)."""
+        book = self.texture._book
+        held = {"f32": book["n_f32"], "u32": book["n_u32"], "tables": len(book["tables"])}
+        if held != self.read:  # (asked mid-trace: it has read more than they hold)
+            raise RuntimeError(f"{type(self.texture).__name__}: the kernel read {self.read} values, "
+                               f"its notes hold {held}")
+
+
+def _same_shade(a, b) -> bool:
+    """Whether two ``shade`` callables compute the same: one function, bound to or partially
+    applied with the same objects (numbers: equal ones). An owner sets a texture's shade
+    every frame; its values are noted again only when it changed."""
+    if a is b:
+        return True
+    if isinstance(a, functools.partial) and isinstance(b, functools.partial):
+        return (_same_shade(a.func, b.func) and len(a.args) == len(b.args)
+                and all(_same_argument(x, y) for x, y in zip(a.args, b.args, strict=True))
+                and a.keywords.keys() == b.keywords.keys()
+                and all(_same_argument(a.keywords[k], b.keywords[k]) for k in a.keywords))
+    self_a, self_b = getattr(a, "__self__", None), getattr(b, "__self__", None)
+    if self_a is not None and self_b is not None:  # bound methods
+        return getattr(a, "__func__", None) is getattr(b, "__func__", None) and self_a is self_b
+    return False
+
+
+def _same_argument(x, y) -> bool:
+    if x is y:
+        return True
+    if isinstance(x, (bool, int, float, str)) and type(x) is type(y):
+        return x == y
+    return False
+
+
+def _loops_traced_once():
+    """A scope in which Dr.Jit traces a loop's body once: with ``OptimizeLoops`` it traces
+    it again where it finds a state variable the body leaves unchanged, which the dry trace
+    and the render need not find alike (their points differ), and each trace reads values."""
+    import drjit as dr
+
+    return dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, False)
+
+
+@functools.cache
+def _stand_in(cls):
+    """What a dry trace reads its values from: zeros, more than any texture asks for."""
+    import drjit as dr
+
+    out = dr.zeros(cls, 1 << 16)
+    dr.eval(out)
+    return out
+
+
+#: The textures whose kernels are being traced, innermost last (a texture's field may trace another's).
+_READING: list[_Reading] = []
+
+
+def _param(cls, value):
+    """``value`` as a kernel input: from the tracing texture's notes, or (outside any) an
+    opaque value of its own."""
+    import drjit as dr
+
+    return _READING[-1].param(cls, value) if _READING else dr.opaque(cls, value)
+
+
+def _table(cls, values: np.ndarray):
+    """``values`` (a series' rows) as a device array: from the tracing texture's notes, or
+    (outside any) uploaded now."""
+    if _READING:
+        return _READING[-1].table(cls, values)
+    return jit_array(cls, values)
 
 
 def _only_where(active, initial: tuple, fn) -> tuple:
@@ -139,9 +259,9 @@ def _series_loop(ops: Ops, rows: dict[str, np.ndarray], term, footprint_m, outpu
     if n <= UNROLLED:
         return total
 
-    table = {name: jit_array(mi.UInt32 if values.dtype == np.uint32 else mi.Float, values)
+    # device arrays, not literals: a new draw compiles no kernel
+    table = {name: _table(mi.UInt32 if values.dtype == np.uint32 else mi.Float, values)
              for name, values in rows.items()}
-    dr.make_opaque(*table.values())  # device arrays, not literals: a new draw compiles no kernel
 
     def cond(i, *total):
         last = dr.minimum(i, n - 1)
@@ -177,6 +297,47 @@ def _shaded_texture(variant: str):
         def camera(self, value) -> None:
             self._camera = tuple(float(c) for c in value)
             self._camera_jit = _opaque_point(self._camera)
+
+        @property
+        def shade(self):
+            return self._shade
+
+        @shade.setter
+        def shade(self, value) -> None:
+            if not _same_shade(value, getattr(self, "_shade", None)):
+                self._stale = True
+            self._shade = value
+
+        def prepare(self) -> None:
+            """Note the values and tables the kernel of the current ``shade`` reads and hold
+            them as device arrays (a dry trace of :meth:`_value`, only when ``shade`` was set
+            since). The render reads them from there as data."""
+            if not getattr(self, "_stale", True) or self._shade is None or drjit_ops() is NUMPY:
+                return
+            import drjit as dr
+
+            # The stand-in point holds data, as the render's points do (literals would fold
+            # away a branch Dr.Jit then never traces), two lanes wide as theirs are wide.
+            si = dr.zeros(mi.SurfaceInteraction3f, 2)
+            dr.make_opaque(si)
+            with _Reading(self, collect=True) as notes, _loops_traced_once():
+                self._value_of(si)
+            f32 = np.asarray(notes.values["f32"], dtype=np.float32)
+            u32 = np.asarray(notes.values["u32"], dtype=np.uint32)
+            self._book = {"f32": tuple(dr.opaque(mi.Float, v) for v in f32.tolist()),
+                          "u32": tuple(dr.opaque(mi.UInt32, v) for v in u32.tolist()),
+                          "tables": tuple(jit_array(cls, values) for cls, values in notes.tables),
+                          "n_f32": len(f32), "n_u32": len(u32)}
+            self._stale = False
+
+        def _value(self, si):
+            if drjit_ops() is NUMPY:  # a scalar variant: numpy's numbers, no kernel
+                return self._value_of(si)
+            self.prepare()
+            with _Reading(self, collect=False) as reading, _loops_traced_once():
+                v = self._value_of(si)
+            reading.check()
+            return v
 
         def eval(self, si, active=True):
             v = self._value(si)
@@ -273,7 +434,7 @@ def texture_class(variant: str):
                 footprint = Slant(footprint, view.x / height, view.y / height)
             return si.p.x, si.p.y, footprint
 
-        def _value(self, si):
+        def _value_of(self, si):
             with np.errstate(over="ignore"):
                 return self.shade(*self._at(si), drjit_ops())
 
@@ -378,7 +539,7 @@ def body_texture_class(variant: str):
             along_t = across * dr.sqrt(1.0 + dr.square(si.wi.y * inverse))
             return PaintPoint(si.uv.x, si.uv.y, *body, nz, across, along_s, along_t)
 
-        def _value(self, si):
+        def _value_of(self, si):
             with np.errstate(over="ignore"):
                 v = self.shade(self._point(si), drjit_ops())
             return mi.Color3f(*v) if self.colour else v

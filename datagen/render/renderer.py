@@ -38,6 +38,7 @@ from datagen.core.conventions import RIGID_OBJECTS, object_id
 from datagen.core.transforms import make_transform
 from datagen.render.aerial import AIRLIGHT_STEP_PX
 from datagen.render.atmosphere import Atmosphere
+from datagen.render.frozen import frozen_render
 from datagen.render.mitsuba import (
     jit_array,
     mitsuba_mesh,
@@ -99,6 +100,10 @@ class FrameRenderer(Protocol):
     def render(self, state: FrameState, look: FrameLook, seed: int, *, geometry: bool = False) -> RenderResult:
         """The frame, posed and rendered with Mitsuba's sampler seed ``seed``."""
 
+    @property
+    def recordings(self) -> int:
+        """How many times the path tracing was recorded (0: it is traced every frame)."""
+
     def feature_visibility(self, state: FrameState, features: FeatureTable
                            ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
         """Per feature: the share of its points the camera sees, and whether it sees the centre."""
@@ -140,6 +145,10 @@ class Renderer(RayCasting):
         #: Run the geometry pass on every frame: the camera model and the image statistics need it.
         self.always_geometry = self.sensor is not None or self.world.any
         self.spp = spp or config.render.spp
+        # The path tracing recorded once and replayed (datagen.render.frozen); None: traced each frame.
+        self._frozen = frozen_render(self.spp) if config.render.frozen and not self.variant.startswith("scalar") \
+            else None
+        self.refused_recordings = 0  # recordings Dr.Jit refused (those frames traced instead)
         self.denoise = config.render.denoise
         self.guides = self.denoise != "off" and config.render.denoise_guides
         if self.denoise != "off":
@@ -239,6 +248,7 @@ class Renderer(RayCasting):
 
     def _build(self, hose_points: int) -> None:
         mi, dr = self._mi, self._dr
+        self._traced = False  # the new scene's first render is traced (datagen.render.frozen)
         hold_scene(self)
         self.release()
         description = self._description()
@@ -344,6 +354,9 @@ class Renderer(RayCasting):
         p["earth.to_world"] = mi.Transform4f(make_transform(np.eye(3), [0.0, 0.0, -origin[2]]).tolist())
         self.world.apply(p, look, float(origin[2]), irradiance, camera_render=self._camera_render, sun_direction=sun)
         p.update()
+        with clock.stage("texture values"):  # outside the render: a recording of it reads them as data
+            for texture in (*self.world.textures(), *self.paintwork.textures()):
+                texture.prepare()
 
     @property
     def camera_render(self) -> NDArray[np.float64]:
@@ -437,11 +450,34 @@ class Renderer(RayCasting):
         p[f"{prefix}.metallic.value"] = m.metallic
         p[f"{prefix}.specular"] = m.specular
 
+    def path_trace(self, seed: int):
+        """The posed scene path traced with sampler seed ``seed``: Mitsuba's image (not yet
+        evaluated), through the frozen render where there is one."""
+        if self._frozen is None or not self._traced:
+            # A scene's first render sets up what Mitsuba makes on first use (measured: a
+            # recording of it fails, a call to objects the recording cannot find).
+            self._traced = True
+            return self._mi.render(self.scene, seed=seed, spp=self.spp)
+        try:
+            return self._frozen(self.scene, self._dr.opaque(self._mi.UInt32, seed))
+        except RuntimeError as error:
+            # A recording that met an object Mitsuba made on first use inside it (measured:
+            # a cloud layer's new faces) is refused; this frame is traced, which makes it.
+            if "record()" not in str(error):
+                raise
+            self.refused_recordings += 1
+            return self._mi.render(self.scene, seed=seed, spp=self.spp)
+
+    @property
+    def recordings(self) -> int:
+        """How many times the frozen render recorded the path tracing (0: traced every frame)."""
+        return 0 if self._frozen is None else self._frozen.n_recordings
+
     def render(self, state: FrameState, look: FrameLook, seed: int, *, geometry: bool = False) -> RenderResult:
         """Pose the scene and render it: exposure-scaled linear RGB seen through the air,
         plus the geometry pass (depth, object ids) when ``geometry`` is asked for or the
         aerial perspective needs it. The result's ``stages`` says where the time went."""
-        mi, clock = self._mi, StageClock()
+        clock = StageClock()
         with clock.stage("pose"):  # the cloud-lighting probe inside it is a stage of its own
             self.pose(state, look, clock)
         haze = look.haze_visibility_m is not None
@@ -455,7 +491,7 @@ class Renderer(RayCasting):
             with clock.stage(AERIAL_PERSPECTIVE):
                 self._set_air(state, look)
         with clock.stage(PATH_TRACING):
-            image = mi.render(self.scene, seed=seed, spp=self.spp)
+            image = self.path_trace(seed)
             self._dr.eval(image)  # the render happens here (Dr.Jit evaluates lazily)
             self._dr.sync_thread()
         render_s = clock.seconds[PATH_TRACING]

@@ -251,6 +251,11 @@ class World:
             entries[name] = self.cloud_meshes[name]
         return entries
 
+    def textures(self) -> tuple:
+        """Every procedural texture of the world (the clouds', the sea's)."""
+        clouds = tuple(t for pair in (self._cloud_textures or {}).values() for t in pair)
+        return (*clouds, *(t for t in (self._sea_texture, *(self._wave_textures or ())) if t is not None))
+
     def cloud_opacities(self) -> tuple:
         """The cloud layers' opacity textures in :data:`CLOUD_LAYERS` order (none without
         clouds): what each frame's layer draws, asked at any render-frame point."""

@@ -1,0 +1,168 @@
+"""The frozen render (:mod:`datagen.render.frozen`): replayed frames are the traced frames."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mitsuba")
+pytestmark = pytest.mark.render
+
+#: Frames of two approach chains at wingcam55's defaults (7 frames a chain): the second
+#: chain's sky, clouds, sea, ground, liveries and sensor draws are all new; its later frames
+#: replay a recording made with the first chain's values or its own.
+FRAMES = (0, 1, 2, 7, 8, 9, 10)
+
+
+def _frames(frozen: bool) -> tuple[list[np.ndarray], int, int]:
+    from datagen.config import load_config, override_config
+    from datagen.pipeline.frame import draw_frame
+    from datagen.render.renderer import Renderer
+    from datagen.render.runtime import set_threads, use_variant
+    from datagen.scene.approach import FrameStates
+    from datagen.scene.resolved import Scene
+
+    use_variant("llvm_ad_rgb")
+    set_threads(1)
+    config = override_config(load_config("wingcam55"), {
+        "camera.width": 48, "camera.height": 26, "render.spp": 1, "render.denoise": "off",
+        "render.frozen": frozen})  # off is the default
+    scene = Scene.resolve(config)
+    states, renderer = FrameStates(config), Renderer(scene)
+    images = []
+    for i in FRAMES:
+        draws = draw_frame(scene, states, i)
+        images.append(renderer.render(draws.state, draws.look, draws.render_seed).rgb)
+    recordings, refused = renderer.recordings, renderer.refused_recordings
+    renderer.release()
+    return images, recordings, refused
+
+
+def test_frozen_frames_are_the_traced_frames_bit_for_bit_over_two_approaches_with_every_randomizer_on() -> None:
+    replayed, recordings, refused = _in_own_process(_frames, True)
+    traced, none, _ = _in_own_process(_frames, False)
+    assert none == 0
+    # A handful of recordings (one refused, its frame traced), the other frames replayed.
+    assert 1 <= recordings <= 3 + refused and refused <= 1
+    for i, a, b in zip(FRAMES, replayed, traced, strict=True):
+        assert np.array_equal(a, b), f"frame {i}: {np.abs(a - b).max()}"
+
+
+def test_a_texture_notes_its_values_again_only_when_its_shade_computes_something_else() -> None:
+    import functools
+
+    import mitsuba as mi
+
+    from datagen.render.procedural import texture_class
+    from datagen.render.runtime import use_variant
+
+    use_variant("llvm_ad_rgb")
+
+    def shade(gain: float, offset, x, y, footprint_m, ops):
+        return x * ops.param_f32(gain) + ops.param_f32(offset[0])
+
+    texture = texture_class(mi.variant())()
+    offset = [0.25]
+    texture.shade = functools.partial(shade, 2.0, offset)
+    texture.prepare()
+    notes = texture._book
+    assert notes["n_f32"] == 2 and [float(v[0]) for v in notes["f32"]] == [2.0, 0.25]
+    texture.shade = functools.partial(shade, 2.0, offset)  # set again each frame: the same computation
+    texture.prepare()
+    assert texture._book is notes
+    texture.shade = functools.partial(shade, 3.0, offset)  # another number: noted again
+    texture.prepare()
+    assert texture._book is not notes and [float(v[0]) for v in texture._book["f32"]] == [3.0, 0.25]
+    notes = texture._book
+    texture.shade = functools.partial(shade, 3.0, [0.25])  # an equal but other object: noted again
+    texture.prepare()
+    assert texture._book is not notes
+
+
+def test_a_texture_whose_kernel_reads_other_values_than_it_noted_is_refused() -> None:
+    import drjit as dr
+    import mitsuba as mi
+
+    from datagen.render.procedural import texture_class
+    from datagen.render.runtime import use_variant
+
+    use_variant("llvm_ad_rgb")
+    extra = []
+
+    def shade(x, y, footprint_m, ops):  # asks for one more value each time it is traced
+        extra.append(1.0)
+        return x * sum((ops.param_f32(v) for v in extra), ops.f32(0.0))
+
+    texture = texture_class(mi.variant())()
+    texture.shade = shade
+    texture.prepare()
+    with pytest.raises(RuntimeError, match="read"):
+        texture.eval_1(dr.zeros(mi.SurfaceInteraction3f, 4))
+
+
+def _in_own_process(fn, *args):
+    """``fn(*args)`` in a fresh process, as a build's worker is: Mitsuba objects other tests
+    left alive in this one are calls a recording cannot follow (it records again or refuses)."""
+    import concurrent.futures
+    import multiprocessing
+
+    with concurrent.futures.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        return pool.submit(fn, *args).result()
+
+
+def _table_replays() -> tuple[list[bool], int]:
+    """A frozen render of a texture that gathers from a :func:`jit_array` table in a loop
+    (as the noise series do), the table replaced between calls: per call whether the replay
+    is the traced render, and the recordings made."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from datagen.render.mitsuba import jit_array
+    from datagen.render.runtime import set_threads, use_variant
+
+    use_variant("llvm_ad_rgb")
+    set_threads(1)
+
+    class Table(mi.Texture):
+        def __init__(self):
+            super().__init__(mi.Properties())
+            self.table = jit_array(mi.Float, np.full(4, 0.5))
+
+        def eval(self, si, active=True):
+            def body(i, total):
+                return i + 1, total + dr.gather(mi.Float, self.table, i)
+
+            _, total = dr.while_loop((mi.UInt32(si.uv.x * 0.0), si.uv.x * 0.0), lambda i, t: i < 3, body)
+            return mi.Color3f(total / 3.0)
+
+        def eval_1(self, si, active=True):
+            return self.eval(si, active).x
+
+        def mean(self):
+            return 0.5
+
+    texture = Table()
+    placed = mi.ScalarTransform4f().translate([0, 0, 2]) @ mi.ScalarTransform4f().rotate([1, 0, 0], 180)
+    scene = mi.load_dict({
+        "type": "scene", "integrator": {"type": "path"},
+        "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 8, "height": 8}},
+        "light": {"type": "constant"},
+        "wall": {"type": "rectangle", "to_world": placed, "bsdf": {"type": "diffuse", "reflectance": texture}},
+    }, optimize=False)
+    frozen = dr.freeze(lambda s, seed: mi.render(s, seed=seed, spp=1))
+    seed = dr.opaque(mi.UInt32, 0)
+    kept, same = [], []  # the tables replaced stay alive: a replay reading one would see its old values
+    for value in (0.5, 0.9, 0.1, 0.7):
+        kept.append(texture.table)
+        texture.table = jit_array(mi.Float, np.full(4, value))
+        traced, replayed = np.array(mi.render(scene, seed=seed, spp=1)), np.array(frozen(scene, seed))
+        same.append(bool(np.array_equal(traced, replayed)))
+    return same, frozen.n_recordings
+
+
+def test_a_frozen_render_reads_the_arrays_jit_array_made_after_it_recorded() -> None:
+    """Dr.Jit replays an array mapped from numpy memory at the memory it recorded;
+    :func:`~datagen.render.mitsuba.jit_array` gives it arrays in its own memory."""
+    same, recordings = _in_own_process(_table_replays)
+    assert recordings == 1  # one recording, three replays
+    assert all(same), same
