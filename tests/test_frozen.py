@@ -66,7 +66,7 @@ def test_a_texture_notes_its_values_again_only_when_its_shade_computes_something
     texture.shade = functools.partial(shade, 2.0, offset)
     texture.prepare()
     notes = texture._book
-    assert notes["n_f32"] == 2 and [float(v[0]) for v in notes["f32"]] == [2.0, 0.25]
+    assert len(notes["f32"]) == 2 and [float(v[0]) for v in notes["f32"]] == [2.0, 0.25]
     texture.shade = functools.partial(shade, 2.0, offset)  # set again each frame: the same computation
     texture.prepare()
     assert texture._book is notes
@@ -111,13 +111,13 @@ def _in_own_process(fn, *args):
 
 
 def _table_replays() -> tuple[list[bool], int]:
-    """A frozen render of a texture that gathers from a :func:`jit_array` table in a loop
+    """A frozen render of a texture that gathers from a :func:`scene_array` table in a loop
     (as the noise series do), the table replaced between calls: per call whether the replay
     is the traced render, and the recordings made."""
     import drjit as dr
     import mitsuba as mi
 
-    from datagen.render.mitsuba import jit_array
+    from datagen.render.mitsuba import scene_array
     from datagen.render.runtime import set_threads, use_variant
 
     use_variant("llvm_ad_rgb")
@@ -126,7 +126,7 @@ def _table_replays() -> tuple[list[bool], int]:
     class Table(mi.Texture):
         def __init__(self):
             super().__init__(mi.Properties())
-            self.table = jit_array(mi.Float, np.full(4, 0.5))
+            self.table = scene_array(mi.Float, np.full(4, 0.5))
 
         def eval(self, si, active=True):
             def body(i, total):
@@ -154,15 +154,15 @@ def _table_replays() -> tuple[list[bool], int]:
     kept, same = [], []  # the tables replaced stay alive: a replay reading one would see its old values
     for value in (0.5, 0.9, 0.1, 0.7):
         kept.append(texture.table)
-        texture.table = jit_array(mi.Float, np.full(4, value))
+        texture.table = scene_array(mi.Float, np.full(4, value))
         traced, replayed = np.array(mi.render(scene, seed=seed, spp=1)), np.array(frozen(scene, seed))
         same.append(bool(np.array_equal(traced, replayed)))
     return same, frozen.n_recordings
 
 
-def test_a_frozen_render_reads_the_arrays_jit_array_made_after_it_recorded() -> None:
+def test_a_frozen_render_reads_the_arrays_scene_array_made_after_it_recorded() -> None:
     """Dr.Jit replays an array mapped from numpy memory at the memory it recorded;
-    :func:`~datagen.render.mitsuba.jit_array` gives it arrays in its own memory."""
+    :func:`~datagen.render.mitsuba.scene_array` gives it arrays in its own memory."""
     same, recordings = _in_own_process(_table_replays)
     assert recordings == 1  # one recording, three replays
     assert all(same), same

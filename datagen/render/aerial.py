@@ -71,7 +71,7 @@ def aerial_class(variant: str):
     import drjit as dr
     import mitsuba as mi
 
-    from datagen.render.mitsuba import jit_array
+    from datagen.render.mitsuba import scene_array
     from datagen.render.procedural import drjit_ops
     from datagen.render.raycast import _past
 
@@ -96,12 +96,12 @@ def aerial_class(variant: str):
             k = intrinsics
             gh, gw = grid.shape[:2]
             if self._paths is None:  # the table's entries, made once
-                self._paths = tuple(jit_array(mi.Float, a.reshape(-1).astype(np.float32)) for a in table_paths())
+                self._paths = tuple(scene_array(mi.Float, a.reshape(-1).astype(np.float32)) for a in table_paths())
                 dr.make_opaque(*self._paths)
             table = dr.ravel(mi.Vector3f(*transmittance_table(air, ops, self._paths)))  # RGB interleaved
             self._frame = {
                 "table": table,
-                "grid": jit_array(mi.Float, np.ascontiguousarray(grid).reshape(-1)), "gw": gw, "gh": gh,
+                "grid": scene_array(mi.Float, np.ascontiguousarray(grid).reshape(-1)), "gw": gw, "gh": gh,
                 "k": [opaque(x) for x in (k.fx, k.fy, k.cx, k.cy)], "size": (k.width, k.height),
                 "rotation": [[opaque(cam_from_render[i, j]) for j in range(3)] for i in range(3)],
                 "codes": codes, "opacities": tuple(opacities),

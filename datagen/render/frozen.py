@@ -11,13 +11,16 @@ frame's values must all be device values set before the call:
   (:meth:`~datagen.render.procedural.texture_class` ``prepare``), never made inside it;
 - the per-frame values (camera, body frames, sky, air) are opaque device values made when
   set;
-- every array comes from Dr.Jit's own memory (:func:`datagen.render.mitsuba.jit_array`):
-  a replay takes an array mapped from numpy memory at the memory it had when recording;
+- every array the scene holds comes from Dr.Jit's own memory
+  (:func:`datagen.render.mitsuba.scene_array`): a replay takes an array mapped from numpy
+  memory at the memory it had when recording;
 - the sampler seed is an opaque ``UInt32``.
 
 A change Dr.Jit can see that alters the kernels' shape (a literal that changed, an array
-of another width class) makes it record again: a handful of recordings per process, counted
-by :attr:`datagen.render.renderer.Renderer.recordings` and reported by the build.
+of another width class) makes it record again, and so does a failed dry run of the replay,
+measured at most approach boundaries (a new recording compiles kernels: why it is off by
+default); counted by :attr:`datagen.render.renderer.Renderer.recordings` and reported by
+the build.
 ``bench/bench_freeze.py`` compares replayed frames with traced ones per world randomizer;
 ``tests/test_frozen.py`` does so on two approaches with every randomizer on.
 """

@@ -58,24 +58,32 @@ def mitsuba_mesh(name: str, vertices: ArrayLike, faces: ArrayLike, bsdf=None, te
 def set_buffer(params, key: str, array: ArrayLike) -> None:
     """Assign a flat numpy buffer to a mesh parameter in any variant (scalar
     variants take their own dynamic array type, vectorized ones mi.Float/UInt32)."""
-    params[key] = jit_array(type(params[key]), np.ravel(array))
+    params[key] = scene_array(type(params[key]), np.ravel(array))
 
 
 def jit_array(cls, values: ArrayLike):
     """``values`` as the Dr.Jit array type ``cls`` (``mi.Float``, ``mi.UInt32``,
     ``mi.TensorXf``, a scalar variant's dynamic arrays), made from :func:`aligned` memory
     of its own element type (memory of another type would be converted by a copy wherever
-    numpy put it): how every numpy array reaches Dr.Jit.
-
-    Under a JIT variant the values are then copied into memory Dr.Jit allocated: Dr.Jit maps
-    numpy memory into an array without copying, and a recording of the render
-    (``dr.freeze``, :mod:`datagen.render.frozen`) replays with the memory a mapped array
-    had when it recorded, not the array it is given (measured, Dr.Jit 1.5: stale values,
-    and a loop bound read from freed memory that never ended); an array in Dr.Jit's own
-    memory it takes as the input it is."""
+    numpy put it): how every numpy array reaches Dr.Jit. An array the scene holds, read
+    inside the render, goes through :func:`scene_array` instead."""
     import drjit as dr
 
-    out = cls(aligned(values, np.uint32 if dr.type_v(cls) == dr.VarType.UInt32 else np.float32))
+    return cls(aligned(values, np.uint32 if dr.type_v(cls) == dr.VarType.UInt32 else np.float32))
+
+
+def scene_array(cls, values: ArrayLike):
+    """:func:`jit_array` for an array the scene holds (a mesh's buffer, a texture's data or
+    table, the air's): under a JIT variant copied into memory Dr.Jit allocated. Dr.Jit maps
+    numpy memory into an array without copying, and a recording of the render
+    (``dr.freeze``, :mod:`datagen.render.frozen`) replays with the memory a mapped array had
+    when it recorded, not the array it is given (measured, Dr.Jit 1.5: stale values, and a
+    loop bound read from freed memory that never ended); an array in Dr.Jit's own memory it
+    takes as the input it is. Arrays used outside the render (rays, images, a field's
+    samples) stay mapped: no copy."""
+    import drjit as dr
+
+    out = jit_array(cls, values)
     if not dr.is_jit_v(cls):
         return out
     if dr.is_tensor_v(cls):

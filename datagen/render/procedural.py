@@ -24,7 +24,7 @@ from typing import Final
 import numpy as np
 
 from datagen.assets.noise import FADE_LO, NUMPY, Ops, Slant, row_params
-from datagen.render.mitsuba import jit_array
+from datagen.render.mitsuba import jit_array, scene_array
 
 __all__ = ["body_texture_class", "drjit_ops", "evaluate", "mask_class", "texture_class"]
 
@@ -126,7 +126,7 @@ class _Reading:
         """Every value the notes hold was read, and no more (a ``shade`` whose asks depend on
         anything but its own state would read another value's slot)."""
         book = self.texture._book
-        held = {"f32": book["n_f32"], "u32": book["n_u32"], "tables": len(book["tables"])}
+        held = {kind: len(book[kind]) for kind in self.read}
         if held != self.read:  # (asked mid-trace: it has read more than they hold)
             raise RuntimeError(f"{type(self.texture).__name__}: the kernel read {self.read} values, "
                                f"its notes hold {held}")
@@ -310,8 +310,8 @@ def _shaded_texture(variant: str):
 
         def prepare(self) -> None:
             """Note the values and tables the kernel of the current ``shade`` reads and hold
-            them as device arrays (a dry trace of :meth:`_value`, only when ``shade`` was set
-            since). The render reads them from there as data."""
+            them on the device (a dry trace of :meth:`_value`, only when ``shade`` computes
+            something else since). The render reads them from there as data."""
             if not getattr(self, "_stale", True) or self._shade is None or drjit_ops() is NUMPY:
                 return
             import drjit as dr
@@ -326,8 +326,7 @@ def _shaded_texture(variant: str):
             u32 = np.asarray(notes.values["u32"], dtype=np.uint32)
             self._book = {"f32": tuple(dr.opaque(mi.Float, v) for v in f32.tolist()),
                           "u32": tuple(dr.opaque(mi.UInt32, v) for v in u32.tolist()),
-                          "tables": tuple(jit_array(cls, values) for cls, values in notes.tables),
-                          "n_f32": len(f32), "n_u32": len(u32)}
+                          "tables": tuple(scene_array(cls, values) for cls, values in notes.tables)}
             self._stale = False
 
         def _value(self, si):

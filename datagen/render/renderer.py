@@ -42,6 +42,7 @@ from datagen.render.frozen import frozen_render
 from datagen.render.mitsuba import (
     jit_array,
     mitsuba_mesh,
+    scene_array,
     sensor_dict,
     set_buffer,
     world_from_micam,
@@ -149,6 +150,7 @@ class Renderer(RayCasting):
         self._frozen = frozen_render(self.spp) if config.render.frozen and not self.variant.startswith("scalar") \
             else None
         self.refused_recordings = 0  # recordings Dr.Jit refused (those frames traced instead)
+        self._traced = False  # the scene rendered once (a scene's first render is traced; set by _build)
         self.denoise = config.render.denoise
         self.guides = self.denoise != "off" and config.render.denoise_guides
         if self.denoise != "off":
@@ -256,7 +258,7 @@ class Renderer(RayCasting):
         banded = self._hose_banded
         if banded:  # the marker bands: a texture along the hose (datagen.assets.drogues)
             hose_bsdf["base_color"] = {"type": "bitmap", "raw": True, "wrap_mode": "clamp", "filter_type": "nearest",
-                                       "data": jit_array(mi.TensorXf, np.zeros((2, HOSE_TEXELS, 3), np.float32))}
+                                       "data": scene_array(mi.TensorXf, np.zeros((2, HOSE_TEXELS, 3), np.float32))}
         placeholder = hose_placeholder(hose_points)
         hose = mitsuba_mesh("hose", placeholder, hose_faces(hose_points), mi.load_dict(hose_bsdf),
                             texcoords=np.zeros((len(placeholder), 2), np.float32) if banded else None)
@@ -287,7 +289,7 @@ class Renderer(RayCasting):
         ids[list(objects)] = list(objects.values())
         codes = np.full(max(backgrounds) + 2, -1, dtype=np.int32)
         codes[[k + 1 for k in backgrounds]] = list(backgrounds.values())
-        self._id_table, self._background_codes = jit_array(mi.UInt32, ids), jit_array(mi.Int32, codes)
+        self._id_table, self._background_codes = jit_array(mi.UInt32, ids), scene_array(mi.Int32, codes)
         if self.sensor is not None and self.sensor.motion_blur:
             from datagen.render.sensor import warm_up_on_device
 
@@ -436,7 +438,7 @@ class Renderer(RayCasting):
         if key != self._hose_key:
             texture = hose_band_texture(rubber.base_color, look.hose_band_colour, look.hose_band_spacing_m,
                                         look.hose_band_width_m)
-            p["hose.bsdf.base_color.data"] = jit_array(self._mi.TensorXf, texture)
+            p["hose.bsdf.base_color.data"] = scene_array(self._mi.TensorXf, texture)
             self._hose_key = key
         p["hose.bsdf.roughness.value"] = rubber.roughness
         p["hose.bsdf.metallic.value"] = rubber.metallic
@@ -453,20 +455,19 @@ class Renderer(RayCasting):
     def path_trace(self, seed: int):
         """The posed scene path traced with sampler seed ``seed``: Mitsuba's image (not yet
         evaluated), through the frozen render where there is one."""
-        if self._frozen is None or not self._traced:
-            # A scene's first render sets up what Mitsuba makes on first use (measured: a
-            # recording of it fails, a call to objects the recording cannot find).
-            self._traced = True
-            return self._mi.render(self.scene, seed=seed, spp=self.spp)
-        try:
-            return self._frozen(self.scene, self._dr.opaque(self._mi.UInt32, seed))
-        except RuntimeError as error:
-            # A recording that met an object Mitsuba made on first use inside it (measured:
-            # a cloud layer's new faces) is refused; this frame is traced, which makes it.
-            if "record()" not in str(error):
-                raise
-            self.refused_recordings += 1
-            return self._mi.render(self.scene, seed=seed, spp=self.spp)
+        if self._frozen is not None and self._traced:
+            try:
+                return self._frozen(self.scene, self._dr.opaque(self._mi.UInt32, seed))
+            except RuntimeError as error:
+                # A recording that met an object Mitsuba made on first use inside it (measured:
+                # a cloud layer's new faces) is refused; this frame is traced, which makes it.
+                if "record()" not in str(error):
+                    raise
+                self.refused_recordings += 1
+        # A scene's first render is traced: it sets up what Mitsuba makes on first use
+        # (measured: a recording of it fails, a call to objects the recording cannot find).
+        self._traced = True
+        return self._mi.render(self.scene, seed=seed, spp=self.spp)
 
     @property
     def recordings(self) -> int:
