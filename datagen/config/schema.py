@@ -900,9 +900,10 @@ class RenderConfig(_Section):
     """Record the path tracing once and replay it for later frames (Dr.Jit's ``dr.freeze``;
     a JIT variant): the frame's values reach the recording as data, so a replay makes the
     traced render's image bit for bit (``bench/bench_freeze.py``; ``tests/test_frozen.py``,
-    two approaches with every randomizer on) without tracing the kernel again. Off by
-    default: Dr.Jit records again at most approach boundaries (its dry run of the replay
-    fails), and each new recording compiles kernels anew (docs/performance.md)."""
+    three approaches with every randomizer on) without tracing the kernel again; a process
+    records twice (its first two frames). Off by default: the small kernel evaluating the
+    sky's values before each replay changes shape at a few approaches and compiles anew,
+    and its figures on a GPU are still to be taken (docs/performance.md)."""
 
     denoise_quality: Literal["fast", "balanced", "high"] = "high"
     """OIDN's filter quality: ``fast`` takes about half the time of ``high``."""

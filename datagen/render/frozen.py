@@ -14,15 +14,23 @@ frame's values must all be device values set before the call:
 - every array the scene holds comes from Dr.Jit's own memory
   (:func:`datagen.render.mitsuba.scene_array`): a replay takes an array mapped from numpy
   memory at the memory it had when recording;
-- the sampler seed is an opaque ``UInt32``.
+- the sampler seed is an opaque ``UInt32``;
+- nothing Mitsuba makes on first use inside the render: the cloud layers' radiance tells
+  Mitsuba it does not vary over the surface, so their emitters never ask for their mesh's
+  UV parameterization, a scene of its own that Mitsuba rebuilt inside the render after
+  the mesh changed (a recording then met an object its inputs did not hold and was
+  refused, and a replay of an older recording read the freed scene and crashed).
 
-A change Dr.Jit can see that alters the kernels' shape (a literal that changed, an array
-of another width class) makes it record again, and so does a failed dry run of the replay,
-measured at most approach boundaries (a new recording compiles kernels: why it is off by
-default); counted by :attr:`datagen.render.renderer.Renderer.recordings` and reported by
-the build.
+A process records twice: the first frame, and the second, whose inputs' layout differs by
+what Mitsuba set up in the first render; every later frame of every approach replays.
+Dr.Jit evaluates the inputs' pending values (the sky's, derived from its sun and
+turbidity) in a small kernel before each call, whose shape changes at a few approaches
+(about 100 operations, compiled anew): with the figures on a GPU still to be taken, that
+is why it is off by default. Counted by :attr:`datagen.render.renderer.Renderer.recordings`
+and reported by the build.
+
 ``bench/bench_freeze.py`` compares replayed frames with traced ones per world randomizer;
-``tests/test_frozen.py`` does so on two approaches with every randomizer on.
+``tests/test_frozen.py`` does so on three approaches with every randomizer on.
 """
 
 from __future__ import annotations

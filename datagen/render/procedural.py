@@ -394,20 +394,35 @@ def texture_class(variant: str):
     :class:`~datagen.assets.noise.Slant`; ``front_only``: the texture is the radiance of a
     one-sided ``area`` emitter, which shows nothing of it behind its surface (Mitsuba's
     ``area`` returns 0 there but evaluates its texture first): a lane that sees the back
-    gets an infinite footprint, so that a series sums no term there."""
+    gets an infinite footprint, so that a series sums no term there. ``varying``: what
+    :meth:`is_spatially_varying` says (see :class:`FieldTexture`'s)."""
     import drjit as dr
     import mitsuba as mi
 
     class FieldTexture(_shaded_texture(variant)):
         def __init__(self, props=None, *, pixel_rad: float = 1e-3, colour: bool = False, slant: bool = False,
-                     front_only: bool = False):
+                     front_only: bool = False, varying: bool = True):
             super().__init__(props if props is not None else mi.Properties())
+            self.varying = varying
             self.pixel_rad = float(pixel_rad)
             self.colour = colour
             self.slant = slant
             self.front_only = front_only
             self.camera = (0.0, 0.0, 0.0)
             self.shade = None  # (x, y, footprint_m, ops) -> value (Float, or Color3f when colour)
+
+        def is_spatially_varying(self):
+            """Whether Mitsuba is told the texture varies over its surface: the radiance of
+            an emitter that is never sampled (``sampling_weight`` 0: the cloud layers') says
+            no. Told yes, the ``area`` emitter's ``pdf_direction`` of a path that met it maps
+            the hit back onto the mesh through the mesh's UV parameterization, a scene of its
+            own that Mitsuba rebuilds on first use after the mesh changes, inside the render:
+            a frozen render's recording then met an object its inputs do not hold and was
+            refused at every approach, and a replay of an older recording read the freed
+            scene and crashed (measured, Mitsuba 3.9). Told no, it asks the shape; either pdf
+            is multiplied by the emitter's probability of being sampled, 0, and the image is
+            the same bit for bit."""
+            return self.varying
 
         def _at(self, si):
             """``(x, y, footprint_m)`` of the point ``si``, for ``shade``."""

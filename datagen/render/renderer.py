@@ -150,7 +150,6 @@ class Renderer(RayCasting):
         self._frozen = frozen_render(self.spp) if config.render.frozen and not self.variant.startswith("scalar") \
             else None
         self.refused_recordings = 0  # recordings Dr.Jit refused (those frames traced instead)
-        self._traced = False  # the scene rendered once (a scene's first render is traced; set by _build)
         self.denoise = config.render.denoise
         self.guides = self.denoise != "off" and config.render.denoise_guides
         if self.denoise != "off":
@@ -250,7 +249,6 @@ class Renderer(RayCasting):
 
     def _build(self, hose_points: int) -> None:
         mi, dr = self._mi, self._dr
-        self._traced = False  # the new scene's first render is traced (datagen.render.frozen)
         hold_scene(self)
         self.release()
         description = self._description()
@@ -455,18 +453,17 @@ class Renderer(RayCasting):
     def path_trace(self, seed: int):
         """The posed scene path traced with sampler seed ``seed``: Mitsuba's image (not yet
         evaluated), through the frozen render where there is one."""
-        if self._frozen is not None and self._traced:
+        if self._frozen is not None:
             try:
                 return self._frozen(self.scene, self._dr.opaque(self._mi.UInt32, seed))
             except RuntimeError as error:
-                # A recording that met an object Mitsuba made on first use inside it (measured:
-                # a cloud layer's new faces) is refused; this frame is traced, which makes it.
+                # A recording that meets an object Mitsuba makes on first use inside the render
+                # is refused (measured before the cloud layers' radiance stopped asking for
+                # their mesh's UV parameterization: procedural.FieldTexture.is_spatially_varying);
+                # this frame is traced, which makes the object, and the next frame records.
                 if "record()" not in str(error):
                     raise
                 self.refused_recordings += 1
-        # A scene's first render is traced: it sets up what Mitsuba makes on first use
-        # (measured: a recording of it fails, a call to objects the recording cannot find).
-        self._traced = True
         return self._mi.render(self.scene, seed=seed, spp=self.spp)
 
     @property

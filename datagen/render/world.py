@@ -234,7 +234,8 @@ class World:
         entries = {}
         for name in CLOUD_LAYERS:
             opacity = field_texture(pixel_rad=self.pixel_rad)
-            radiance = field_texture(pixel_rad=self.pixel_rad, colour=True, front_only=True, slant=True)
+            radiance = field_texture(pixel_rad=self.pixel_rad, colour=True, front_only=True, slant=True,
+                                     varying=False)
             for texture in (opacity, radiance):
                 texture.shade = _clear
             self._cloud_textures[name] = (opacity, radiance)
