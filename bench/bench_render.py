@@ -1,7 +1,7 @@
 """Rendering cost per frame at the config's full resolution (2048x1080 by default).
 
     python bench/bench_render.py [--config scenes/wingcam55.yaml] [--spp 4 16 64] [--frames 3]
-                                 [--every 1] [--variant auto] [--denoise off|oidn] [--guides] [--frozen]
+                                 [--every 1] [--variant auto] [--denoise off|oidn] [--guides] [--traced]
     python bench/bench_render.py --randomizers [--frames 8]
     python bench/bench_render.py --size 64x34 --spp 1 --frames 16 --every 7 --threads 1   # the fixed per-frame cost
 
@@ -13,8 +13,8 @@ to all-off, and the process's peak RSS.
 ``--size WxH`` renders at another resolution (the same field of view): at 64x34 and 1 spp
 the render's own work is negligible and what remains is the fixed per-frame cost (tracing
 the kernel, posing, the camera model's fixed costs). ``--threads`` sizes Dr.Jit's thread pool
-(one, with ``taskset -c 0``, for the one-core figures). ``--frozen`` turns the frozen render
-on (:mod:`datagen.render.frozen`): the path tracing recorded once and replayed.
+(one, with ``taskset -c 0``, for the one-core figures). ``--traced`` turns the frozen render
+off (:mod:`datagen.render.frozen`; on by default): the path tracing traced again every frame.
 
 ``--variant cuda_ad_rgb`` renders and denoises on the GPU where one is (nothing else
 changes: the denoiser takes the render's Dr.Jit tensors on their device).
@@ -62,8 +62,8 @@ def main() -> None:
     parser.add_argument("--randomizers", action="store_true", help="time each world randomizer and all of them")
     parser.add_argument("--size", default=None, help="WxH: render at this resolution instead of the config's")
     parser.add_argument("--threads", type=int, default=None, help="Dr.Jit threads (default: every core)")
-    parser.add_argument("--frozen", action="store_true", help="render.frozen on: the path tracing recorded once "
-                        "and replayed (datagen.render.frozen)")
+    parser.add_argument("--traced", action="store_true", help="render.frozen off: the path tracing traced again "
+                        "every frame (datagen.render.frozen)")
     args = parser.parse_args()
     config = load_config(args.config)
     if args.size is not None:
@@ -77,8 +77,8 @@ def main() -> None:
         config = override_config(config, {"render.denoise": args.denoise})
     if args.guides:
         config = override_config(config, {"render.denoise_guides": True})
-    if args.frozen:
-        config = override_config(config, {"render.frozen": True})
+    if args.traced:
+        config = override_config(config, {"render.frozen": False})
     if args.randomizers:
         randomizers(config, args)
         return

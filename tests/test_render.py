@@ -368,12 +368,15 @@ def test_looks_are_drawn_from_the_frame_rng_within_the_config() -> None:
 KERNEL_FRAMES: Final = (0, 1, 5, *(16 * k + (7 * k) % 16 for k in range(1, 23)))
 
 
-def kernel_census(seed: int = 31, frames: tuple[int, ...] = KERNEL_FRAMES, name: str = "wingcam55") -> dict:
+def kernel_census(seed: int = 31, frames: tuple[int, ...] = KERNEL_FRAMES, name: str = "wingcam55",
+                  frozen: bool | None = None) -> dict:
     """In this process (one thread, ``llvm_ad_rgb``), a tiny shipped config ``name`` with every world
     randomizer on, each frame made as a build makes it: per frame, the JIT kernels launched
     that no earlier frame launched (``new``); and the render kernel (the largest: hash,
     operation count) of one frame alone, and again with a second renderer of another
-    config built and rendered beside it (``alone``, ``beside``)."""
+    config built and rendered beside it (``alone``, ``beside``). ``frozen``: the render
+    recorded once and replayed or traced each frame (``render.frozen``; None: the default);
+    ``recordings``: how many times it recorded."""
     import tempfile
 
     import drjit as dr
@@ -383,7 +386,7 @@ def kernel_census(seed: int = 31, frames: tuple[int, ...] = KERNEL_FRAMES, name:
     use_variant("llvm_ad_rgb")
     set_threads(1)
     tiny = {"render.spp": 1, "camera.width": 32, "camera.height": 17, "labels.edge_margin_px": 1.0,
-            "dataset.seed": seed}
+            "dataset.seed": seed, **({} if frozen is None else {"render.frozen": frozen})}
     config = override_config(load_config(ROOT / "scenes" / f"{name}.yaml"), tiny)
     assert all(getattr(config.randomization, name).enabled for name in ("clouds", "livery", "sensor"))
     scene, states = Scene.resolve(config), FrameStates(config)
@@ -401,6 +404,7 @@ def kernel_census(seed: int = 31, frames: tuple[int, ...] = KERNEL_FRAMES, name:
             launched = kernels(renderer, scene, states, i)
             out["new"].append(len({h for h, _ in launched} - seen))
             seen |= {h for h, _ in launched}
+        out["recordings"] = renderer.recordings
         out["alone"] = max(kernels(renderer, scene, states, frames[1]), key=lambda k: k[1])
         other = override_config(load_config(ROOT / "scenes" / "podcam15.yaml"), {**tiny, "render.spp": 2})
         other_scene = Scene.resolve(other)
@@ -411,24 +415,33 @@ def kernel_census(seed: int = 31, frames: tuple[int, ...] = KERNEL_FRAMES, name:
     return out
 
 
-@pytest.fixture(scope="module")
-def census() -> dict:
-    """:func:`kernel_census` in a process of its own: Mitsuba objects other tests leave in
-    this one would change the kernels."""
+@pytest.fixture(scope="module", params=[True, False], ids=["frozen", "traced"])
+def census(request) -> dict:
+    """:func:`kernel_census` in a process of its own, with the render frozen (the default)
+    and traced: Mitsuba objects other tests leave in this one would change the kernels."""
     code = ("import json; from tests.test_render import kernel_census; "
-            "print(json.dumps(kernel_census()))")
+            f"print(json.dumps(kernel_census(frozen={request.param})))")
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=600,
                           check=False)
     assert done.returncode == 0, done.stderr[-2000:]
-    return json.loads(done.stdout.strip().splitlines()[-1])
+    return {**json.loads(done.stdout.strip().splitlines()[-1]), "frozen": request.param}
 
 
 def test_frames_after_the_first_compile_no_kernel(census) -> None:
     """Every per-frame value reaches the kernels as an opaque value (the sky's scales
-    included): after one frame, frames of other approaches, skies, clouds, seas, liveries
-    and sensor draws compile nothing (each compile costs seconds, and memory)."""
+    included), and nothing is left pending for a frozen render to evaluate in a kernel of
+    its own (datagen.render.frozen.settle): after one frame, frames of other approaches,
+    skies, clouds, seas, liveries and sensor draws compile nothing (each compile costs
+    seconds, and memory), frozen or traced."""
     new = census["new"]
     assert new[0] > 0 and new[1:] == [0] * (len(new) - 1), f"new kernels per frame: {new}"
+
+
+def test_a_frozen_render_records_once_over_twenty_three_approaches(census) -> None:
+    """The frozen render records at the first frame and replays every later frame of every
+    approach (the film prepared when the scene is built: datagen.render.frozen); traced,
+    it never records."""
+    assert census["recordings"] == (1 if census["frozen"] else 0)
 
 
 def test_the_render_kernel_is_the_same_with_another_renderer_alive(census) -> None:

@@ -19,15 +19,20 @@ frame's values must all be device values set before the call:
   Mitsuba it does not vary over the surface, so their emitters never ask for their mesh's
   UV parameterization, a scene of its own that Mitsuba rebuilt inside the render after
   the mesh changed (a recording then met an object its inputs did not hold and was
-  refused, and a replay of an older recording read the freed scene and crashed).
+  refused, and a replay of an older recording read the freed scene and crashed);
+- no value still pending when the render is called: Dr.Jit evaluates a frozen function's
+  pending inputs before the call, all of them in one kernel, whose shape then depends on
+  which were pending (a new scene's hose, a new sky's sun angles) and compiled anew at some
+  frames; :func:`settle` evaluates them where they are made, always in the same groups;
+- the same inputs' layout from the first frame on: the sensor's film is prepared, and its
+  literals settled, when the scene is built (a first render leaves an image array where
+  the film held a literal one, and the second frame recorded again).
 
-A process records twice: the first frame, and the second, whose inputs' layout differs by
-what Mitsuba set up in the first render; every later frame of every approach replays.
-Dr.Jit evaluates the inputs' pending values (the sky's, derived from its sun and
-turbidity) in a small kernel before each call, whose shape changes at a few approaches
-(about 100 operations, compiled anew): with the figures on a GPU still to be taken, that
-is why it is off by default. Counted by :attr:`datagen.render.renderer.Renderer.recordings`
-and reported by the build.
+A process records once, at its first frame, and compiles nothing after it; every later frame
+of every approach replays (the default: ``render.frozen``). Counted by
+:attr:`datagen.render.renderer.Renderer.recordings`; a build reports recordings after a
+worker's first frame, if any. A recording Dr.Jit refuses traces its frame instead
+(:attr:`~datagen.render.renderer.Renderer.refused_recordings`).
 
 ``bench/bench_freeze.py`` compares replayed frames with traced ones per world randomizer;
 ``tests/test_frozen.py`` does so on three approaches with every randomizer on.
@@ -35,7 +40,7 @@ and reported by the build.
 
 from __future__ import annotations
 
-__all__ = ["frozen_render"]
+__all__ = ["frozen_render", "settle"]
 
 
 def frozen_render(spp: int):
@@ -48,3 +53,28 @@ def frozen_render(spp: int):
         return mi.render(scene, seed=seed, spp=spp)
 
     return dr.freeze(render)
+
+
+def settle(obj, backend, *, literals: bool = False) -> None:
+    """Evaluate now every value ``obj`` (a Mitsuba object, a Python plugin, the scene) holds
+    that is still pending, as Dr.Jit evaluates a frozen function's inputs (``backend``: any
+    array of the variant, which tells Dr.Jit the backend); with ``literals``, its literal
+    values (a ``dr.zeros``, say) become arrays in memory too.
+
+    Mitsuba leaves some values a plugin derives in its ``parameters_changed`` pending
+    (measured, Mitsuba 3.9: the sun's angles of ``sunsky``, a new mesh's buffers); a frozen
+    render evaluates them before replaying, in one kernel whatever else is pending, so that
+    kernel's shape changes from frame to frame and compiles anew. Settled where they are
+    made, they are evaluated in the same groups every frame. A sensor's film before its
+    first render holds a literal image, after it an array: the inputs' layout differs, and
+    the second frame records again unless the film is prepared and its literals settled."""
+    import drjit as dr
+
+    key = bool(literals)
+    if key not in _settlers:
+        _settlers[key] = dr.freeze(lambda _obj, _backend: None, auto_opaque=not literals)
+    _settlers[key](obj, backend)
+
+
+#: The no-op frozen functions whose input evaluation :func:`settle` uses (by ``literals``).
+_settlers: dict = {}

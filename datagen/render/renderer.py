@@ -38,7 +38,7 @@ from datagen.core.conventions import RIGID_OBJECTS, object_id
 from datagen.core.transforms import make_transform
 from datagen.render.aerial import AIRLIGHT_STEP_PX
 from datagen.render.atmosphere import Atmosphere
-from datagen.render.frozen import frozen_render
+from datagen.render.frozen import frozen_render, settle
 from datagen.render.mitsuba import (
     jit_array,
     mitsuba_mesh,
@@ -263,6 +263,11 @@ class Renderer(RayCasting):
         self._hose_key = None
         self.scene = mi.load_dict(dict(description, hose=hose), optimize=False)
         self.params = mi.traverse(self.scene)
+        self._unsettled = True  # the frozen render's first pose settles the scene (_apply)
+        if self._frozen is not None:  # the film as a render leaves it: one recording (frozen.settle)
+            sensor = self.scene.sensors()[0]
+            sensor.film().prepare(self.scene.integrator().aov_names())
+            settle(sensor, dr.opaque(mi.UInt32, 0, 2), literals=True)
         self._hose_points = hose_points
         if self.variant.startswith("scalar"):  # its ray casts name the shapes they hit
             return
@@ -357,6 +362,12 @@ class Renderer(RayCasting):
         with clock.stage("texture values"):  # outside the render: a recording of it reads them as data
             for texture in (*self.world.textures(), *self.paintwork.textures()):
                 texture.prepare()
+        if self._frozen is not None:  # nothing left pending for the frozen render (frozen.settle)
+            backend = self._dr.opaque(self._mi.UInt32, 0, 2)
+            settle(self.sky, backend)  # every frame: the sun's angles
+            if self._unsettled:  # once a scene: what loading it left (the hose's buffers)
+                settle(self.scene, backend)
+                self._unsettled = False
 
     @property
     def camera_render(self) -> NDArray[np.float64]:
