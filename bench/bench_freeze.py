@@ -4,11 +4,12 @@
         [--variant llvm_ad_rgb]
 
 For each setting (every world randomizer off; each one on alone; every one on), a child
-process poses the scene as a build does (``Renderer.pose`` and the air) for each frame, then
-renders it twice at 1 spp: ``mi.render`` traced as today, and through ``dr.freeze`` (the first
-frames record, the later ones replay), both with the render seed as an opaque ``mi.UInt32`` so
-that the two trace the same kernel. The frames span approaches (7 frames each at the
-defaults), so a per-frame or per-approach value baked into a recording shows as a difference.
+process poses the scene as a build does (``Renderer.pose`` and the air, the frozen render's
+settling included: :mod:`datagen.render.frozen`) for each frame, then renders it twice at
+1 spp: ``mi.render`` traced, and through a ``dr.freeze`` of its own (the first frames record,
+the later ones replay), both with the render seed as an opaque ``mi.UInt32`` so that the two
+trace the same kernel. The frames span approaches (7 frames each at the defaults), so a
+per-frame or per-approach value baked into a recording shows as a difference.
 
 Prints a Markdown table per setting: frames bit-identical to the traced render, the largest
 difference, the recordings made, and the mean seconds a frame traced and replayed (the

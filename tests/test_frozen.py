@@ -31,7 +31,9 @@ def _frames(frozen: bool) -> tuple[list[np.ndarray], int, int]:
     scene = Scene.resolve(config)
     states, renderer = FrameStates(config), Renderer(scene)
     images = []
-    for i in FRAMES:
+    for k, i in enumerate(FRAMES):
+        if k == len(FRAMES) - 1:
+            renderer.release()  # the last frame's scene built anew (as after another renderer's)
         draws = draw_frame(scene, states, i)
         images.append(renderer.render(draws.state, draws.look, draws.render_seed).rgb)
     recordings, refused = renderer.recordings, renderer.refused_recordings
@@ -39,11 +41,12 @@ def _frames(frozen: bool) -> tuple[list[np.ndarray], int, int]:
     return images, recordings, refused
 
 
-def test_frozen_frames_are_the_traced_frames_bit_for_bit_over_three_approaches_with_every_randomizer_on() -> None:
+def test_frozen_frames_are_the_traced_frames_bit_for_bit_over_three_approaches_and_a_rebuilt_scene() -> None:
+    """Every randomizer on; the last frame's scene built anew replays the recording too."""
     replayed, recordings, refused = _in_own_process(_frames, True)
     traced, none, _ = _in_own_process(_frames, False)
     assert none == 0
-    # The first frame records; no later frame or approach records again or is refused.
+    # The first frame records; no later frame, approach or rebuilt scene records again or is refused.
     assert recordings == 1 and refused == 0, (recordings, refused)
     for i, a, b in zip(FRAMES, replayed, traced, strict=True):
         assert np.array_equal(a, b), f"frame {i}: {np.abs(a - b).max()}"
@@ -101,24 +104,73 @@ def test_a_texture_whose_kernel_reads_other_values_than_it_noted_is_refused() ->
         texture.eval_1(dr.zeros(mi.SurfaceInteraction3f, 4))
 
 
-def test_a_cloud_layers_radiance_says_it_is_uniform_only_where_its_emitter_is_never_sampled() -> None:
-    """A texture that tells Mitsuba it does not vary gets a wrong emission pdf; that pdf is
-    multiplied by the emitter's sampling weight, so the image is right only while it is 0.
-    Telling the truth costs a scene per layer that Mitsuba rebuilds inside the render (a
-    frozen render's recordings were refused, and its replays crashed)."""
+def _textures_not_varying() -> list[tuple[str, float | None]]:
+    """Every procedural texture of wingcam55's world and paintwork that tells Mitsuba it does
+    not vary over its surface: the cloud layer whose emitter's radiance it is, and that
+    emitter's sampling weight (None: no cloud layer's)."""
     from datagen.config import load_config
+    from datagen.render.renderer import Renderer
     from datagen.render.runtime import use_variant
-    from datagen.render.world import World
     from datagen.scene.resolved import Scene
 
     use_variant("llvm_ad_rgb")
-    world = World(Scene.resolve(load_config("wingcam55")).config, pixel_rad=1e-3)
-    shapes = world.cloud_shapes()
-    assert shapes
-    for name, mesh in shapes.items():
-        opacity, radiance = world._cloud_textures[name]
-        assert mesh.emitter().sampling_weight() == 0.0, name
-        assert not radiance.is_spatially_varying() and opacity.is_spatially_varying()
+    renderer = Renderer(Scene.resolve(load_config("wingcam55")))
+    renderer._build(8)
+    world = renderer.world
+    radiance = {id(texture): (name, world.cloud_meshes[name].emitter().sampling_weight())
+                for name, texture in zip(world.cloud_meshes, world.cloud_radiances(), strict=True)}
+    out = [radiance.get(id(t), ("", None)) for t in (*renderer.world.textures(), *renderer.paintwork.textures())
+           if not t.is_spatially_varying()]
+    assert len(renderer.world.cloud_meshes) == 2
+    renderer.release()
+    return out
+
+
+def test_only_the_cloud_layers_radiance_says_it_does_not_vary_and_their_emitters_are_never_sampled() -> None:
+    """A texture that tells Mitsuba it does not vary gets a wrong emission pdf; Mitsuba
+    multiplies that pdf by the emitter's sampling weight, so the image is right only while it
+    is 0. Telling the truth costs a scene per layer that Mitsuba rebuilds inside the render
+    (a frozen render's recordings were refused, and its replays crashed)."""
+    found = _in_own_process(_textures_not_varying)
+    assert sorted(found) == [("cloud_deck", 0.0), ("cloud_layer", 0.0)], found
+
+
+@pytest.mark.parametrize("message", [
+    "record(): error encountered while recording a frozen function (see above).",
+    "replay(): error encountered while re-recording a function (see above).",
+])
+def test_a_refused_recording_traces_its_frame_and_a_new_frozen_render_replaces_the_old(message, monkeypatch) -> None:
+    """Dr.Jit's refusals to record (a first recording, or a recording again after a failed
+    dry run of a replay) trace that frame; the frozen render whose cache may hold the refused
+    entry is dropped, its recordings still counted. Other errors are raised."""
+    import types
+
+    import datagen.render.renderer as renderer_module
+
+    class Refusing:
+        n_recordings = 3
+
+        def __call__(self, scene, seed):
+            raise RuntimeError(message) from RuntimeError("record(): validate(): ...")
+
+    fresh = types.SimpleNamespace(n_recordings=0)
+    monkeypatch.setattr(renderer_module, "frozen_render", lambda spp: fresh)
+    traced = []
+    r = types.SimpleNamespace(
+        _frozen=Refusing(), refused_recordings=0, _dropped_recordings=0, spp=2, scene="scene",
+        _dr=types.SimpleNamespace(opaque=lambda cls, v: v),
+        _mi=types.SimpleNamespace(UInt32=int, render=lambda scene, seed, spp: traced.append((scene, seed, spp)) or "image"))
+    assert renderer_module.Renderer.path_trace(r, 7) == "image" and traced == [("scene", 7, 2)]
+    assert r.refused_recordings == 1 and r._frozen is fresh
+    assert renderer_module.Renderer.recordings.fget(r) == 3
+
+    class Failing:
+        def __call__(self, scene, seed):
+            raise RuntimeError("a kernel failed")
+
+    r._frozen = Failing()
+    with pytest.raises(RuntimeError, match="a kernel failed"):
+        renderer_module.Renderer.path_trace(r, 7)
 
 
 def _in_own_process(fn, *args):

@@ -411,45 +411,62 @@ def kernel_census(seed: int = 31, frames: tuple[int, ...] = KERNEL_FRAMES, name:
         second = Renderer(other_scene)
         kernels(second, other_scene, FrameStates(other), 0)
         out["beside"] = max(kernels(renderer, scene, states, frames[1]), key=lambda k: k[1])
+        out["recordings_beside"] = renderer.recordings  # its scene rebuilt after the other renderer's
         assert second.config is other  # alive until here
     return out
 
 
-@pytest.fixture(scope="module", params=[True, False], ids=["frozen", "traced"])
-def census(request) -> dict:
-    """:func:`kernel_census` in a process of its own, with the render frozen (the default)
-    and traced: Mitsuba objects other tests leave in this one would change the kernels."""
+def _census(frozen: bool) -> dict:
+    """:func:`kernel_census` in a process of its own: Mitsuba objects other tests leave in
+    this one would change the kernels."""
     code = ("import json; from tests.test_render import kernel_census; "
-            f"print(json.dumps(kernel_census(frozen={request.param})))")
+            f"print(json.dumps(kernel_census(frozen={frozen})))")
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=600,
                           check=False)
     assert done.returncode == 0, done.stderr[-2000:]
-    return {**json.loads(done.stdout.strip().splitlines()[-1]), "frozen": request.param}
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def test_frames_after_the_first_compile_no_kernel(census) -> None:
+@pytest.fixture(scope="module")
+def frozen_census() -> dict:
+    """:func:`_census` with the render frozen (the default)."""
+    return _census(True)
+
+
+@pytest.fixture(scope="module")
+def traced_census() -> dict:
+    """:func:`_census` with the render traced every frame."""
+    return _census(False)
+
+
+@pytest.mark.parametrize("mode", ["frozen", "traced"])
+def test_frames_after_the_first_compile_no_kernel(mode: str, request) -> None:
     """Every per-frame value reaches the kernels as an opaque value (the sky's scales
     included), and nothing is left pending for a frozen render to evaluate in a kernel of
     its own (datagen.render.frozen.settle): after one frame, frames of other approaches,
     skies, clouds, seas, liveries and sensor draws compile nothing (each compile costs
     seconds, and memory), frozen or traced."""
-    new = census["new"]
+    new = request.getfixturevalue(f"{mode}_census")["new"]
     assert new[0] > 0 and new[1:] == [0] * (len(new) - 1), f"new kernels per frame: {new}"
 
 
-def test_a_frozen_render_records_once_over_twenty_three_approaches(census) -> None:
+def test_a_frozen_render_records_once_over_twenty_three_approaches_and_a_rebuilt_scene(
+        frozen_census, traced_census) -> None:
     """The frozen render records at the first frame and replays every later frame of every
-    approach (the film prepared when the scene is built: datagen.render.frozen); traced,
-    it never records."""
-    assert census["recordings"] == (1 if census["frozen"] else 0)
+    approach (the film and sampler settled when the scene is built: datagen.render.frozen);
+    its scene rebuilt after another renderer's, it replays the same recording. Traced, it
+    never records."""
+    assert frozen_census["recordings"] == frozen_census["recordings_beside"] == 1, frozen_census
+    assert traced_census["recordings"] == traced_census["recordings_beside"] == 0
 
 
-def test_the_render_kernel_is_the_same_with_another_renderer_alive(census) -> None:
+def test_the_render_kernel_is_the_same_with_another_renderer_alive(traced_census) -> None:
     """Dr.Jit compiles a call through a Mitsuba class for every live instance in the
     process: a second renderer's scene grew the render kernel (and on CUDA disabled its
     ray tracing). It is released while another renderer renders, so the kernel is the
-    one a lone renderer compiles, operation for operation."""
-    assert census["alone"] == census["beside"]
+    one a lone renderer compiles, operation for operation (traced: a replayed kernel is
+    logged with the hash it recorded, whatever the scene beside it)."""
+    assert traced_census["alone"] == traced_census["beside"]
 
 
 def _placed(values: np.ndarray, on_boundary: bool) -> np.ndarray:

@@ -900,10 +900,10 @@ class RenderConfig(_Section):
     """Record the path tracing once and replay it for later frames (Dr.Jit's ``dr.freeze``;
     a JIT variant): the frame's values reach the recording as data, so a replay makes the
     traced render's image bit for bit (``bench/bench_freeze.py``; ``tests/test_frozen.py``,
-    three approaches with every randomizer on) without tracing the kernel again. A process
+    three approaches with every randomizer on) without tracing the kernel again. A renderer
     records once, at its first frame, and compiles nothing after it (as the traced render);
-    off, every frame traces the kernel again (measured: 0.89 against 0.28 s a frame of fixed
-    cost on one core, docs/performance.md)."""
+    off, every frame traces the kernel again (the fixed cost of a frame, each way:
+    docs/performance.md)."""
 
     denoise_quality: Literal["fast", "balanced", "high"] = "high"
     """OIDN's filter quality: ``fast`` takes about half the time of ``high``."""

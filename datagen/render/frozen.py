@@ -24,12 +24,13 @@ frame's values must all be device values set before the call:
   pending inputs before the call, all of them in one kernel, whose shape then depends on
   which were pending (a new scene's hose, a new sky's sun angles) and compiled anew at some
   frames; :func:`settle` evaluates them where they are made, always in the same groups;
-- the same inputs' layout from the first frame on: the sensor's film is prepared, and its
-  literals settled, when the scene is built (a first render leaves an image array where
-  the film held a literal one, and the second frame recorded again).
+- the same inputs' layout from the first frame on: the sensor's film is prepared, and the
+  film's and sampler's literals settled, when the scene is built (a first render leaves
+  arrays where they held literals, and the second frame recorded again).
 
-A process records once, at its first frame, and compiles nothing after it; every later frame
-of every approach replays (the default: ``render.frozen``). Counted by
+A renderer records once, at its first frame, and compiles nothing after it; every later
+frame of every approach, and a scene built anew after another renderer's, replays (the
+default: ``render.frozen``). Counted by
 :attr:`datagen.render.renderer.Renderer.recordings`; a build reports recordings after a
 worker's first frame, if any. A recording Dr.Jit refuses traces its frame instead
 (:attr:`~datagen.render.renderer.Renderer.refused_recordings`).
@@ -55,26 +56,35 @@ def frozen_render(spp: int):
     return dr.freeze(render)
 
 
-def settle(obj, backend, *, literals: bool = False) -> None:
+def settle(obj, *, literals: bool = False) -> None:
     """Evaluate now every value ``obj`` (a Mitsuba object, a Python plugin, the scene) holds
-    that is still pending, as Dr.Jit evaluates a frozen function's inputs (``backend``: any
-    array of the variant, which tells Dr.Jit the backend); with ``literals``, its literal
-    values (a ``dr.zeros``, say) become arrays in memory too.
+    that is still pending, as Dr.Jit evaluates a frozen function's inputs; with
+    ``literals``, its literal values (a ``dr.zeros``, say) become arrays in memory too.
 
     Mitsuba leaves some values a plugin derives in its ``parameters_changed`` pending
     (measured, Mitsuba 3.9: the sun's angles of ``sunsky``, a new mesh's buffers); a frozen
     render evaluates them before replaying, in one kernel whatever else is pending, so that
     kernel's shape changes from frame to frame and compiles anew. Settled where they are
-    made, they are evaluated in the same groups every frame. A sensor's film before its
-    first render holds a literal image, after it an array: the inputs' layout differs, and
-    the second frame records again unless the film is prepared and its literals settled."""
+    made, they are evaluated in the same groups every frame. A film before its first render
+    holds a literal image, after it an array: the inputs' layout differs, and the second
+    frame records again unless the film is prepared and its literals settled.
+
+    Each kind of object (its type, with or without ``literals``) has a no-op frozen function
+    of its own, which keeps its last :data:`SETTLE_LAYOUTS` input layouts."""
     import drjit as dr
+    import mitsuba as mi
 
-    key = bool(literals)
+    key = (type(obj).__name__, bool(literals))
     if key not in _settlers:
-        _settlers[key] = dr.freeze(lambda _obj, _backend: None, auto_opaque=not literals)
-    _settlers[key](obj, backend)
+        backend = dr.JitBackend.CUDA if mi.variant().startswith("cuda") else dr.JitBackend.LLVM
+        _settlers[key] = dr.freeze(lambda _obj: None, backend=backend, auto_opaque=not literals,
+                                   limit=SETTLE_LAYOUTS, warn_after=1_000_000)
+    _settlers[key](obj)
 
 
-#: The no-op frozen functions whose input evaluation :func:`settle` uses (by ``literals``).
+#: How many input layouts each of :func:`settle`'s no-op frozen functions keeps (a new scene
+#: is a new layout; the oldest is dropped).
+SETTLE_LAYOUTS = 4
+
+#: The no-op frozen functions whose input evaluation :func:`settle` uses.
 _settlers: dict = {}

@@ -417,11 +417,11 @@ def texture_class(variant: str):
             no. Told yes, the ``area`` emitter's ``pdf_direction`` of a path that met it maps
             the hit back onto the mesh through the mesh's UV parameterization, a scene of its
             own that Mitsuba rebuilds on first use after the mesh changes, inside the render:
-            a frozen render's recording then met an object its inputs do not hold and was
-            refused at every approach, and a replay of an older recording read the freed
-            scene and crashed (measured, Mitsuba 3.9). Told no, it asks the shape; either pdf
-            is multiplied by the emitter's probability of being sampled, 0, and the image is
-            the same bit for bit."""
+            a frozen render's recording then met an object its inputs did not hold and was
+            refused at every other approach, and a replay of an older recording read the
+            freed scene and crashed (measured, Mitsuba 3.9). Told no, it asks the shape;
+            Mitsuba multiplies either pdf by the emitter's sampling weight, 0, and the image
+            is the same bit for bit (measured)."""
             return self.varying
 
         def _at(self, si):

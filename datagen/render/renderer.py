@@ -150,6 +150,7 @@ class Renderer(RayCasting):
         self._frozen = frozen_render(self.spp) if config.render.frozen and not self.variant.startswith("scalar") \
             else None
         self.refused_recordings = 0  # recordings Dr.Jit refused (those frames traced instead)
+        self._dropped_recordings = 0  # recordings of frozen renders dropped after a refusal
         self.denoise = config.render.denoise
         self.guides = self.denoise != "off" and config.render.denoise_guides
         if self.denoise != "off":
@@ -264,10 +265,11 @@ class Renderer(RayCasting):
         self.scene = mi.load_dict(dict(description, hose=hose), optimize=False)
         self.params = mi.traverse(self.scene)
         self._unsettled = True  # the frozen render's first pose settles the scene (_apply)
-        if self._frozen is not None:  # the film as a render leaves it: one recording (frozen.settle)
+        if self._frozen is not None:  # the film and sampler as a render leaves them: one recording
             sensor = self.scene.sensors()[0]
             sensor.film().prepare(self.scene.integrator().aov_names())
-            settle(sensor, dr.opaque(mi.UInt32, 0, 2), literals=True)
+            settle(sensor.film(), literals=True)  # (frozen.settle)
+            settle(sensor.sampler(), literals=True)
         self._hose_points = hose_points
         if self.variant.startswith("scalar"):  # its ray casts name the shapes they hit
             return
@@ -363,10 +365,9 @@ class Renderer(RayCasting):
             for texture in (*self.world.textures(), *self.paintwork.textures()):
                 texture.prepare()
         if self._frozen is not None:  # nothing left pending for the frozen render (frozen.settle)
-            backend = self._dr.opaque(self._mi.UInt32, 0, 2)
-            settle(self.sky, backend)  # every frame: the sun's angles
+            settle(self.sky)  # every frame: the sun's angles
             if self._unsettled:  # once a scene: what loading it left (the hose's buffers)
-                settle(self.scene, backend)
+                settle(self.scene)
                 self._unsettled = False
 
     @property
@@ -468,19 +469,23 @@ class Renderer(RayCasting):
             try:
                 return self._frozen(self.scene, self._dr.opaque(self._mi.UInt32, seed))
             except RuntimeError as error:
-                # A recording that meets an object Mitsuba makes on first use inside the render
-                # is refused (measured before the cloud layers' radiance stopped asking for
-                # their mesh's UV parameterization: procedural.FieldTexture.is_spatially_varying);
-                # this frame is traced, which makes the object, and the next frame records.
-                if "record()" not in str(error):
+                # Dr.Jit refuses a recording, or a recording again after a failed dry run of a
+                # replay, that meets an object Mitsuba makes on first use inside the render
+                # (measured before the cloud layers' radiance stopped asking for their mesh's UV
+                # parameterization: procedural.FieldTexture.is_spatially_varying). The frame is
+                # traced, which makes the object, and a new frozen render replaces the one whose
+                # cache may hold the refused entry; the next frame records.
+                if not _refused(error):
                     raise
                 self.refused_recordings += 1
+                self._dropped_recordings += self._frozen.n_recordings
+                self._frozen = frozen_render(self.spp)
         return self._mi.render(self.scene, seed=seed, spp=self.spp)
 
     @property
     def recordings(self) -> int:
         """How many times the frozen render recorded the path tracing (0: traced every frame)."""
-        return 0 if self._frozen is None else self._frozen.n_recordings
+        return self._dropped_recordings + (0 if self._frozen is None else self._frozen.n_recordings)
 
     def render(self, state: FrameState, look: FrameLook, seed: int, *, geometry: bool = False) -> RenderResult:
         """Pose the scene and render it: exposure-scaled linear RGB seen through the air,
@@ -619,3 +624,13 @@ def _upsampled(grid: NDArray[np.float32], width: int, height: int) -> NDArray[np
     out = cv2.remap(grid, np.ascontiguousarray(map_x), np.ascontiguousarray(map_y), cv2.INTER_LINEAR,
                     borderMode=cv2.BORDER_REPLICATE)
     return out.reshape(height, width, -1)
+
+
+def _refused(error: BaseException) -> bool:
+    """Whether ``error`` (or an error it was raised from) is Dr.Jit refusing to record or to
+    record again a frozen function (``record(): ...``, ``replay(): ... re-recording ...``)."""
+    while error is not None:
+        if "record()" in str(error) or "re-recording" in str(error):
+            return True
+        error = error.__cause__
+    return False

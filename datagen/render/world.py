@@ -52,6 +52,11 @@ CLOUD_LAYERS: Final = {
     "cloud_deck": ("cloud_deck_coverage", "cloud_deck_altitude_m", "cloud_deck_thickness_m"),
     "cloud_layer": ("cloud_layer_coverage", "cloud_layer_altitude_m", "cloud_layer_thickness_m"),
 }
+#: A cloud layer's emitter is found by paths and never sampled (its sampling weight). Its
+#: radiance then tells Mitsuba it does not vary over the surface
+#: (procedural.FieldTexture.is_spatially_varying): the emission pdf Mitsuba takes instead is
+#: multiplied by this weight.
+CLOUD_EMITTER_WEIGHT: Final = 0.0
 #: A cloud layer is a square CLOUD_SIZE_M across, centred under or over the camera, as a mesh
 #: of cells CLOUD_CELL_M across: a cell exists (has area) only where the layer's field may
 #: reach its threshold there, so that rays through clear sky meet nothing (a plane with a
@@ -235,14 +240,14 @@ class World:
         for name in CLOUD_LAYERS:
             opacity = field_texture(pixel_rad=self.pixel_rad)
             radiance = field_texture(pixel_rad=self.pixel_rad, colour=True, front_only=True, slant=True,
-                                     varying=False)
+                                     varying=CLOUD_EMITTER_WEIGHT > 0.0)
             for texture in (opacity, radiance):
                 texture.shade = _clear
             self._cloud_textures[name] = (opacity, radiance)
             # Behind the mask, a black mirror: a delta lobe, so that the path tracer spends no
             # shadow ray on a surface that reflects nothing (a black diffuse one would).
             bsdf = mask_class(mi.variant())(opacity)
-            emitter = mi.load_dict({"type": "area", "sampling_weight": 0.0,  # found by paths, never sampled
+            emitter = mi.load_dict({"type": "area", "sampling_weight": CLOUD_EMITTER_WEIGHT,
                                     "radiance": radiance})
             # Built with every cell in place: the acceleration structure then follows the
             # grid, which later frames only collapse cells of (mirroring it measured 2x slower).
@@ -256,6 +261,11 @@ class World:
         """Every procedural texture of the world (the clouds', the sea's)."""
         clouds = tuple(t for pair in (self._cloud_textures or {}).values() for t in pair)
         return (*clouds, *(t for t in (self._sea_texture, *(self._wave_textures or ())) if t is not None))
+
+    def cloud_radiances(self) -> tuple:
+        """The cloud layers' radiance textures (their emitters') in :data:`CLOUD_LAYERS` order
+        (none without clouds)."""
+        return tuple(self._cloud_textures[name][1] for name in CLOUD_LAYERS) if self._cloud_textures else ()
 
     def cloud_opacities(self) -> tuple:
         """The cloud layers' opacity textures in :data:`CLOUD_LAYERS` order (none without
