@@ -156,10 +156,14 @@ def test_a_refused_recording_traces_its_frame_and_a_new_frozen_render_replaces_t
     fresh = types.SimpleNamespace(n_recordings=0)
     monkeypatch.setattr(renderer_module, "frozen_render", lambda spp: fresh)
     traced = []
+
+    def render(scene, seed, spp):
+        traced.append((scene, seed, spp))
+        return "image"
+
     r = types.SimpleNamespace(
         _frozen=Refusing(), refused_recordings=0, _dropped_recordings=0, spp=2, scene="scene",
-        _dr=types.SimpleNamespace(opaque=lambda cls, v: v),
-        _mi=types.SimpleNamespace(UInt32=int, render=lambda scene, seed, spp: traced.append((scene, seed, spp)) or "image"))
+        _dr=types.SimpleNamespace(opaque=lambda cls, v: v), _mi=types.SimpleNamespace(UInt32=int, render=render))
     assert renderer_module.Renderer.path_trace(r, 7) == "image" and traced == [("scene", 7, 2)]
     assert r.refused_recordings == 1 and r._frozen is fresh
     assert renderer_module.Renderer.recordings.fget(r) == 3
