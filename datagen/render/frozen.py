@@ -29,8 +29,9 @@ frame's values must all be device values set before the call:
   arrays where they held literals, and the second frame recorded again).
 
 A renderer records once, at its first frame, and compiles nothing after it; every later
-frame of every approach, and a scene built anew after another renderer's, replays (the
-default: ``render.frozen``). Counted by
+frame of every approach replays (the default: ``render.frozen``); a scene built anew after
+another renderer's replays the recording or records once more (measured: wingcam55 and
+podcam15 replay, dashcam75 beside podcam15 records again). Counted by
 :attr:`datagen.render.renderer.Renderer.recordings`; a build reports recordings after a
 worker's first frame, if any. A recording Dr.Jit refuses traces its frame instead
 (:attr:`~datagen.render.renderer.Renderer.refused_recordings`).
