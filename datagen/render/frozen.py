@@ -77,8 +77,7 @@ def settle(obj, *, literals: bool = False) -> None:
 
     key = (type(obj).__name__, bool(literals))
     if key not in _settlers:
-        backend = dr.JitBackend.CUDA if mi.variant().startswith("cuda") else dr.JitBackend.LLVM
-        _settlers[key] = dr.freeze(lambda _obj: None, backend=backend, auto_opaque=not literals,
+        _settlers[key] = dr.freeze(lambda _obj: None, backend=dr.backend_v(mi.Float), auto_opaque=not literals,
                                    limit=SETTLE_LAYOUTS, warn_after=1_000_000)
     _settlers[key](obj)
 
