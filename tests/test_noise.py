@@ -320,6 +320,56 @@ def test_cloud_edges_have_no_preferred_direction() -> None:
 
 
 @pytest.mark.render
+def test_the_cloud_cull_keeps_the_cells_that_sampling_every_cell_in_full_keeps() -> None:
+    pytest.importorskip("mitsuba")
+    import math
+
+    from datagen.assets.clouds import CLOUD_FORMS
+    from datagen.render.runtime import use_variant
+    from datagen.render.world import (CULL_OCTAVES, CULL_SAMPLES, NOISE_SLOPE_BOUND, _cell_layout, _cell_maxima,
+                                      _cloudy_cells)
+
+    use_variant("llvm_ad_rgb")
+    x0, y0, size = _cell_layout()
+    forms = list(CLOUD_FORMS.values()) if isinstance(CLOUD_FORMS, dict) else list(CLOUD_FORMS)
+    undecided = 0
+    for seed, form in enumerate(forms):
+        layer = CloudLayer.drawn(np.random.default_rng(seed), 0.15, 1.0, 168_000.0, form=form)
+        field = layer.field
+        rise = sum(NOISE_SLOPE_BOUND * field.amplitude(o) * 2.0**o / field.wavelength_m for o in range(CULL_OCTAVES))
+        full = np.zeros(len(x0), dtype=bool)
+        for cell in np.unique(size):
+            group = np.flatnonzero(size == cell)
+            spacing = cell / CULL_SAMPLES
+            maxima = _cell_maxima(field, x0[group], y0[group], (np.arange(CULL_SAMPLES) + 0.5) * spacing)
+            full[group] = maxima + rise * spacing / math.sqrt(2.0) + field.bound(CULL_OCTAVES) > layer.threshold
+        undecided += int((~full).sum())
+        assert np.array_equal(_cloudy_cells(layer), full)
+    assert undecided > 0  # some cell was culled: the subset's shortcut decided not every cell
+
+
+@pytest.mark.render
+def test_the_cloud_cull_compiles_no_kernel_for_another_cell_count_or_subset() -> None:
+    pytest.importorskip("mitsuba")
+    from datagen.render.runtime import KernelCensus, use_variant
+    from datagen.render.world import CULL_SAMPLES, _cell_maxima
+
+    use_variant("llvm_ad_rgb")
+    field = CloudLayer.drawn(np.random.default_rng(3), 0.3, 1.0, 168_000.0).field
+    offsets = (np.arange(CULL_SAMPLES) + 0.5) * 40.0
+    corners = np.arange(5, dtype=np.float64) * 1500.0
+    census = KernelCensus()
+    with census.recording():
+        first = _cell_maxima(field, corners, corners, offsets)
+        census.new_kernels()
+        one = _cell_maxima(field, corners[3:4], corners[3:4], offsets)
+        subset = _cell_maxima(field, corners[:2], corners[:2], offsets[2::4])
+        assert census.new_kernels() == 0
+    assert one.shape == (1,) and one[0] == first[3] and subset.shape == (2,)
+    assert np.all(subset <= first[:2])  # a subset of a cell's samples: no larger a maximum
+
+
+@pytest.mark.render
 def test_every_point_with_cloud_lies_in_a_cell_the_layer_keeps() -> None:
     pytest.importorskip("mitsuba")
     from datagen.render.runtime import use_variant
