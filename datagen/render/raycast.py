@@ -35,6 +35,15 @@ def visibility_tolerance_m(distance_m: NDArray[np.float64]) -> NDArray[np.float6
     return 0.01 + 1e-4 * np.asarray(distance_m)
 
 
+def _appended(mi, dr, a, b):
+    """Dr.Jit vectors ``b`` after ``a`` in one array (on their device)."""
+    n, m = dr.width(a), dr.width(b)
+    out = dr.zeros(type(a), n + m)
+    dr.scatter(out, a, dr.arange(mi.UInt32, n))
+    dr.scatter(out, b, dr.arange(mi.UInt32, m) + n)
+    return out
+
+
 def _past(t, maximum):
     """How far a ray that passes a cloud layer at distance ``t`` goes on before it is cast
     again: just past the layer (``maximum``: numpy's or Dr.Jit's)."""
@@ -138,31 +147,44 @@ class RayCasting:
         where it does not: it meets none, or stops before; a scalar variant gives -1
         everywhere), copied to the host only when asked for (the aerial perspective weighs each
         sample by the layers' opacity where the sample meets them, not by this)."""
+        return self.geometry_and_cast(stride, np.zeros((0, 3), np.float32), opacity=opacity)[0]
+
+    def geometry_and_cast(self, stride: int, directions_render: NDArray, *, opacity: bool = False
+                          ) -> tuple[tuple[NDArray, ...], NDArray]:
+        """:meth:`geometry_pass` and, in the same cast, the distance (inf: nothing) along each
+        of ``directions_render`` ((N, 3), render frame) from the posed camera, as
+        :meth:`cast` gives it: a frame's few other rays from the camera (the sun's, its
+        lights') ride with the pixels' rays, so that the frame traces one cast, not three."""
         k = self.intrinsics
         d_cam, z_per_t = self._pixel_rays(stride)
         w, h = -(-k.width // stride), -(-k.height // stride)
+        n, extra = len(d_cam), np.asarray(directions_render, dtype=np.float32).reshape(-1, 3)
         r = self._world_from_cam[:3, :3].astype(np.float32)  # the render frame shares the world's axes
         if self.variant.startswith("scalar"):
-            t, ids, surface = self.cast(self._camera_render, d_cam @ r.T)
-            depth = t * z_per_t
-            alpha = [np.full(len(depth), -1.0, np.float32)] * len(CLOUD_LAYERS)
+            t, ids, surface = self.cast(self._camera_render, np.concatenate([d_cam @ r.T, extra]))
+            depth = t[:n] * z_per_t
+            alpha = [np.full(n, -1.0, np.float32)] * len(CLOUD_LAYERS)
         else:  # the rays made and rotated on the device
             mi, dr = self._mi, self._dr
             d_dev, z_dev = self._device_rays(stride)
             m = [[dr.opaque(mi.Float, float(r[i, j])) for j in range(3)] for i in range(3)]
             d = mi.Vector3f(*(m[i][0] * d_dev.x + m[i][1] * d_dev.y + m[i][2] * d_dev.z for i in range(3)))
+            # Two more rays at least, whatever the frame asks for: the same kernels every frame.
+            more = np.resize(extra, (max(len(extra), 2), 3)) if len(extra) else np.array([[0, 0, 1]] * 2, np.float32)
+            d = _appended(mi, dr, d, jit_vectors(mi.Vector3f, more))
             t, ids, surface, *alpha = self._cast_on_device(d)
-            depth = t * z_dev
-            dr.eval(depth)
-            depth, ids, surface = (np.asarray(a) for a in (depth, ids, surface))
-        out = (depth.reshape(h, w).astype(np.float32), ids.reshape(h, w).astype(np.uint32),
-               surface.reshape(h, w).astype(np.uint8))
+            dr.eval(t, ids, surface)
+            t, ids, surface = (np.asarray(a) for a in (t, ids, surface))
+            depth = t[:n] * np.asarray(z_dev)  # float32 products, as on the device
+        out = (depth.reshape(h, w).astype(np.float32), ids[:n].reshape(h, w).astype(np.uint32),
+               surface[:n].reshape(h, w).astype(np.uint8))
         if opacity:
-            layers = np.stack([np.asarray(a) for a in alpha], axis=-1)  # one per layer: a copy from the device
+            layers = np.stack([np.asarray(a)[:n] for a in alpha], axis=-1)  # one per layer: a copy from the device
             out += (layers.reshape(h, w, len(CLOUD_LAYERS)).astype(np.float32),)
+        cast = np.asarray(t[n:n + len(extra)], dtype=np.float32)
         if stride == 1:
-            return out
-        return tuple(np.repeat(np.repeat(a, stride, axis=0), stride, axis=1)[:k.height, :k.width] for a in out)
+            return out, cast
+        return tuple(np.repeat(np.repeat(a, stride, axis=0), stride, axis=1)[:k.height, :k.width] for a in out), cast
 
     @functools.cache  # noqa: B019 (one renderer per process; two strides at most)
     def _device_rays(self, stride: int):

@@ -495,11 +495,17 @@ class Renderer(RayCasting):
         with clock.stage("pose"):  # the cloud-lighting probe inside it is a stage of its own
             self.pose(state, look, clock)
         haze = look.haze_visibility_m is not None
-        with clock.stage("geometry pass"):
+        with clock.stage("geometry pass"):  # with the sun's ray and the lights' in the same cast
+            lights = self._light_rays(state, look)
+            sun_world = None if self.sensor is None else sun_direction_world(state, look)
+            directions = np.concatenate([np.zeros((0, 3), np.float32) if sun_world is None else sun_world[None, :],
+                                         np.zeros((0, 3)) if lights is None else lights.directions]).astype(np.float32)
             if geometry or self.always_geometry:  # the camera model and the statistics: half resolution will do
-                depth, ids, surface = self.geometry_pass(1 if geometry else 2)
+                (depth, ids, surface), t = self.geometry_and_cast(1 if geometry else 2, directions)
             else:
                 depth = ids = surface = None
+                t = self.cast(self._camera_render, directions)[0] if len(directions) else np.zeros(0, np.float32)
+            t_sun, t_lights = (None, t) if sun_world is None else (t[0], t[1:])
             texels = self.world.texel_footprint_px(depth, ids, surface, self.intrinsics.fx)
         if self.aerial is not None:
             with clock.stage(AERIAL_PERSPECTIVE):
@@ -520,50 +526,53 @@ class Renderer(RayCasting):
             with clock.stage(DENOISE):
                 rgb = self._denoised(image, beauty)
             denoise_s = clock.seconds[DENOISE]
-        with clock.stage("lights"):
-            self._draw_lights(rgb, state, look)
+        if lights is not None:
+            with clock.stage("lights"):
+                self._draw_lights(rgb, lights, t_lights)
         if self.sensor is None:
             with clock.stage("exposure"):
                 rgb *= exposure_scale(look.exposure_ev)
             return RenderResult(rgb, depth, ids, render_s, denoise_s, surface, texels, stages=clock.seconds)
         from datagen.render.sensor import apply_sensor
 
-        with clock.stage("geometry pass"):
-            sun_world = sun_direction_world(state, look)
-            t_sun, _, _ = self.cast(self._camera_render, sun_world[None, :].astype(np.float32))
         out = apply_sensor(rgb, look, state, render=self.intrinsics, output=self.output_intrinsics,
                            margin_px=self.margin_px, depth=depth, ids=ids, surface=surface,
                            sun_cam=state.cam_from_world[:3, :3] @ sun_world,
-                           sun_transmittance=float(not np.isfinite(t_sun[0])),
+                           sun_transmittance=float(not np.isfinite(t_sun)),
                            auto_exposure=self.sensor.auto_exposure, clock=clock,
                            device=not self.variant.startswith("scalar"))
         return RenderResult(out.rgb, out.depth, out.object_id, render_s, denoise_s, out.surface,
                             {**out.measured, **texels}, clock.seconds)
 
-    def _draw_lights(self, rgb: NDArray[np.float32], state: FrameState, look: FrameLook) -> None:
-        """The aircraft's lit lights (:meth:`Paintwork.light_spots`) added to the linear image
-        where the camera sees them: in front of it and nothing hit on the way."""
+    def _light_rays(self, state: FrameState, look: FrameLook) -> _LightRays | None:
+        """The aircraft's lit lights (:meth:`Paintwork.light_spots`) in front of the camera
+        and the render-frame directions to them, to be cast from the camera (None: none)."""
         from datagen.core.camera import project_points
-        from datagen.render.paintwork import LIGHT_STANDOFF_M, add_light_spots
 
         spots = self.paintwork.light_spots(look, {obj: state.world_from(obj) for obj in RIGID_OBJECTS},
                                            state.time_s, self._irradiance)
         if not spots:
-            return
+            return None
         world = np.array([p for p, _ in spots])
         cam = (state.cam_from_world @ np.c_[world, np.ones(len(world))].T).T[:, :3]
         front = cam[:, 2] > 1.0
         if not front.any():
-            return
+            return None
         world, cam = world[front], cam[front]
         radiance = np.array([r for (_, r), f in zip(spots, front, strict=True) if f])
-        origin = self._world_from_cam[:3, 3]
-        towards = world - origin
+        towards = world - self._world_from_cam[:3, 3]
         distance = np.linalg.norm(towards, axis=1)
-        t, _, _ = self.cast(self._camera_render, (towards / distance[:, None]).astype(np.float32))
-        seen = t >= distance - LIGHT_STANDOFF_M  # the lens stands off the skin: what it stands on is behind it
+        return _LightRays(project_points(cam, self.intrinsics), distance, radiance,
+                          (towards / distance[:, None]).astype(np.float32))
+
+    def _draw_lights(self, rgb: NDArray[np.float32], lights: _LightRays, t: NDArray[np.float32]) -> None:
+        """``lights`` added to the linear image where the camera sees them: nothing hit on
+        the way (``t``, the distance along each light's ray to the first hit)."""
+        from datagen.render.paintwork import LIGHT_STANDOFF_M, add_light_spots
+
+        seen = t >= lights.distance - LIGHT_STANDOFF_M  # the lens stands off the skin: what it stands on is behind it
         if seen.any():
-            add_light_spots(rgb, project_points(cam[seen], self.intrinsics), distance[seen], radiance[seen],
+            add_light_spots(rgb, lights.pixels[seen], lights.distance[seen], lights.radiance[seen],
                             self.intrinsics.fx)
 
     def _set_air(self, state: FrameState, look: FrameLook) -> None:
@@ -610,6 +619,17 @@ class Renderer(RayCasting):
             beauty = self._mi.TensorXf(np.ascontiguousarray(beauty))
         out = denoise_render(image, guides=self.guides, quality=self.config.render.denoise_quality, beauty=beauty)
         return np.maximum(np.array(out, dtype=np.float32), np.float32(0.0))
+
+
+@dataclass(frozen=True)
+class _LightRays:
+    """A frame's lights in front of the camera: their pixels, distances (m), radiance, and
+    the render-frame directions to them from the camera."""
+
+    pixels: NDArray[np.float64]
+    distance: NDArray[np.float64]
+    radiance: NDArray[np.float64]
+    directions: NDArray[np.float32]
 
 
 def _upsampled(grid: NDArray[np.float32], width: int, height: int) -> NDArray[np.float32]:
