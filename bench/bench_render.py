@@ -111,8 +111,9 @@ def main() -> None:
                   f"denoise {denoise_s / k:5.2f} s/frame, whole frame {total_s / k:6.2f} s/frame, "
                   f"host work (outside mi.render and the denoiser) {(total_s - render_s - denoise_s) / k:5.2f} s/frame "
                   f"= {100 * (1 - (render_s + denoise_s) / total_s):4.1f}%, "
-                  f"kernels compiled after warm-up {compiles}, render recordings {renderer.recordings} "
-                  f"({renderer.refused_recordings} refused, those frames traced), peak RSS {peak:,.0f} MiB")
+                  f"kernels compiled after warm-up {compiles}, render recordings {renderer.recordings}, "
+                  f"ray-cast recordings {renderer.cast_recordings} ({renderer.refused_recordings} refused, "
+                  f"those traced), peak RSS {peak:,.0f} MiB")
             rest = rest_of_frame(stages)
             print("    stages: " + ", ".join(f"{name} {t / k:.3f} s" for name, t in rest)
                   + f" ({sum(t for _, t in rest) / total_s:.0%} of the frame)")

@@ -30,14 +30,16 @@ def _frames(frozen: bool) -> tuple[list[np.ndarray], tuple[int, int], int]:
         "render.frozen": frozen})  # on is the default
     scene = Scene.resolve(config)
     states, renderer = FrameStates(config), Renderer(scene)
-    images, before = [], 0
+    images, before = [], (0, 0)
     for k, i in enumerate(FRAMES):
         if k == len(FRAMES) - 1:
-            before = renderer.recordings
+            before = renderer.recordings, renderer.cast_recordings
             renderer.release()  # the last frame's scene built anew (as after another renderer's)
         draws = draw_frame(scene, states, i)
-        images.append(renderer.render(draws.state, draws.look, draws.render_seed).rgb)
-    recordings, refused = (before, renderer.recordings), renderer.refused_recordings
+        out = renderer.render(draws.state, draws.look, draws.render_seed)
+        images.append((out.rgb, out.depth, out.object_id, out.surface))  # the image, and the geometry pass's
+    recordings = (before[0], renderer.recordings, before[1], renderer.cast_recordings)
+    refused = renderer.refused_recordings
     renderer.release()
     return images, recordings, refused
 
@@ -45,16 +47,18 @@ def _frames(frozen: bool) -> tuple[list[np.ndarray], tuple[int, int], int]:
 def test_frozen_frames_are_the_traced_frames_bit_for_bit_over_three_approaches_and_a_rebuilt_scene() -> None:
     """Every randomizer on; the last frame's scene is built anew and its frame is the traced
     one too."""
-    replayed, (recordings, after_rebuild), refused = _in_own_process(_frames, True)
+    replayed, (recordings, after_rebuild, casts, casts_after), refused = _in_own_process(_frames, True)
     traced, none, _ = _in_own_process(_frames, False)
-    assert none == (0, 0)
-    # The first frame records; no later frame or approach records again or is refused. The
-    # scene built anew replays the recording or records once more (measured: about one run
-    # in six records again there; what decides it is not found).
-    assert recordings == 1 and refused == 0, (recordings, refused)
-    assert after_rebuild in (1, 2), after_rebuild
+    assert none == (0, 0, 0, 0)
+    # The first frame records the render and the geometry pass's cast; no later frame or
+    # approach records again or is refused. The scene built anew replays the recordings or
+    # records once more (measured: about one run in six records the render again there; what
+    # decides it is not found).
+    assert recordings == 1 and casts == 1 and refused == 0, (recordings, casts, refused)
+    assert after_rebuild in (1, 2) and casts_after in (1, 2), (after_rebuild, casts_after)
     for i, a, b in zip(FRAMES, replayed, traced, strict=True):
-        assert np.array_equal(a, b), f"frame {i}: {np.abs(a - b).max()}"
+        for name, x, y in zip(("image", "depth", "object ids", "surfaces"), a, b, strict=True):
+            assert x is not None and np.array_equal(x, y), f"frame {i}: {name}"
 
 
 def test_a_texture_notes_its_values_again_only_when_its_shade_computes_something_else() -> None:
@@ -180,6 +184,49 @@ def test_a_refused_recording_traces_its_frame_and_a_new_frozen_render_replaces_t
     r._frozen = Failing()
     with pytest.raises(RuntimeError, match="a kernel failed"):
         renderer_module.Renderer.path_trace(r, 7)
+
+
+def test_a_refused_recording_of_the_ray_cast_traces_it_and_a_new_frozen_cast_replaces_the_old(monkeypatch) -> None:
+    """As the render's: the geometry pass's cast is traced where Dr.Jit refuses to record it,
+    the frozen cast is replaced, and its recordings still count; other errors are raised."""
+    import types
+
+    import drjit as dr
+    import mitsuba as mi
+
+    import datagen.render.raycast as raycast
+    from datagen.render.renderer import Renderer
+    from datagen.render.runtime import use_variant
+
+    use_variant("llvm_ad_rgb")
+
+    class Refusing:
+        n_recordings = 2
+
+        def __call__(self, *args):
+            raise RuntimeError("replay(): ... re-recording ...")
+
+    fresh = types.SimpleNamespace(n_recordings=0)
+    traced = []
+    monkeypatch.setattr(raycast, "frozen_cast", lambda kernel: fresh)
+    monkeypatch.setattr(raycast, "cast_kernel", lambda *args: traced.append(args) or "cast")
+    r = types.SimpleNamespace(
+        _mi=mi, _dr=dr, _camera_render=np.zeros(3), _traffic_ids=(), _id_table=mi.UInt32([0, 1]),
+        _background_codes=mi.Int32([-1, 0, 1]), scene="scene", refused_recordings=0,
+        _dropped_cast_recordings=0, _frozen_cast=Refusing(),
+        world=types.SimpleNamespace(cloud_layer=lambda name: None, cloud_opacities=lambda: (), pixel_rad=1e-3))
+    d = mi.Vector3f(dr.zeros(mi.Float, 4), dr.zeros(mi.Float, 4), dr.ones(mi.Float, 4))
+    assert raycast.RayCasting._cast_on_device(r, d) == "cast" and len(traced) == 1
+    assert r.refused_recordings == 1 and r._frozen_cast is fresh
+    assert Renderer.cast_recordings.fget(r) == 2
+
+    class Failing:
+        def __call__(self, *args):
+            raise RuntimeError("a kernel failed")
+
+    r._frozen_cast = Failing()
+    with pytest.raises(RuntimeError, match="a kernel failed"):
+        raycast.RayCasting._cast_on_device(r, d)
 
 
 def _in_own_process(fn, *args):

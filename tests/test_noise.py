@@ -326,8 +326,14 @@ def test_the_cloud_cull_keeps_the_cells_that_sampling_every_cell_in_full_keeps()
 
     from datagen.assets.clouds import CLOUD_FORMS
     from datagen.render.runtime import use_variant
-    from datagen.render.world import (CULL_OCTAVES, CULL_SAMPLES, NOISE_SLOPE_BOUND, _cell_layout, _cell_maxima,
-                                      _cloudy_cells)
+    from datagen.render.world import (
+        CULL_OCTAVES,
+        CULL_SAMPLES,
+        NOISE_SLOPE_BOUND,
+        _cell_layout,
+        _cell_maxima,
+        _cloudy_cells,
+    )
 
     use_variant("llvm_ad_rgb")
     x0, y0, size = _cell_layout()

@@ -28,6 +28,10 @@ frame's values must all be device values set before the call:
   film's and sampler's literals settled, when the scene is built (a first render leaves
   arrays where they held literals, and the second frame recorded again).
 
+The geometry pass's ray cast is frozen the same way (:func:`frozen_cast`): its rays, the
+state they start from and the cloud layers' opacity textures are its inputs, and it reads
+nothing back to the host between passes.
+
 A renderer records once, at its first frame, and compiles nothing after it; every later
 frame of every approach replays (the default: ``render.frozen``); a scene built anew after
 another renderer's replays the recording or records once more (measured: wingcam55 and
@@ -42,7 +46,7 @@ worker's first frame, if any. A recording Dr.Jit refuses traces its frame instea
 
 from __future__ import annotations
 
-__all__ = ["frozen_render", "settle"]
+__all__ = ["frozen_cast", "frozen_render", "refused", "settle"]
 
 
 def frozen_render(spp: int):
@@ -55,6 +59,25 @@ def frozen_render(spp: int):
         return mi.render(scene, seed=seed, spp=spp)
 
     return dr.freeze(render)
+
+
+def frozen_cast(cast):
+    """``cast`` (:func:`datagen.render.raycast.cast_kernel`) frozen: the geometry pass's ray
+    cast, recorded once per input layout and replayed (its inputs are all device arrays or
+    Mitsuba objects, and a key of the Python values it bakes in)."""
+    import drjit as dr
+
+    return dr.freeze(cast, limit=CAST_LAYOUTS)
+
+
+def refused(error: BaseException) -> bool:
+    """Whether ``error`` (or an error it was raised from) is Dr.Jit refusing to record or to
+    record again a frozen function (``record(): ...``, ``replay(): ... re-recording ...``)."""
+    while error is not None:
+        if "record()" in str(error) or "re-recording" in str(error):
+            return True
+        error = error.__cause__
+    return False
 
 
 def settle(obj, *, literals: bool = False) -> None:
@@ -85,6 +108,10 @@ def settle(obj, *, literals: bool = False) -> None:
 #: How many input layouts each of :func:`settle`'s no-op frozen functions keeps (a new scene
 #: is a new layout; the oldest is dropped).
 SETTLE_LAYOUTS = 4
+
+#: How many input layouts the frozen ray cast keeps (a frame with more lights than the rays
+#: padded for is another layout; a scene built anew, another).
+CAST_LAYOUTS = 4
 
 #: The no-op frozen functions whose input evaluation :func:`settle` uses.
 _settlers: dict = {}

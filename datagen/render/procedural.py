@@ -26,7 +26,7 @@ import numpy as np
 from datagen.assets.noise import FADE_LO, NUMPY, Ops, Slant, row_params
 from datagen.render.mitsuba import jit_array, scene_array
 
-__all__ = ["body_texture_class", "drjit_ops", "evaluate", "mask_class", "texture_class"]
+__all__ = ["body_texture_class", "drjit_ops", "evaluate", "mask_class", "only_where", "texture_class"]
 
 #: The area a texture's field is evaluated on: its surface's render-frame x and y (metres).
 PLANE_AXES: Final = (0, 1)
@@ -73,7 +73,7 @@ def _ops(variant: str) -> Ops:
         abs=dr.abs,
         select=dr.select,
     )
-    return dataclasses.replace(ops, series_loop=functools.partial(_series_loop, ops), only_where=_only_where)
+    return dataclasses.replace(ops, series_loop=functools.partial(_series_loop, ops), only_where=only_where)
 
 
 class _Reading:
@@ -196,7 +196,7 @@ def _table(cls, values: np.ndarray):
     return jit_array(cls, values)
 
 
-def _only_where(active, initial: tuple, fn) -> tuple:
+def only_where(active, initial: tuple, fn) -> tuple:
     """:meth:`datagen.assets.noise.Ops.where` in a kernel: ``fn`` inside a loop of at most one
     pass, which the lanes that are not ``active`` leave at once (a packet of lanes none of
     which is active skips the work)."""
@@ -451,6 +451,21 @@ def texture_class(variant: str):
         def _value_of(self, si):
             with np.errstate(over="ignore"):
                 return self.shade(*self._at(si), drjit_ops())
+
+        def value_at(self, x, y, footprint_m):
+            """``shade`` at render-frame points ``(x, y)`` seen with a pixel's footprint
+            ``footprint_m`` there (the geometry pass's question to a cloud layer's opacity),
+            reading the values :meth:`prepare` noted, as the render does: a recording of it
+            reads them as data."""
+            ops = drjit_ops()
+            with np.errstate(over="ignore"):
+                if ops is NUMPY:
+                    return self.shade(x, y, footprint_m, ops)
+                self.prepare()
+                with _Reading(self, collect=False) as reading, _loops_traced_once():
+                    value = self.shade(x, y, footprint_m, ops)
+            reading.check()
+            return value
 
 
     assert mi.variant() == variant

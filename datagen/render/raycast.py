@@ -15,16 +15,20 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.core.conventions import OBJECT_NAMES, OTHER_AIRCRAFT_ID, object_id, pixel_centres
+from datagen.render.frozen import frozen_cast, refused
 from datagen.render.mitsuba import jit_array, jit_vectors, visible
-from datagen.render.procedural import drjit_ops
+from datagen.render.procedural import only_where
 from datagen.render.world import CLOUD_LAYERS, SURFACES
 
 if TYPE_CHECKING:
     from datagen.core.features import FeatureTable
     from datagen.scene.approach import FrameState
 
-__all__ = ["CLOUD_PASS_OPACITY", "RayCasting", "visibility_tolerance_m"]
+__all__ = ["CLOUD_PASS_OPACITY", "RayCasting", "cast_kernel", "visibility_tolerance_m"]
 
+#: The geometry pass's cast carries a frame's other rays from the camera (the sun's, the lights')
+#: in blocks of this many.
+EXTRA_RAYS: Final = 16
 #: A ray cast by the geometry pass passes a cloud layer where the layer's opacity is below this.
 CLOUD_PASS_OPACITY: Final = 0.5
 
@@ -169,8 +173,10 @@ class RayCasting:
             d_dev, z_dev = self._device_rays(stride)
             m = [[dr.opaque(mi.Float, float(r[i, j])) for j in range(3)] for i in range(3)]
             d = mi.Vector3f(*(m[i][0] * d_dev.x + m[i][1] * d_dev.y + m[i][2] * d_dev.z for i in range(3)))
-            # Two more rays at least, whatever the frame asks for: the same kernels every frame.
-            more = np.resize(extra, (max(len(extra), 2), 3)) if len(extra) else np.array([[0, 0, 1]] * 2, np.float32)
+            # The rays the frame asks for padded to a multiple of EXTRA_RAYS (one at least): the
+            # same kernels, and the same recording of them, every frame.
+            more = np.resize(extra if len(extra) else np.array([[0, 0, 1]], np.float32),
+                             (max(1, -(-len(extra) // EXTRA_RAYS)) * EXTRA_RAYS, 3))
             d = _appended(mi, dr, d, jit_vectors(mi.Vector3f, more))
             t, ids, surface, *alpha = self._cast_on_device(d)
             dr.eval(t, ids, surface)
@@ -198,74 +204,36 @@ class RayCasting:
     def _cast_on_device(self, d):
         """:meth:`cast` of rays ``d`` (``mi.Vector3f``, render frame) from the posed camera, as
         Dr.Jit work on the variant's device: (t, object id, surface, and per cloud layer its
-        opacity where the ray meets it (-1 where it does not)), evaluated there.
+        opacity where the ray meets it (-1 where it does not)), evaluated there
+        (:func:`cast_kernel`, frozen with the render where the render is: ``_frozen_cast``).
         The same as the scalar loop but for float32 rounding of the distance travelled
         through cloud layers (a pixel or two of 2 million at a cloud's edge)."""
         mi, dr = self._mi, self._dr
         n = dr.width(d)
-        o = mi.Point3f(*(dr.zeros(mi.Float, n) + dr.opaque(mi.Float, float(c)) for c in self._camera_render))
-        id_table, codes = self._id_table, self._background_codes
-        travelled = dr.opaque(mi.Float, 0.0, n)
-        t_out = dr.opaque(mi.Float, dr.inf, n)
-        ids_out = dr.opaque(mi.UInt32, 0, n)
-        surface_out = dr.opaque(mi.UInt32, 0, n)
-        alpha_out = [dr.opaque(mi.Float, -1.0, n) for _ in CLOUD_LAYERS]
-        active = dr.opaque(mi.Bool, True, n)
-        dr.make_opaque(d, o)
-        # Each step is evaluated on its own, so that every kernel is the same whichever
-        # layers a frame's rays meet, and how many passes they take.
-        layers = ("sea", *CLOUD_LAYERS)
-        ops = drjit_ops()
-        for _ in range(len(CLOUD_LAYERS) + 1):
-            si = self.scene.ray_intersect(mi.Ray3f(o, d), ray_flags=mi.RayFlags.Minimal, coherent=True,
-                                          active=active)
-            shape = dr.reinterpret_array(mi.UInt32, si.shape)
-            valid = active & si.is_valid()
-            known = valid & (shape + 1 < dr.width(codes))
-            ids = dr.gather(mi.UInt32, id_table, shape, valid & (shape < dr.width(id_table)))
-            if self._traffic_ids:  # another aircraft: an instance of an object's meshes (datagen.scene.traffic)
-                instance = dr.reinterpret_array(mi.UInt32, si.instance)
-                other = dr.zeros(mi.Bool, n)
-                for registry in self._traffic_ids:
-                    other |= instance == dr.opaque(mi.UInt32, registry)
-                ids = dr.select(valid & other, OTHER_AIRCRAFT_ID, ids)
-            code = dr.select(known, dr.gather(mi.Int32, codes, shape + 1, known), -1)
-            surface = mi.UInt32(dr.select(valid, SURFACES.index("object"), SURFACES.index("sky")))
-            surface = dr.select(code == 0, SURFACES.index("sea"), surface)
-            surface = dr.select(code > 0, SURFACES.index("cloud"), surface)
-            hit_t = si.t
-            dr.eval(hit_t, ids, code, surface)
-            passing = dr.opaque(mi.Bool, False, n)
-            alpha = dr.opaque(mi.Float, 1.0, n)
-            for c, name in enumerate(layers[1:], start=1):
-                layer = self.world.cloud_layer(name)
-                if layer is None:
-                    continue
-                at = dr.compress(active & (code == c))  # the rays that met this layer
-                met = dr.width(at)
-                if met < 2:  # the same kernels whether 0, 1 or many rays met the layer: two lanes in memory
-                    at = jit_array(mi.UInt32, np.resize(np.asarray(at, dtype=np.uint32), 2) if met else [0, 0])
-                real = dr.arange(mi.UInt32, dr.width(at)) < dr.opaque(mi.UInt32, met)
-                t = dr.gather(mi.Float, hit_t, at)
-                p = dr.gather(mi.Point3f, o, at) + dr.gather(mi.Vector3f, d, at) * t
-                opacity = layer(p.x, p.y, (dr.gather(mi.Float, travelled, at) + t) * self.world.pixel_rad, ops)
-                dr.scatter(passing, opacity < CLOUD_PASS_OPACITY, at, real)
-                dr.scatter(alpha, opacity, at, real)
-                dr.eval(passing, alpha)
-            done = active & ~passing
-            t_out = dr.select(done, travelled + hit_t, t_out)
-            ids_out = dr.select(done, ids, ids_out)
-            surface_out = dr.select(done, surface, surface_out)
-            for c in range(1, len(layers)):
-                alpha_out[c - 1] = dr.select(active & (code == c), alpha, alpha_out[c - 1])
-            active = passing
-            step = _past(hit_t, dr.maximum)
-            travelled = dr.select(passing, travelled + step, travelled)
-            o = dr.select(passing, o + d * step, o)
-            dr.eval(t_out, ids_out, surface_out, *alpha_out, active, travelled, o)
-            if not dr.any(active)[0]:
-                break
-        return t_out, ids_out, surface_out, *alpha_out
+        opaque = functools.partial(dr.opaque, shape=n)
+        start = {"o": mi.Point3f(*(opaque(mi.Float, float(c)) for c in self._camera_render)),
+                 "travelled": opaque(mi.Float, 0.0), "t": opaque(mi.Float, dr.inf), "ids": opaque(mi.UInt32, 0),
+                 "surface": opaque(mi.UInt32, 0), "alpha": [opaque(mi.Float, -1.0) for _ in CLOUD_LAYERS],
+                 "active": opaque(mi.Bool, True)}
+        dr.make_opaque(d)
+        present = tuple(c for c, name in enumerate(CLOUD_LAYERS, start=1) if self.world.cloud_layer(name) is not None)
+        opacities = self.world.cloud_opacities()
+        textures = tuple(opacities[c - 1] for c in present)
+        # What the kernel bakes in: a change of any of it records anew.
+        key = (present, self._traffic_ids, dr.width(self._id_table), dr.width(self._background_codes),
+               float(self.world.pixel_rad))
+        args = (self.scene, d, start, self._id_table, self._background_codes, textures, key)
+        frozen = getattr(self, "_frozen_cast", None)
+        if frozen is not None:
+            try:
+                return frozen(*args)
+            except RuntimeError as error:  # as the render's (Renderer.path_trace): traced, and a new one
+                if not refused(error):
+                    raise
+                self.refused_recordings += 1
+                self._dropped_cast_recordings += frozen.n_recordings
+                self._frozen_cast = frozen_cast(cast_kernel)
+        return cast_kernel(*args)
 
     def feature_visibility(self, state: FrameState, features: FeatureTable
                            ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
@@ -284,3 +252,71 @@ class RayCasting:
         mask = np.arange(p)[None, :] < features.n_points[:, None]
         fraction = (seen[:, :p] & mask).sum(axis=1) / features.n_points
         return fraction, seen[:, p]
+
+
+def cast_kernel(scene, d, start: dict, id_table, codes, textures: tuple, key: tuple):
+    """The rays ``d`` (render frame) cast from ``start["o"]`` through ``scene``, passing each
+    cloud layer where its opacity is below :data:`CLOUD_PASS_OPACITY`, up to
+    ``len(CLOUD_LAYERS) + 1`` times: (t, object id, surface code, and per cloud layer its
+    opacity where the ray meets it, -1 where it does not). ``start`` holds the state's first
+    values (all ``d``'s width); ``id_table`` maps a shape's index to its object id,
+    ``codes`` a shape's index + 1 to its background code (0 sea, c the c-th cloud layer);
+    ``textures`` are the opacity textures of the layers ``key[0]`` names (their codes);
+    ``key`` also holds the other aircraft's instance ids, the tables' widths and the
+    pixel's angle.
+
+    Everything a frame changes comes in as device data and every pass runs whatever the rays
+    met, so that a recording (``dr.freeze``, :func:`datagen.render.frozen.frozen_cast`)
+    replays any frame: a layer's opacity is evaluated on the lanes that meet it, inside a
+    loop the others leave at once (no ``dr.compress``, whose width a recording would fix),
+    and nothing is read back to the host."""
+    import drjit as dr
+    import mitsuba as mi
+
+    present, traffic, _, _, pixel_rad = key
+    o = start["o"]
+    travelled, t_out, ids_out, surface_out = start["travelled"], start["t"], start["ids"], start["surface"]
+    alpha_out, active = list(start["alpha"]), start["active"]
+    # Each step is evaluated on its own, so that every kernel is the same whichever
+    # layers a frame's rays meet, and how many passes they take.
+    for _ in range(len(CLOUD_LAYERS) + 1):
+        si = scene.ray_intersect(mi.Ray3f(o, d), ray_flags=mi.RayFlags.Minimal, coherent=True, active=active)
+        shape = dr.reinterpret_array(mi.UInt32, si.shape)
+        valid = active & si.is_valid()
+        known = valid & (shape + 1 < dr.width(codes))
+        ids = dr.gather(mi.UInt32, id_table, shape, valid & (shape < dr.width(id_table)))
+        if traffic:  # another aircraft: an instance of an object's meshes (datagen.scene.traffic)
+            instance = dr.reinterpret_array(mi.UInt32, si.instance)
+            other = instance == dr.opaque(mi.UInt32, traffic[0])
+            for registry in traffic[1:]:
+                other |= instance == dr.opaque(mi.UInt32, registry)
+            ids = dr.select(valid & other, OTHER_AIRCRAFT_ID, ids)
+        code = dr.select(known, dr.gather(mi.Int32, codes, shape + 1, known), -1)
+        surface = mi.UInt32(dr.select(valid, SURFACES.index("object"), SURFACES.index("sky")))
+        surface = dr.select(code == 0, SURFACES.index("sea"), surface)
+        surface = dr.select(code > 0, SURFACES.index("cloud"), surface)
+        hit_t = si.t
+        dr.eval(hit_t, ids, code, surface)
+        passing = dr.zeros(mi.Bool, dr.width(d))
+        alpha = mi.Float(1.0)  # (read only where a layer set it)
+        for c, texture in zip(present, textures, strict=True):
+            on = active & (code == c)  # the rays that met this layer
+            p = o + d * hit_t
+            footprint = (travelled + hit_t) * pixel_rad
+            (opacity,) = only_where(on, (mi.Float(1.0),), lambda p=p, footprint=footprint, texture=texture:
+                                     (texture.value_at(p.x, p.y, footprint),))
+            passing = dr.select(on, opacity < CLOUD_PASS_OPACITY, passing)
+            alpha = dr.select(on, opacity, alpha)
+            dr.eval(passing, alpha)
+        done = active & ~passing
+        t_out = dr.select(done, travelled + hit_t, t_out)
+        ids_out = dr.select(done, ids, ids_out)
+        surface_out = dr.select(done, surface, surface_out)
+        for c in range(1, len(CLOUD_LAYERS) + 1):
+            alpha_out[c - 1] = dr.select(active & (code == c), alpha, alpha_out[c - 1])
+        active = passing
+        step = _past(hit_t, dr.maximum)
+        travelled = dr.select(passing, travelled + step, travelled)
+        o = dr.select(passing, o + d * step, o)
+        dr.eval(t_out, ids_out, surface_out, *alpha_out, active, travelled, o)
+    return t_out, ids_out, surface_out, *alpha_out

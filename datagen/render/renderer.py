@@ -38,7 +38,7 @@ from datagen.core.conventions import RIGID_OBJECTS, object_id
 from datagen.core.transforms import make_transform
 from datagen.render.aerial import AIRLIGHT_STEP_PX
 from datagen.render.atmosphere import Atmosphere
-from datagen.render.frozen import frozen_render, settle
+from datagen.render.frozen import frozen_cast, frozen_render, refused, settle
 from datagen.render.mitsuba import (
     jit_array,
     mitsuba_mesh,
@@ -48,7 +48,7 @@ from datagen.render.mitsuba import (
     world_from_micam,
 )
 from datagen.render.paintwork import Paintwork
-from datagen.render.raycast import RayCasting
+from datagen.render.raycast import RayCasting, cast_kernel
 from datagen.render.runtime import hold_scene, use_variant
 from datagen.render.sky import sky_class
 from datagen.render.timing import DENOISE, PATH_TRACING, StageClock
@@ -149,8 +149,11 @@ class Renderer(RayCasting):
         # The path tracing recorded once and replayed (datagen.render.frozen); None: traced each frame.
         self._frozen = frozen_render(self.spp) if config.render.frozen and not self.variant.startswith("scalar") \
             else None
+        # The geometry pass's ray cast, frozen with the render (datagen.render.raycast.cast_kernel).
+        self._frozen_cast = frozen_cast(cast_kernel) if self._frozen is not None else None
         self.refused_recordings = 0  # recordings Dr.Jit refused (those frames traced instead)
         self._dropped_recordings = 0  # recordings of frozen renders dropped after a refusal
+        self._dropped_cast_recordings = 0  # and of frozen casts
         self.denoise = config.render.denoise
         self.guides = self.denoise != "off" and config.render.denoise_guides
         if self.denoise != "off":
@@ -475,7 +478,7 @@ class Renderer(RayCasting):
                 # parameterization: procedural.FieldTexture.is_spatially_varying). The frame is
                 # traced, which makes the object, and a new frozen render replaces the one whose
                 # cache may hold the refused entry; the next frame records.
-                if not _refused(error):
+                if not refused(error):
                     raise
                 self.refused_recordings += 1
                 self._dropped_recordings += self._frozen.n_recordings
@@ -487,6 +490,12 @@ class Renderer(RayCasting):
         """How many times the frozen render recorded the path tracing (0: traced every frame)."""
         return self._dropped_recordings + (0 if self._frozen is None else self._frozen.n_recordings)
 
+    @property
+    def cast_recordings(self) -> int:
+        """How many times the frozen ray cast recorded (0: traced every frame)."""
+        frozen = self._frozen_cast
+        return self._dropped_cast_recordings + (0 if frozen is None else frozen.n_recordings)
+
     def render(self, state: FrameState, look: FrameLook, seed: int, *, geometry: bool = False) -> RenderResult:
         """Pose the scene and render it: exposure-scaled linear RGB seen through the air,
         plus the geometry pass (depth, object ids) when ``geometry`` is asked for or the
@@ -495,6 +504,9 @@ class Renderer(RayCasting):
         with clock.stage("pose"):  # the cloud-lighting probe inside it is a stage of its own
             self.pose(state, look, clock)
         haze = look.haze_visibility_m is not None
+        if self.aerial is not None:  # before the cast, which sees the scene's air as the render does
+            with clock.stage(AERIAL_PERSPECTIVE):
+                self._set_air(state, look)
         with clock.stage("geometry pass"):  # with the sun's ray and the lights' in the same cast
             lights = self._light_rays(state, look)
             sun_world = None if self.sensor is None else sun_direction_world(state, look)
@@ -507,9 +519,6 @@ class Renderer(RayCasting):
                 t = self.cast(self._camera_render, directions)[0] if len(directions) else np.zeros(0, np.float32)
             t_sun, t_lights = (None, t) if sun_world is None else (t[0], t[1:])
             texels = self.world.texel_footprint_px(depth, ids, surface, self.intrinsics.fx)
-        if self.aerial is not None:
-            with clock.stage(AERIAL_PERSPECTIVE):
-                self._set_air(state, look)
         with clock.stage(PATH_TRACING):
             image = self.path_trace(seed)
             self._dr.eval(image)  # the render happens here (Dr.Jit evaluates lazily)
@@ -644,13 +653,3 @@ def _upsampled(grid: NDArray[np.float32], width: int, height: int) -> NDArray[np
     out = cv2.remap(grid, np.ascontiguousarray(map_x), np.ascontiguousarray(map_y), cv2.INTER_LINEAR,
                     borderMode=cv2.BORDER_REPLICATE)
     return out.reshape(height, width, -1)
-
-
-def _refused(error: BaseException) -> bool:
-    """Whether ``error`` (or an error it was raised from) is Dr.Jit refusing to record or to
-    record again a frozen function (``record(): ...``, ``replay(): ... re-recording ...``)."""
-    while error is not None:
-        if "record()" in str(error) or "re-recording" in str(error):
-            return True
-        error = error.__cause__
-    return False
