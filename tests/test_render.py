@@ -405,6 +405,7 @@ def kernel_census(seed: int = 31, frames: tuple[int, ...] = KERNEL_FRAMES, name:
             out["new"].append(len({h for h, _ in launched} - seen))
             seen |= {h for h, _ in launched}
         out["recordings"] = renderer.recordings
+        out["cast_recordings"] = renderer.cast_recordings
         out["alone"] = max(kernels(renderer, scene, states, frames[1]), key=lambda k: k[1])
         other = override_config(load_config(ROOT / "scenes" / "podcam15.yaml"), {**tiny, "render.spp": 2})
         other_scene = Scene.resolve(other)
@@ -412,6 +413,7 @@ def kernel_census(seed: int = 31, frames: tuple[int, ...] = KERNEL_FRAMES, name:
         kernels(second, other_scene, FrameStates(other), 0)
         out["beside"] = max(kernels(renderer, scene, states, frames[1]), key=lambda k: k[1])
         out["recordings_beside"] = renderer.recordings  # its scene rebuilt after the other renderer's
+        out["cast_recordings_beside"] = renderer.cast_recordings
         assert second.config is other  # alive until here
     return out
 
@@ -452,14 +454,16 @@ def test_frames_after_the_first_compile_no_kernel(mode: str, request) -> None:
 
 def test_a_frozen_render_records_once_over_twenty_three_approaches_and_a_rebuilt_scene(
         frozen_census, traced_census) -> None:
-    """The frozen render records at the first frame and replays every later frame of every
-    approach (the film and sampler settled when the scene is built: datagen.render.frozen);
-    its scene rebuilt after another renderer's, it replays the recording or records once
-    more (measured: dashcam75 records again, and a rebuilt wingcam55 scene now and then).
-    Traced, it never records."""
-    assert frozen_census["recordings"] == 1, frozen_census
+    """The frozen render, and the geometry pass's frozen ray cast, record at the first frame
+    and replay every later frame of every approach (the film and sampler settled when the
+    scene is built: datagen.render.frozen); its scene rebuilt after another renderer's, each
+    replays its recording or records once more (measured: dashcam75 records the render
+    again, and a rebuilt wingcam55 scene now and then). Traced, neither records."""
+    assert frozen_census["recordings"] == frozen_census["cast_recordings"] == 1, frozen_census
     assert frozen_census["recordings_beside"] in (1, 2), frozen_census
+    assert frozen_census["cast_recordings_beside"] in (1, 2), frozen_census
     assert traced_census["recordings"] == traced_census["recordings_beside"] == 0
+    assert traced_census["cast_recordings"] == traced_census["cast_recordings_beside"] == 0
 
 
 def test_the_render_kernel_is_the_same_with_another_renderer_alive(traced_census) -> None:

@@ -29,7 +29,7 @@ class ShardSummary:
     blank: int = 0  # label boxes of the rendered frames that show nothing (datagen.core.box_content)
     blank_frames: int = 0  # rendered frames with such a box
     compiled: int = 0  # JIT kernels first launched by a rendered frame after its process's first
-    recorded: int = 0  # recordings of the frozen render made after its process's first frame
+    recorded: int = 0  # recordings of the frozen render or ray cast made after its process's first frame
     per_class: list[int] | None = None  # label lines per class (None: a shard written before they were counted)
 
     def counts(self) -> dict:
@@ -79,7 +79,7 @@ class BuildReport:
     denoise_s = _summed("denoise_s", "seconds in the denoiser")
     rendered_frame_s = _summed("frame_s", "seconds of this run's rendered frames, whole")
     compiled = _summed("compiled", "JIT kernels first launched after a worker's first frame")
-    recorded = _summed("recorded", "recordings of the frozen render after a worker's first frame")
+    recorded = _summed("recorded", "recordings of the frozen render or ray cast after a worker's first frame")
     blank = _summed("blank", "label boxes of rendered frames that show nothing")
     blank_frames = _summed("blank_frames", "rendered frames with such a box")
 

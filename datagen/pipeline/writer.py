@@ -114,7 +114,7 @@ class ShardWriter:
         self._stages: dict[str, float] = {}  # the last rendered frame's seconds per stage
         self._census = None  # the kernels each rendered frame launches (datagen.render.runtime.KernelCensus)
         self._first_frame = True  # this process has rendered no frame yet
-        self._recordings = 0  # the frozen render's recordings so far (datagen.render.frozen)
+        self._recordings = 0  # the frozen render's and ray cast's recordings so far (datagen.render.frozen)
         if render:
             from datagen.render.renderer import Renderer  # Mitsuba only when rendering
             from datagen.render.runtime import KernelCensus
@@ -167,7 +167,7 @@ class ShardWriter:
                     rendered += 1
                     new = self._census.new_kernels()
                     compiled += 0 if self._first_frame else new  # the first frame compiles (or loads) them all
-                    recordings = self.renderer.recordings
+                    recordings = self.renderer.recordings + self.renderer.cast_recordings
                     recorded += 0 if self._first_frame else recordings - self._recordings  # the first frame records
                     self._recordings = recordings
                     self._first_frame = False

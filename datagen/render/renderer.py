@@ -105,6 +105,10 @@ class FrameRenderer(Protocol):
     def recordings(self) -> int:
         """How many times the path tracing was recorded (0: it is traced every frame)."""
 
+    @property
+    def cast_recordings(self) -> int:
+        """How many times the geometry pass's ray cast was recorded (0: traced every frame)."""
+
     def feature_visibility(self, state: FrameState, features: FeatureTable
                            ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
         """Per feature: the share of its points the camera sees, and whether it sees the centre."""
