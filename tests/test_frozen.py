@@ -15,7 +15,7 @@ pytestmark = pytest.mark.render
 FRAMES = (0, 1, 2, 7, 8, 9, 10, 14)
 
 
-def _frames(frozen: bool) -> tuple[list[np.ndarray], tuple[int, int], int]:
+def _frames(frozen: bool) -> tuple[list[tuple[np.ndarray, ...]], tuple[int, int, int, int], int]:
     from datagen.config import load_config, override_config
     from datagen.pipeline.frame import draw_frame
     from datagen.render.renderer import Renderer

@@ -1,4 +1,5 @@
-"""The path tracing recorded once and replayed: Dr.Jit's ``dr.freeze`` around ``mi.render``.
+"""The path tracing recorded once and replayed: Dr.Jit's ``dr.freeze`` around ``mi.render``
+(and around the geometry pass's ray cast).
 
 Every ``mi.render`` traces the path tracer's kernel again in Python and C++ (the Python
 plugins included) before it runs it; a frozen function records the kernels its first call

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from datagen.core.conventions import OBJECT_NAMES, OTHER_AIRCRAFT_ID, object_id, pixel_centres
 from datagen.render.frozen import frozen_cast, refused
-from datagen.render.mitsuba import jit_array, jit_vectors, visible
+from datagen.render.mitsuba import jit_array, jit_vectors, scene_array, visible
 from datagen.render.procedural import only_where
 from datagen.render.world import CLOUD_LAYERS, SURFACES
 
@@ -40,12 +40,23 @@ def visibility_tolerance_m(distance_m: NDArray[np.float64]) -> NDArray[np.float6
 
 
 def _appended(mi, dr, a, b):
-    """Dr.Jit vectors ``b`` after ``a`` in one array (on their device)."""
+    """Dr.Jit vectors ``b`` after ``a`` in one array (on their device, in Dr.Jit's memory)."""
     n, m = dr.width(a), dr.width(b)
     out = dr.zeros(type(a), n + m)
     dr.scatter(out, a, dr.arange(mi.UInt32, n))
-    dr.scatter(out, b, dr.arange(mi.UInt32, m) + n)
+    dr.scatter(out, b, dr.arange(mi.UInt32, m) + dr.opaque(mi.UInt32, n))
     return out
+
+
+def _ray_block(mi, directions: NDArray):
+    """``(N, 3)`` directions padded to a whole number of :data:`EXTRA_RAYS` blocks (one at
+    least; padding repeats them, or looks straight ahead) as a ``mi.Vector3f`` in Dr.Jit's
+    memory: a frozen cast takes it as an input (:func:`datagen.render.mitsuba.scene_array`),
+    and the same count of rays gives the same recording."""
+    rays = np.asarray(directions, dtype=np.float32).reshape(-1, 3)
+    rays = np.resize(rays if len(rays) else np.array([[0.0, 0.0, 1.0]], np.float32),
+                     (max(1, -(-len(rays) // EXTRA_RAYS)) * EXTRA_RAYS, 3))
+    return mi.Vector3f(*(scene_array(mi.Float, rays[:, i]) for i in range(3)))
 
 
 def _past(t, maximum):
@@ -58,8 +69,9 @@ class RayCasting:
     """The renderer's ray casts, after it is posed: its Mitsuba ``scene``, ``world``,
     ``variant``, ``intrinsics``, the posed camera (``_world_from_cam``, ``_camera_render``),
     the device tables its build made (``_id_table``, ``_background_codes``), the registry ids
-    of its other aircraft's instances (``_traffic_ids``) and its
-    Mitsuba and Dr.Jit modules (``_mi``, ``_dr``)."""
+    of its other aircraft's instances (``_traffic_ids``), its Mitsuba and Dr.Jit modules
+    (``_mi``, ``_dr``), and the frozen cast (``_frozen_cast``, None: traced) with the counts a
+    refusal to record it updates (``refused_recordings``, ``_dropped_cast_recordings``)."""
 
     @functools.cache  # noqa: B019 (one renderer per process; two strides at most)
     def _pixel_rays(self, stride: int = 1) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
@@ -82,9 +94,7 @@ class RayCasting:
         n = len(directions_render)
         directions = np.asarray(directions_render, dtype=np.float32)
         if not self.variant.startswith("scalar"):  # on the variant's device
-            mi = self._mi
-            d = jit_vectors(mi.Vector3f, np.resize(directions, (max(n, 2), 3)))  # one ray is cast as two
-            t, ids, surface = self._cast_on_device(d)[:3]
+            t, ids, surface = self._cast_on_device(_ray_block(self._mi, directions))[:3]
             return tuple(np.asarray(a)[:n] for a in (t, ids, surface))
         origins = np.broadcast_to(np.asarray(origin_render, dtype=np.float32), (n, 3)).copy()
         t = np.full(n, np.inf)
@@ -173,11 +183,9 @@ class RayCasting:
             d_dev, z_dev = self._device_rays(stride)
             m = [[dr.opaque(mi.Float, float(r[i, j])) for j in range(3)] for i in range(3)]
             d = mi.Vector3f(*(m[i][0] * d_dev.x + m[i][1] * d_dev.y + m[i][2] * d_dev.z for i in range(3)))
-            # The rays the frame asks for padded to a multiple of EXTRA_RAYS (one at least): the
-            # same kernels, and the same recording of them, every frame.
-            more = np.resize(extra if len(extra) else np.array([[0, 0, 1]], np.float32),
-                             (max(1, -(-len(extra) // EXTRA_RAYS)) * EXTRA_RAYS, 3))
-            d = _appended(mi, dr, d, jit_vectors(mi.Vector3f, more))
+            # The rays the frame asks for in blocks of EXTRA_RAYS (one at least): the same
+            # kernels, and the same recording of them, every frame.
+            d = _appended(mi, dr, d, _ray_block(mi, extra))
             t, ids, surface, *alpha = self._cast_on_device(d)
             dr.eval(t, ids, surface)
             t, ids, surface = (np.asarray(a) for a in (t, ids, surface))
@@ -219,9 +227,10 @@ class RayCasting:
         present = tuple(c for c, name in enumerate(CLOUD_LAYERS, start=1) if self.world.cloud_layer(name) is not None)
         opacities = self.world.cloud_opacities()
         textures = tuple(opacities[c - 1] for c in present)
-        # What the kernel bakes in: a change of any of it records anew.
+        # What the kernel bakes in (the rays' count too: loops size their state by it), so that
+        # a change of any of it records anew.
         key = (present, self._traffic_ids, dr.width(self._id_table), dr.width(self._background_codes),
-               float(self.world.pixel_rad))
+               float(self.world.pixel_rad), n)
         args = (self.scene, d, start, self._id_table, self._background_codes, textures, key)
         frozen = getattr(self, "_frozen_cast", None)
         if frozen is not None:
@@ -262,8 +271,8 @@ def cast_kernel(scene, d, start: dict, id_table, codes, textures: tuple, key: tu
     values (all ``d``'s width); ``id_table`` maps a shape's index to its object id,
     ``codes`` a shape's index + 1 to its background code (0 sea, c the c-th cloud layer);
     ``textures`` are the opacity textures of the layers ``key[0]`` names (their codes);
-    ``key`` also holds the other aircraft's instance ids, the tables' widths and the
-    pixel's angle.
+    ``key`` also holds the other aircraft's instance ids, the tables' widths, the pixel's
+    angle and the rays' count.
 
     Everything a frame changes comes in as device data and every pass runs whatever the rays
     met, so that a recording (``dr.freeze``, :func:`datagen.render.frozen.frozen_cast`)
@@ -273,7 +282,7 @@ def cast_kernel(scene, d, start: dict, id_table, codes, textures: tuple, key: tu
     import drjit as dr
     import mitsuba as mi
 
-    present, traffic, _, _, pixel_rad = key
+    present, traffic, _, _, pixel_rad, _ = key
     o = start["o"]
     travelled, t_out, ids_out, surface_out = start["travelled"], start["t"], start["ids"], start["surface"]
     alpha_out, active = list(start["alpha"]), start["active"]

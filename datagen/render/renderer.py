@@ -301,7 +301,8 @@ class Renderer(RayCasting):
         ids[list(objects)] = list(objects.values())
         codes = np.full(max(backgrounds) + 2, -1, dtype=np.int32)
         codes[[k + 1 for k in backgrounds]] = list(backgrounds.values())
-        self._id_table, self._background_codes = jit_array(mi.UInt32, ids), scene_array(mi.Int32, codes)
+        # In Dr.Jit's memory: the frozen ray cast takes both as inputs (datagen.render.frozen).
+        self._id_table, self._background_codes = scene_array(mi.UInt32, ids), scene_array(mi.Int32, codes)
         if self.sensor is not None and self.sensor.motion_blur:
             from datagen.render.sensor import warm_up_on_device
 

@@ -525,20 +525,18 @@ def _cloudy_cells(layer: CloudLayer) -> NDArray[np.bool_]:
     first :data:`CULL_OCTAVES` octaves at the centres of a square grid of samples per cell
     (:data:`CULL_SAMPLES` a side), whose largest
     value per cell, plus how far those octaves can rise within half a sample's diagonal and
-    all the finer octaves can add, reaches the threshold (:func:`_cell_maxima`: 22 million
-    points a layer)."""
+    all the finer octaves can add, reaches the threshold (:func:`_cell_maxima`: 1/16 of the
+    22 million points of a layer first, then every point of the cells that leaves undecided)."""
     x0, y0, size = _cell_layout()
     if not math.isfinite(layer.threshold):
         return np.zeros(len(x0), dtype=bool)
     field = layer.field
-    rise = sum(NOISE_SLOPE_BOUND * field.amplitude(o) * 2.0**o / field.wavelength_m
-               for o in range(CULL_OCTAVES))
     kept = np.zeros(len(x0), dtype=bool)
     for cell in (CLOUD_CELL_M, CLOUD_FAR_CELL_M):
         group = np.flatnonzero(size == cell)
         spacing = cell / CULL_SAMPLES
         offsets = (np.arange(CULL_SAMPLES) + 0.5) * spacing
-        slack = rise * spacing / math.sqrt(2.0) + field.bound(CULL_OCTAVES)
+        slack = _cull_slack(field, spacing)
         # A cell kept on a subset of its samples is kept on all of them (their largest value is
         # no smaller): only the cells that subset leaves undecided are sampled in full.
         sure = _cell_maxima(field, x0[group], y0[group], offsets[CULL_SUBSET // 2::CULL_SUBSET]) + slack > \
@@ -550,13 +548,21 @@ def _cloudy_cells(layer: CloudLayer) -> NDArray[np.bool_]:
     return kept
 
 
+def _cull_slack(field, spacing_m: float) -> float:
+    """How far above its largest sample a cell's field may reach between samples
+    ``spacing_m`` apart: the first :data:`CULL_OCTAVES` octaves' rise within half a sample's
+    diagonal, and all the finer octaves."""
+    rise = sum(NOISE_SLOPE_BOUND * field.amplitude(o) * 2.0**o / field.wavelength_m for o in range(CULL_OCTAVES))
+    return rise * spacing_m / math.sqrt(2.0) + field.bound(CULL_OCTAVES)
+
+
 def _cell_maxima(field, x0: NDArray[np.float64], y0: NDArray[np.float64],
                  offsets: NDArray[np.float64]) -> NDArray[np.float32]:
     """Per cell (lower-left corners ``x0``, ``y0``), the largest value of ``field``'s first
     :data:`CULL_OCTAVES` octaves at the points ``offsets`` x ``offsets`` from its corner
     (each point's float32 coordinates rounded once from the float64 sum). Under a vectorized
     variant the points are made, evaluated and reduced on the render's device, and one value a
-    cell comes back (not the points: ~22 million a layer)."""
+    cell comes back (not the points)."""
     import drjit as dr
     import mitsuba as mi
 
