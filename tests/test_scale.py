@@ -208,3 +208,39 @@ def test_map_in_order_submits_only_a_few_tasks_ahead_of_the_results_taken(monkey
 def test_map_in_order_yields_every_result_in_task_order_from_worker_processes(tmp_path) -> None:
     assert list(map_in_order(touch, [(tmp_path, i) for i in range(40)], 2)) == list(range(40))
     assert len(list(tmp_path.iterdir())) == 40
+
+
+@pytest.mark.parametrize("split", [None, "train", "val"])
+def test_a_source_and_a_loaded_view_walk_to_the_same_frames_for_any_positions(built, split) -> None:
+    """The one walk (DatasetMeta.walk): for positions in frame order or not, every frame or a
+    split's, a source read shard by shard and a loaded view give the same frames in the order
+    asked for, and the frames of the split alone."""
+    view, source = load_dataset(built), open_dataset(built)
+    order = source.frames()
+    assert np.array_equal(order.frame_id, view.frame_id)
+    rng = np.random.default_rng(3)
+    for positions in (None, np.sort(rng.choice(len(order), 97, replace=False)), rng.permutation(len(order))[:61]):
+        wanted = np.arange(len(order)) if positions is None else positions
+        wanted = wanted[[split is None or order.split[p] == split for p in wanted.tolist()]]
+        for dataset in (source, view):
+            walked = [(v.frame_id[rows], [v.split[r] for r in rows.tolist()]) for v, rows in
+                      dataset.walk(positions, split=split)]
+            ids = np.concatenate([w[0] for w in walked]) if walked else np.zeros(0, np.int64)
+            assert np.array_equal(ids, order.frame_id[wanted]), type(dataset).__name__
+            assert split is None or all(s == split for w in walked for s in w[1])
+
+
+def test_walking_a_source_in_frame_order_reads_each_shard_once_though_train_and_val_interleave(built,
+                                                                                             monkeypatch) -> None:
+    from datagen.dataset.reader import DatasetSource
+
+    source = open_dataset(built)
+    order = source.frames()
+    switches = sum(a != b for a, b in zip(order.manifest_file, order.manifest_file[1:]))
+    assert switches > len(source.manifests)  # the frame order goes back and forth between shards
+    reads: list[str] = []
+    real = DatasetSource.read_shard
+    monkeypatch.setattr(DatasetSource, "read_shard",
+                        lambda self, name, **kw: reads.append(name) or real(self, name, **kw))
+    rows = sum(len(r) for _, r in source.walk())
+    assert rows == len(order) and sorted(reads) == sorted(source.manifests)

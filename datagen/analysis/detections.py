@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.core.training import MATCH_PX
-from datagen.dataset.reader import DatasetSource, DatasetView
+from datagen.dataset.reader import DatasetMeta, DatasetView
 
 __all__ = ["DetectionScores", "score_detections", "summarize_detections"]
 
@@ -139,21 +139,12 @@ _NO_ROWS: Final = {"frame_id": np.zeros(0, np.int64), "class_id": np.zeros(0, np
                    "missing": np.zeros(1, np.int64), "frames": np.zeros(1, np.int64)}
 
 
-def score_detections(dataset: DatasetView | DatasetSource, predictions: Mapping, *, split: str | None = None,
+def score_detections(dataset: DatasetMeta, predictions: Mapping, *, split: str | None = None,
                      match_px: float = MATCH_PX) -> DetectionScores:
     """Score ``predictions`` (per image stem, per class ``(u_px, v_px, conf)``: the points PnP
     uses) on every frame of ``split`` (all frames when None); a frame without a prediction
-    file has no detections. A source is read one manifest at a time."""
-    if isinstance(dataset, DatasetSource):
-        parts = []
-        for name in dataset.manifests:
-            if split is not None and not name.split("/")[-1].startswith(f"{split}-"):
-                continue
-            view = dataset.read_shard(name)
-            parts.append(_frame_rows(view, np.arange(len(view)), predictions))
-    else:
-        rows = np.flatnonzero(np.array([split is None or s == split for s in dataset.split], dtype=bool))
-        parts = [_frame_rows(dataset, rows, predictions)]
+    file has no detections. A source is read one shard at a time."""
+    parts = [_frame_rows(view, rows, predictions) for view, rows in dataset.walk(split=split)]
     if not parts:
         parts = [_NO_ROWS]
     cat = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}

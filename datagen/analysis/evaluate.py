@@ -23,7 +23,7 @@ import itertools
 import math
 import time
 from collections import deque
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Final
 
@@ -36,7 +36,7 @@ from datagen.core.camera import Intrinsics
 from datagen.core.conventions import evaluation_rng
 from datagen.core.errors import DatagenError
 from datagen.core.transforms import invert_rigid
-from datagen.dataset.reader import DatasetIndex, DatasetMeta, DatasetSource, DatasetView
+from datagen.dataset.reader import DatasetMeta, DatasetView, FrameOrder
 from datagen.parallel import map_in_order
 
 __all__ = [
@@ -232,7 +232,7 @@ def noise_offsets(rng: np.random.Generator, n: int, radius_px: float) -> NDArray
     return np.stack([r * np.cos(angle), r * np.sin(angle)], axis=1)
 
 
-def covered_splits(view: DatasetIndex | DatasetView, predictions: Mapping) -> list[str]:
+def covered_splits(view: FrameOrder, predictions: Mapping) -> list[str]:
     """The splits of the frames that have a prediction file, in dataset order."""
     return [s for s in dict.fromkeys(view.split[i] for i, stem in enumerate(view.stems) if stem in predictions)]
 
@@ -260,7 +260,7 @@ def noise_radii(text: str) -> list[float]:
     return radii
 
 
-def prediction_split(view: DatasetIndex | DatasetView, predictions: Mapping) -> tuple[str, str]:
+def prediction_split(view: FrameOrder, predictions: Mapping) -> tuple[str, str]:
     """The split a detector's predictions are scored on when none is asked for, and why: the
     split (or ``all``) of the frames that have a prediction file; ``val`` when there is no
     file at all (``yolo predict`` writes none for an image without detections).
@@ -408,47 +408,20 @@ def _outlier(ptd: NDArray[np.float64], history: deque, settings: PnPSettings) ->
     return bool(np.any(np.abs(ptd - past.mean(axis=0)) > settings.outlier_sigma * sigma))
 
 
-def _chunks(dataset: DatasetView | DatasetSource, positions: NDArray[np.int64], index: DatasetIndex | None
-            ) -> Iterator[tuple[DatasetView, NDArray[np.int64]]]:
-    """``(view, rows)`` runs of the dataset's frames at ``positions`` (in frame order): a
-    source's shards are read as the frames reach them, at most one per split held."""
-    if index is None:
-        yield dataset, positions
-        return
-    held: dict[str, tuple[DatasetView, dict[int, int]]] = {}
-    names = [index.manifest_file[p] for p in positions.tolist()]
-    start = 0
-    while start < len(positions):
-        name = names[start]
-        end = start
-        while end < len(positions) and names[end] == name:
-            end += 1
-        if name not in held:
-            shard = dataset.read_shard(name)
-            rank = index.rank[name]
-            split = shard.split[0] if len(shard) else ""
-            for other in [n for n, (v, _) in held.items() if (v.split[0] if len(v) else "") == split]:
-                del held[other]
-            held[name] = (shard, {int(r): row for row, r in enumerate(rank.tolist())})
-        shard, row_of = held[name]
-        yield shard, np.array([row_of[int(p)] for p in positions[start:end]], dtype=np.int64)
-        start = end
-
-
-def _evaluate_block(dataset: DatasetView | DatasetSource, positions: NDArray[np.int64], index: DatasetIndex | None,
-                    runs: list[Run], seed: int, settings: PnPSettings) -> list[dict[str, NDArray]]:
+def _evaluate_block(dataset: DatasetMeta, positions: NDArray[np.int64], runs: list[Run], seed: int,
+                    settings: PnPSettings) -> list[dict[str, NDArray]]:
     """The per-frame results of every run over the frames at ``positions`` (whole approaches,
     in frame order), as arrays."""
     chains = [_Chain() for _ in runs]
     out: list[dict[str, list]] = [{c: [] for c in _COLUMNS} for _ in runs]
-    for view, rows in _chunks(dataset, positions, index):
+    for view, rows in dataset.walk(positions):
         _evaluate_rows(view, rows, runs, chains, seed=seed, settings=settings, out=out)
     return [{c: (np.array(v, dtype=t).reshape(-1, 3) if c in ("ptd_m", "truth_m", "ptd_receiver_m")
                  else np.array(v, dtype=t)) for (c, t), v in zip(_COLUMNS.items(), res.values(), strict=True)}
             for res in out]
 
 
-def _blocks(index: DatasetIndex | DatasetView, attempted: NDArray[np.int64], n: int) -> list[NDArray[np.int64]]:
+def _blocks(index: FrameOrder, attempted: NDArray[np.int64], n: int) -> list[NDArray[np.int64]]:
     """``attempted`` (positions in frame order) cut into about ``n`` blocks of whole approaches."""
     if n <= 1 or len(attempted) < 2:
         return [attempted]
@@ -458,9 +431,9 @@ def _blocks(index: DatasetIndex | DatasetView, attempted: NDArray[np.int64], n: 
     return [b for b in np.split(attempted, np.unique(cuts)) if len(b)]
 
 
-def evaluate_runs(dataset: DatasetView | DatasetSource, runs: list[Run], *, seed: int | None = None,
+def evaluate_runs(dataset: DatasetMeta, runs: list[Run], *, seed: int | None = None,
                   settings: PnPSettings = PnPSettings(), split: str | None = None, workers: int = 1,
-                  progress: Progress | None = None, index: DatasetIndex | None = None) -> list[dict]:
+                  progress: Progress | None = None) -> list[dict]:
     """PtD vectors of every frame (frame order) for each run's 2D points, in one pass over
     the dataset: a loaded view, or an opened source read shard by shard as the frames in
     frame order reach them (one shard per split held at a time). With ``workers`` > 1 the
@@ -469,21 +442,16 @@ def evaluate_runs(dataset: DatasetView | DatasetSource, runs: list[Run], *, seed
     results do not depend on ``workers``.
 
     ``split`` limits the attempts to one split's frames (``val`` when scoring a detector
-    on what it did not train on). ``index``: the source's, where the caller has read it.
-    Returns per run the arrays of :func:`evaluate`."""
+    on what it did not train on). Returns per run the arrays of :func:`evaluate`."""
     target = _target_object(dataset)
     seed = int(dataset.doc.get("seed", 0)) if seed is None else seed
-    if isinstance(dataset, DatasetSource):
-        index = index or dataset.index(allow_duplicates=False)
-    else:
-        index = None
-    rows = index if index is not None else dataset
+    rows = dataset.frames(unique=True)
     attempted = np.flatnonzero(np.array([split is None or s == split for s in rows.split], dtype=bool))
     blocks = _blocks(rows, attempted, 4 * workers if workers > 1 else 1)
     progress = progress or NullProgress()
     progress.start(len(attempted), 0)
     parts: list[list[dict[str, NDArray]]] = []
-    tasks = [(dataset, block, index, runs, seed, settings) for block in blocks]
+    tasks = [(dataset, block, runs, seed, settings) for block in blocks]
     for block, part in zip(blocks, map_in_order(_evaluate_block, tasks, workers), strict=True):
         parts.append(part)
         progress.advance(len(block))
@@ -501,7 +469,7 @@ def evaluate_runs(dataset: DatasetView | DatasetSource, runs: list[Run], *, seed
     return results
 
 
-def evaluate(view: DatasetView | DatasetSource, *, noise_px: float = 0.0, run: int = 0, seed: int | None = None,
+def evaluate(view: DatasetMeta, *, noise_px: float = 0.0, run: int = 0, seed: int | None = None,
              predictions: Mapping | None = None, settings: PnPSettings = PnPSettings(),
              split: str | None = None) -> dict[str, NDArray]:
     """PtD vectors of every frame (frame order) for one source of 2D points.

@@ -191,10 +191,9 @@ def audit(
 
     folder = report_out("audit", out, dataset)
     source = open_dataset(dataset)
-    index = source.index()
-    result = run_audit(source, min_learnable=min_learnable, workers=workers, index=index,
+    result = run_audit(source, min_learnable=min_learnable, workers=workers,
                        progress=ConsoleProgress(source.root.name, verb="audit", announce=False))
-    written = write_report(result, source, folder, frames=frames_to_draw(source, overlays, index))
+    written = write_report(result, source, folder, frames=frames_to_draw(source, overlays))
     for check in result.checks:
         status = "n/a " if not check.applicable else ("pass" if check.passed else "FAIL")
         if check.min_pass_share is not None and check.pass_share is None:
@@ -234,10 +233,10 @@ def preview(
 
     folder = report_out("preview", out, dataset)
     source = open_dataset(dataset)
-    index = source.index(allow_duplicates=False)
+    index = source.frames(unique=True)
     require_plan(index, partial)
     wanted = _frame_list(frames) if frames else [int(f) for f in index.frame_id[:4]]
-    view = source.read_frames(list(dict.fromkeys(wanted)), index)  # only the manifests that hold them
+    view = source.read_frames(list(dict.fromkeys(wanted)))  # only the manifests that hold them
     for path in write_previews(view, wanted, folder, warn=lambda line: typer.echo(shown(line), err=True)):
         typer.echo(f"wrote {path}")
 
@@ -294,7 +293,7 @@ def evaluate(
         raise DatagenError(f"--split: {split!r}: choose all, train or val")
     folder = report_out("evaluate" if predictions is None else "evaluate --predictions", out, dataset)
     source = open_dataset(dataset)
-    index = source.index(allow_duplicates=False)
+    index = source.frames(unique=True)
     require_plan(index, partial, split if split in ("train", "val") else None)
     progress = ConsoleProgress(source.root.name, verb="evaluate", announce=False)
     if predictions is not None:
@@ -338,7 +337,7 @@ def evaluate(
                            "all or the other split")
     settings = PnPSettings()  # the paper's: every run is solved, summarized and reported with these
     results = evaluate_runs(source, plan, seed=seed, settings=settings, split=only, workers=workers,
-                            progress=progress, index=index)
+                            progress=progress)
     runs = list(zip(sources, results, strict=True))
     detector = None
     if predictions is not None:
@@ -427,7 +426,7 @@ def train(
     source = open_dataset(dataset)  # the checks every reading command makes, one line each
     # Ultralytics runs a data.yaml's download, loads what hyp.yaml names, reads every image a list names and
     # prints the class names: each is checked as the audit checks it, before anything else.
-    _refuse_failed(source, check_recipe(source, source.index()))
+    _refuse_failed(source, check_recipe(source))
     if source.doc.get("render") is False:
         raise DatagenError(f"{source.root / 'dataset.json'}: render: false: a labels-only build has no images to "
                            "train on (build it without --no-render)")

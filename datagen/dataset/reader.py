@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
@@ -52,8 +53,18 @@ from datagen.dataset.limits import (
 )
 from datagen.paths import NOT_INSIDE, DatasetFolder, named_inside, read_bytes
 
-__all__ = ["DatasetIndex", "DatasetMeta", "DatasetSource", "DatasetView", "image_size", "load_dataset", "open_dataset",
-           "plan_gaps"]
+__all__ = ["DatasetIndex", "DatasetMeta", "DatasetSource", "DatasetView", "FrameOrder", "Shard", "image_size",
+           "load_dataset", "open_dataset", "plan_gaps"]
+
+
+@dataclass(frozen=True, eq=False)
+class Shard:
+    """One manifest's rows of a dataset (a loaded view is one shard of itself): the manifest
+    (relative to the root; empty for a view) and each of its rows' position in the dataset's
+    frame order (its rows sorted by frame id, as a view holds them)."""
+
+    name: str
+    positions: NDArray[np.int64]
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,6 +111,50 @@ class DatasetMeta(Labelled):
         """``labels.format``: detect, pose or both."""
         return self.label_rules.format
 
+    def frames(self, *, unique: bool = False) -> FrameOrder:
+        """The small per-frame columns of every frame, in frame order (a view: itself; a
+        source: every manifest's small columns, read once). ``unique``: refuse, in one line,
+        a frame that several manifests hold."""
+        raise NotImplementedError
+
+    def shards(self) -> list[Shard]:
+        """The dataset's shards, in manifest order (a view: one, itself)."""
+        raise NotImplementedError
+
+    def read(self, shard: Shard, *, checked: bool = True) -> DatasetView:
+        """``shard``'s rows as a view (a view's own shard: the view); ``checked``: refuse
+        (one line) rows whose camera is not dataset.json's (the audit, which reports them,
+        reads them unchecked)."""
+        raise NotImplementedError
+
+    def walk(self, positions: NDArray[np.int64] | None = None, *, split: str | None = None,
+             checked: bool = True) -> Iterator[tuple[DatasetView, NDArray[np.int64]]]:
+        """The one way through a dataset's rows: ``(view, rows)`` runs of the frames at
+        ``positions`` (in the dataset's frame order, :meth:`frames`; every frame when None),
+        in the order given, of ``split`` alone when one is named; ``view.<column>[rows]`` are
+        those frames'. A loaded view yields itself; a source reads each shard as the
+        positions reach it and holds at most one a split (positions in frame order then read
+        each shard once, however train and val frames interleave)."""
+        order = self.frames()
+        positions = np.arange(len(order), dtype=np.int64) if positions is None else np.asarray(positions, np.int64)
+        if split is not None:
+            positions = positions[np.array([order.split[p] == split for p in positions.tolist()], dtype=bool)]
+        shards = self.shards()
+        shard_of = np.zeros(len(order), dtype=np.int64)
+        row_of = np.zeros(len(order), dtype=np.int64)
+        for k, shard in enumerate(shards):
+            shard_of[shard.positions] = k
+            row_of[shard.positions] = np.arange(len(shard.positions))
+        held: dict[str, tuple[int, DatasetView]] = {}  # split -> the shard held for it
+        owner = shard_of[positions]
+        starts = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]]) if len(positions) else np.zeros(0, np.int64)
+        for start, end in zip(starts.tolist(), [*starts[1:].tolist(), len(positions)], strict=True):
+            k = int(owner[start])
+            key = order.split[int(positions[start])]
+            if key not in held or held[key][0] != k:
+                held[key] = (k, self.read(shards[k], checked=checked))
+            yield held[key][1], row_of[positions[start:end]]
+
 
 @dataclass(frozen=True, eq=False)
 class DatasetView(DatasetMeta):
@@ -140,6 +195,15 @@ class DatasetView(DatasetMeta):
 
     def __len__(self) -> int:
         return len(self.frame_id)
+
+    def frames(self, *, unique: bool = False) -> DatasetView:
+        return self  # (a view with duplicates was loaded asking for them)
+
+    def shards(self) -> list[Shard]:
+        return [Shard("", np.arange(len(self), dtype=np.int64))]
+
+    def read(self, shard: Shard, *, checked: bool = True) -> DatasetView:
+        return self
 
     @property
     def intrinsics_as_built(self) -> NDArray[np.bool_]:
@@ -215,7 +279,12 @@ class DatasetIndex:
         return DatasetFolder(self.root)
 
 
-def plan_gaps(rows: DatasetIndex | DatasetView, only: str | None = None) -> list[str]:
+#: A dataset's frames in frame order with their small columns: a source's index, or a loaded
+#: view (what :meth:`DatasetMeta.frames` gives).
+FrameOrder = DatasetIndex | DatasetView
+
+
+def plan_gaps(rows: FrameOrder, only: str | None = None) -> list[str]:
     """How the frames in the manifests differ from what dataset.json planned
     (``splits.SPLIT.frames``), one text per split that differs (none: as planned); ``only``:
     of that split alone."""
@@ -240,7 +309,7 @@ def plan_gaps(rows: DatasetIndex | DatasetView, only: str | None = None) -> list
     return gaps
 
 
-def _stems(rows: DatasetIndex | DatasetView) -> list[str]:
+def _stems(rows: FrameOrder) -> list[str]:
     return [Path(next((p for p in paths if p), f"{int(frame):08d}")).stem
             for frame, *paths in zip(rows.frame_id, rows.image_path, rows.label_path, rows.pose_label_path,
                                      strict=True)]
@@ -275,15 +344,28 @@ class DatasetSource(DatasetMeta):
                                    f"frames dataset.json plans (at {name}): manifests copied in from elsewhere")
         return tables
 
+    def frames(self, *, unique: bool = False) -> DatasetIndex:
+        if unique:  # as load_dataset refuses them
+            _refuse_duplicates(self.root, self._index.frame_id, self._index.manifest_file)
+        return self._index
+
+
+    def shards(self) -> list[Shard]:
+        ranks = self.frames().rank
+        return [Shard(name, ranks[name]) for name in self.manifests]
+
+    def read(self, shard: Shard, *, checked: bool = True) -> DatasetView:
+        return self.read_shard(shard.name, checked=checked)
+
     def read_shard(self, name: str, *, checked: bool = True) -> DatasetView:
         """One manifest's rows as a view; ``checked``: refuse (one line) rows whose camera is
         not dataset.json's (the audit, which reports them, reads them unchecked)."""
         return _view(self, [self.read_manifest(name)], [name], allow_duplicates=True, checked=checked)
 
-    def read_frames(self, frames: list[int], index: DatasetIndex) -> DatasetView:
+    def read_frames(self, frames: list[int]) -> DatasetView:
         """The rows of the frame ids ``frames`` as a view, read from the manifests that hold
-        them and no other (``index``: this source's); one line naming the first id that no
-        manifest holds."""
+        them and no other; one line naming the first id that no manifest holds."""
+        index = self.frames()
         where = dict(zip(index.frame_id.tolist(), index.manifest_file, strict=True))
         missing = [f for f in frames if f not in where]
         if missing:
@@ -292,18 +374,16 @@ class DatasetSource(DatasetMeta):
         names = sorted({where[f] for f in frames})
         return _view(self, [self.read_manifest(n) for n in names], names, allow_duplicates=False, checked=True)
 
-    def index(self, *, allow_duplicates: bool = True) -> DatasetIndex:
-        """Every manifest's small columns (:data:`INDEX_COLUMNS`), rows in frame order.
-
-        ``allow_duplicates``: keep rows of a frame that several manifests hold (the audit
-        names them); otherwise they are refused in one line, as by :func:`load_dataset`."""
+    @functools.cached_property
+    def _index(self) -> DatasetIndex:
+        """Every manifest's small columns (:data:`INDEX_COLUMNS`), rows in frame order, read
+        once (:meth:`frames`); rows of a frame that several manifests hold are kept (the audit
+        names them)."""
         tables = self.read_manifests(INDEX_COLUMNS)
         names = [name for name, t in zip(self.manifests, tables, strict=True) for _ in range(t.num_rows)]
         _check_splits(self.root, [v for t in tables for v in t.column("split").to_pylist()], names,
                       [v for t in tables for v in t.column("frame_id").to_pylist()])
         frame_ids = np.concatenate([np.asarray(t.column("frame_id"), dtype=np.int64) for t in tables])
-        if not allow_duplicates:
-            _refuse_duplicates(self.root, frame_ids, names)
         order = np.argsort(frame_ids, kind="stable")
         rank = np.empty(len(order), dtype=np.int64)
         rank[order] = np.arange(len(order))

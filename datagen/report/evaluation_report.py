@@ -19,14 +19,14 @@ import pyarrow as pa
 from datagen.analysis.detections import DetectionScores, summarize_detections
 from datagen.analysis.evaluate import DISTANCE_EDGES, REASONS, PnPSettings, summarize
 from datagen.atomic import write_parquet, write_text
-from datagen.dataset.reader import DatasetIndex, DatasetView
+from datagen.dataset.reader import FrameOrder
 from datagen.dataset.reports import REPORTS, claim_report_folder
 from datagen.paths import real_folder
 
 __all__ = ["write_evaluation"]
 
 
-def write_evaluation(view: DatasetIndex | DatasetView, runs: list[tuple[dict, dict]], out: Path,
+def write_evaluation(view: FrameOrder, runs: list[tuple[dict, dict]], out: Path,
                      settings: PnPSettings = PnPSettings(), detector: DetectionScores | None = None
                      ) -> dict[str, Path]:
     """``evaluation.json`` (settings and each run's metrics), ``results.parquet`` (one row

@@ -16,7 +16,7 @@ from datagen.config.inputs import parse_yaml, read_text
 from datagen.core.errors import DatagenError, shown
 from datagen.dataset.layout import DATA_YAML_KEYS, MANIFEST_NAME, SPLITS
 from datagen.dataset.limits import HYP_YAML_BYTES, ReadLimits
-from datagen.dataset.reader import DatasetIndex, DatasetMeta, DatasetView, image_size, plan_gaps
+from datagen.dataset.reader import DatasetMeta, FrameOrder, image_size, plan_gaps
 from datagen.dataset.training_run import recipe_problems
 from datagen.paths import Unreadable, read_bytes, regular_file
 
@@ -26,7 +26,7 @@ from datagen.paths import Unreadable, read_bytes, regular_file
 ULTRALYTICS_SUFFIXES: Final = (".cache", ".cache.npy", ".npy")
 
 
-def check_files(view: DatasetIndex | DatasetView) -> Check:
+def check_files(view: FrameOrder) -> Check:
     check = Check("files", "every image, label and EXR a manifest names exists inside the dataset, no "
                   "symbolic link leads out of it, no file in images/, labels/ or exr/ is unnamed, no temporary "
                   "file is left, and every planned shard is finished")
@@ -76,7 +76,7 @@ def check_files(view: DatasetIndex | DatasetView) -> Check:
     return check
 
 
-def image_list_problems(index: DatasetIndex | DatasetView) -> list[tuple[str, str]]:
+def image_list_problems(index: FrameOrder) -> list[tuple[str, str]]:
     """``(file, problem)`` of the image lists Ultralytics trains on (``train.txt``,
     ``val.txt``, and the pose set's): each must list exactly the manifests' images of its
     split, in frame order, and each image listed must be a regular file inside the dataset
@@ -116,7 +116,7 @@ def image_list_problems(index: DatasetIndex | DatasetView) -> list[tuple[str, st
     return problems
 
 
-def check_recipe(meta: DatasetMeta, index: DatasetIndex | DatasetView) -> Check:
+def check_recipe(meta: DatasetMeta) -> Check:
     """What Ultralytics reads and runs when it trains: data.yaml and hyp.yaml (and the pose
     set's) hold only what datagen writes there, the image lists of this dataset (no ``path``
     or ``download``: Ultralytics resolves the one and runs the other), and settings of the
@@ -147,7 +147,7 @@ def check_recipe(meta: DatasetMeta, index: DatasetIndex | DatasetView) -> Check:
         for problem in recipe_problems(doc):
             check.fail(hyp, problem)
     check.checked += len(sets) * len(SPLITS)
-    for name, problem in image_list_problems(index):
+    for name, problem in image_list_problems(meta.frames()):
         check.fail(name, problem)
     return check
 
@@ -159,7 +159,7 @@ HEADER_BYTES: Final = 65536
 MAX_WORLD_TEXEL_PX: Final = 1.5
 
 
-def check_texels(view: DatasetIndex | DatasetView) -> Check:
+def check_texels(view: FrameOrder) -> Check:
     """No rendered frame shows a world texture's texel larger than :data:`MAX_WORLD_TEXEL_PX`
     on screen (the manifest's ``world_texel_px``; 0 for the procedural sea and clouds)."""
     check = Check("world_texels", f"no rendered frame shows a world texel over {MAX_WORLD_TEXEL_PX:g} px "

@@ -19,7 +19,7 @@ from datagen.analysis.audit.pose import PoseChecks
 from datagen.analysis.audit.statistics import Totals, appearance_finish, statistics, statistics_part
 from datagen.analysis.exact import Spill
 from datagen.console import NullProgress, Progress
-from datagen.dataset.reader import DatasetIndex, DatasetSource, DatasetView
+from datagen.dataset.reader import DatasetMeta, DatasetView, Shard
 from datagen.parallel import map_in_order
 
 #: The groups of per-frame checks, in report order (the dataset's files and images follow).
@@ -46,28 +46,22 @@ def _audit_part(view: DatasetView, rank: NDArray[np.int64]) -> _Part:
     return _Part(parts, statistics_part(view, found.labels, rank))
 
 
-def _audit_shard(source: DatasetSource, name: str, rank: NDArray[np.int64]) -> _Part:
-    return _audit_part(source.read_shard(name, checked=False), rank)
+def _audit_shard(dataset: DatasetMeta, shard: Shard) -> _Part:
+    return _audit_part(dataset.read(shard, checked=False), shard.positions)
 
 
-def _parts(dataset: DatasetView | DatasetSource, index: DatasetIndex | DatasetView, workers: int,
-           progress) -> Iterator[_Part]:
-    """The one iterator the checks and statistics are fed from: the whole view at once, or
-    each shard of a source in manifest order, in ``workers`` processes (each reads and
-    checks whole shards; only the compact results come back)."""
-    if isinstance(dataset, DatasetView):
-        yield _audit_part(dataset, np.arange(len(dataset)))
-        progress.advance(len(dataset))
-        return
-    names = list(dataset.manifests)
-    tasks = [(dataset, name, index.rank[name]) for name in names]
-    for name, part in zip(names, map_in_order(_audit_shard, tasks, workers), strict=True):
-        progress.advance(len(index.rank[name]))
+def _parts(dataset: DatasetMeta, workers: int, progress) -> Iterator[_Part]:
+    """The one iterator the checks and statistics are fed from: each shard in manifest order
+    (a loaded view is one), in ``workers`` processes (each reads and checks whole shards;
+    only the compact results come back)."""
+    shards = dataset.shards()
+    for shard, part in zip(shards, map_in_order(_audit_shard, [(dataset, s) for s in shards], workers), strict=True):
+        progress.advance(len(shard.positions))
         yield part
 
 
-def audit(dataset: DatasetView | DatasetSource, *, min_learnable: float = MIN_LEARNABLE_SHARE, workers: int = 1,
-          progress: Progress | None = None, index: DatasetIndex | None = None) -> AuditResult:
+def audit(dataset: DatasetMeta, *, min_learnable: float = MIN_LEARNABLE_SHARE, workers: int = 1,
+          progress: Progress | None = None) -> AuditResult:
     """Run every check and compute every statistic of a dataset.
 
     ``dataset``: a loaded view (all in memory), or an opened source, which is read and
@@ -76,16 +70,15 @@ def audit(dataset: DatasetView | DatasetSource, *, min_learnable: float = MIN_LE
     ``min_learnable``: the share of label lines that must be learnable by Ultralytics'
     trainer at ``labels.train_imgsz`` (:mod:`datagen.core.training`).
     ``progress``: an object with ``start(total, done)``, ``advance(n)`` and ``close()``
-    (:class:`datagen.console.Progress`). ``index``: the source's, where the
-    caller has read it."""
+    (:class:`datagen.console.Progress`)."""
     progress = progress or NullProgress()
-    index = dataset if isinstance(dataset, DatasetView) else index or dataset.index()
+    index = dataset.frames()
     progress.start(len(index), 0)
     groups = [group for group in GROUPS if group.applies(dataset)]
     merged: dict[str, Check] = {}
     with Spill() as spill:  # the per-feature and per-line values, on disk until the statistics
         totals = Totals(len(dataset.features))
-        for part in _parts(dataset, index, workers, progress):
+        for part in _parts(dataset, workers, progress):
             for group, found in zip(groups, part.groups, strict=True):
                 for c in found.checks:
                     merged[c.name] = merged[c.name].merge(c) if c.name in merged else c
@@ -104,6 +97,6 @@ def audit(dataset: DatasetView | DatasetSource, *, min_learnable: float = MIN_LE
             if section is not None:
                 stats[section[0]] = section[1]
         stats["appearance"] = appearance_finish(spill, totals.appearance)
-    checks += [check_files(index), check_recipe(dataset, index), check_texels(index)]
+    checks += [check_files(index), check_recipe(dataset), check_texels(index)]
     return AuditResult(dataset.root, str(dataset.doc.get("name", dataset.root.name)), len(index),
                        [c.finish() for c in checks], stats, found_stats.plot)
