@@ -22,7 +22,7 @@ from datagen.parallel import cpu_count
 from datagen.pipeline.dataset_card import write_dataset_card
 from datagen.pipeline.dataset_document import config_fingerprint
 from datagen.pipeline.estimate import frame_cost
-from datagen.pipeline.executors import EXECUTORS, ExecutorName
+from datagen.pipeline.executors import EXECUTORS, ExecutorName, ShardRun
 from datagen.pipeline.folder import DatasetLock, check_folder, prepare_folder, remove_owned, sweep_temporaries
 from datagen.pipeline.image_lists import write_image_lists
 from datagen.pipeline.metadata import write_dataset_files
@@ -105,7 +105,7 @@ def build_dataset(config: Config, out: Path, *, workers: int | str | None = None
                                       variant=variant))
             try:
                 if todo:
-                    kind.run(scene, layout, todo, workers, render, progress.advance, shard_done, threads)
+                    kind.run(ShardRun(scene, layout, todo, workers, render, progress.advance, shard_done, threads))
                 if len(report.shards) == len(jobs):  # finished: what describes the whole dataset
                     if render:
                         write_image_lists(layout, jobs)

@@ -20,6 +20,7 @@ import signal
 import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager
+from dataclasses import dataclass
 from typing import Final, Literal, Protocol
 
 from datagen.core.errors import DatagenError
@@ -30,10 +31,27 @@ from datagen.pipeline.progress import ShardSummary
 from datagen.pipeline.writer import FramesDone, ShardWriter, shard_groups
 from datagen.scene.resolved import Scene
 
-__all__ = ["EXECUTORS", "THREAD_VARIABLES", "Executor", "ExecutorName", "LocalExecutor", "RayExecutor", "ctrl_c_flag",
-           "local_threads", "ray_cluster", "run_local", "run_ray", "worker_environment"]
+__all__ = ["EXECUTORS", "THREAD_VARIABLES", "Executor", "ExecutorName", "LocalExecutor", "RayExecutor", "ShardRun",
+           "ctrl_c_flag", "local_threads", "ray_cluster", "run_local", "run_ray", "worker_environment"]
 
 ExecutorName = Literal["local", "ray"]
+
+
+@dataclass(frozen=True)
+class ShardRun:
+    """What an executor runs: the shards ``jobs`` of ``scene`` into ``layout``, ``workers`` at
+    a time (None: the executor's default), each with ``threads`` Mitsuba threads (None: the
+    cores shared among them), rendered or labels only (``render``); the frames done go to
+    ``progress``, and each finished shard's summary to ``done``."""
+
+    scene: Scene
+    layout: Layout
+    jobs: list[ShardJob]
+    workers: int | None
+    render: bool
+    progress: FramesDone
+    done: Callable[[ShardSummary], None]
+    threads: int | None = None
 
 
 
@@ -167,13 +185,13 @@ def local_threads(workers: int, threads: int | None) -> int:
     return threads or max(1, cpu_count() // workers)
 
 
-def run_local(scene: Scene, layout: Layout, jobs: list[ShardJob], workers: int, render: bool,
-              progress: FramesDone, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
-    """Run ``jobs`` in ``workers`` processes (one: in this process), ``threads`` Mitsuba
-    threads each, as the tasks of :func:`shard_groups`; report frames to ``progress`` and
-    finished shards to ``done``."""
-    workers = min(workers, len(jobs))
-    threads = local_threads(workers, threads)
+def run_local(work: ShardRun) -> None:
+    """Run ``work``'s jobs in its workers' processes (one, the default: in this process), as
+    the tasks of :func:`shard_groups`."""
+    scene, layout, jobs, render, progress, done = (work.scene, work.layout, work.jobs, work.render, work.progress,
+                                                   work.done)
+    workers = min(work.workers or 1, len(jobs))
+    threads = local_threads(workers, work.threads)
     groups = shard_groups(jobs, workers, together=not render)
     if workers == 1:
         writer = _writer(scene, layout, threads, render)
@@ -260,11 +278,14 @@ def ray_cluster(workers: int | None):
             ray.shutdown()
 
 
-def run_ray(scene: Scene, layout: Layout, jobs: list[ShardJob], workers: int | None, render: bool,
-            progress: FramesDone, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
-    """Shards as Ray tasks on the cluster :func:`ray_cluster` connected to."""
+def run_ray(work: ShardRun) -> None:
+    """``work``'s shards as Ray tasks on the cluster :func:`ray_cluster` connected to (its
+    workers: one a node by default)."""
     import ray
     from ray.util.queue import Queue
+
+    scene, layout, jobs, workers, render, progress, done, threads = (
+        work.scene, work.layout, work.jobs, work.workers, work.render, work.progress, work.done, work.threads)
 
     cpus = int(ray.cluster_resources().get("CPU", 1))
     alive = [n for n in ray.nodes() if n.get("Alive")]
@@ -310,10 +331,8 @@ class Executor(Protocol):
     def cores(self, workers: int | None, shards: int, threads: int | None) -> int:
         """The cores its workers use for ``shards`` shards (the build's estimate)."""
 
-    def run(self, scene: Scene, layout: Layout, jobs: list[ShardJob], workers: int | None, render: bool,
-            progress: FramesDone, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
-        """Run ``jobs`` into ``layout``, ``workers`` at a time, each with ``threads`` Mitsuba
-        threads; frames done go to ``progress`` and each finished shard's summary to ``done``."""
+    def run(self, work: ShardRun) -> None:
+        """Run ``work`` (:class:`ShardRun`)."""
 
 
 class LocalExecutor:
@@ -336,9 +355,8 @@ class LocalExecutor:
         busy = max(1, min(workers or 1, shards))
         return min(busy * local_threads(busy, threads), cpu_count())
 
-    def run(self, scene: Scene, layout: Layout, jobs: list[ShardJob], workers: int | None, render: bool,
-            progress: FramesDone, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
-        run_local(scene, layout, jobs, workers or 1, render, progress, done, threads)
+    def run(self, work: ShardRun) -> None:
+        run_local(work)
 
 
 class RayExecutor:
@@ -355,9 +373,8 @@ class RayExecutor:
     def cores(self, workers: int | None, shards: int, threads: int | None) -> int:
         return cpu_count()
 
-    def run(self, scene: Scene, layout: Layout, jobs: list[ShardJob], workers: int | None, render: bool,
-            progress: FramesDone, done: Callable[[ShardSummary], None], threads: int | None = None) -> None:
-        run_ray(scene, layout, jobs, workers, render, progress, done, threads)
+    def run(self, work: ShardRun) -> None:
+        run_ray(work)
 
 
 #: The executors ``datagen build --executor`` names.
