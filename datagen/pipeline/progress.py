@@ -140,8 +140,9 @@ class BuildReport:
             if rest:
                 out.append("  other, per rendered frame: " + ", ".join(f"{name} {s:.2f} s" for name, s in rest))
             out.append(f"  kernels compiled after each worker's first frame: {self.compiled}")
-            if self.recorded:  # render.frozen: Dr.Jit recorded the path tracing again (datagen.render.frozen)
-                out.append(f"  frozen render recorded again after each worker's first frame: {self.recorded} times")
+            if self.recorded:  # render.frozen: Dr.Jit recorded the path tracing or the cast again (render.frozen)
+                out.append(f"  frozen render or ray cast recorded again after each worker's first frame: "
+                           f"{self.recorded} times")
         excluded = ", ".join(f"{k} {v}" for k, v in self.excluded.items())
         scope = "" if done == len(self.jobs) else f" (in the {done} finished shards)"
         out.append(f"  labels: {self.labels} boxes{scope}; excluded: {excluded}")
