@@ -7,9 +7,12 @@ and names its worst offenders by file. The statistics show how far the *tight* b
 centre (the perceived centre) lies from the projection of the true 3D centre, as a
 function of distance, feature size and view obliqueness (paper Fig. 8).
 
-One module per group of checks (:mod:`.manifest`, :mod:`.label_lines`, :mod:`.pose`,
-:mod:`.files`), the statistics (:mod:`.statistics`) and the driver that feeds them shard
-by shard (:mod:`.run`).
+One module per group of per-frame checks (:mod:`.manifest_checks`, :mod:`.label_lines`,
+:mod:`.pose`, :mod:`.image_checks`) on their common base (:mod:`.check`), the checks of
+the dataset's files (:mod:`.dataset_files`), the statistics (:mod:`.statistics`, with the
+box geometry of :mod:`.box_geometry`), the driver that feeds them shard by shard
+(:mod:`.driver`, over :meth:`datagen.dataset.reader.DatasetMeta.shards`), and the
+frames the report draws (:mod:`.frames`).
 """
 
 from datagen.analysis.audit.box_geometry import feature_normals, obliqueness_deg, tight_centre_drift_px
