@@ -155,6 +155,7 @@ def test_a_refused_recording_traces_its_frame_and_a_new_frozen_render_replaces_t
     import types
 
     import datagen.render.renderer as renderer_module
+    from datagen.render.frozen import Frozen
 
     class Refusing:
         n_recordings = 3
@@ -163,7 +164,7 @@ def test_a_refused_recording_traces_its_frame_and_a_new_frozen_render_replaces_t
             raise RuntimeError(message) from RuntimeError("record(): validate(): ...")
 
     fresh = types.SimpleNamespace(n_recordings=0)
-    monkeypatch.setattr(renderer_module, "frozen_render", lambda spp: fresh)
+    made = iter([Refusing(), fresh])
     traced = []
 
     def render(scene, seed, spp):
@@ -171,17 +172,17 @@ def test_a_refused_recording_traces_its_frame_and_a_new_frozen_render_replaces_t
         return "image"
 
     r = types.SimpleNamespace(
-        _frozen=Refusing(), refused_recordings=0, _dropped_recordings=0, spp=2, scene="scene",
+        _frozen=Frozen(lambda: next(made)), spp=2, scene="scene",
         _dr=types.SimpleNamespace(opaque=lambda cls, v: v), _mi=types.SimpleNamespace(UInt32=int, render=render))
     assert renderer_module.Renderer.path_trace(r, 7) == "image" and traced == [("scene", 7, 2)]
-    assert r.refused_recordings == 1 and r._frozen is fresh
+    assert r._frozen.refused == 1 and r._frozen.function is fresh
     assert renderer_module.Renderer.recordings.fget(r) == 3
 
     class Failing:
         def __call__(self, scene, seed):
             raise RuntimeError("a kernel failed")
 
-    r._frozen = Failing()
+    r._frozen = Frozen(Failing)
     with pytest.raises(RuntimeError, match="a kernel failed"):
         renderer_module.Renderer.path_trace(r, 7)
 
@@ -195,6 +196,7 @@ def test_a_refused_recording_of_the_ray_cast_traces_it_and_a_new_frozen_cast_rep
     import mitsuba as mi
 
     import datagen.render.raycast as raycast
+    from datagen.render.frozen import Frozen
     from datagen.render.renderer import Renderer
     from datagen.render.runtime import use_variant
 
@@ -207,24 +209,23 @@ def test_a_refused_recording_of_the_ray_cast_traces_it_and_a_new_frozen_cast_rep
             raise RuntimeError("replay(): ... re-recording ...")
 
     fresh = types.SimpleNamespace(n_recordings=0)
+    made = iter([Refusing(), fresh])
     traced = []
-    monkeypatch.setattr(raycast, "frozen_cast", lambda kernel: fresh)
     monkeypatch.setattr(raycast, "cast_kernel", lambda *args: traced.append(args) or "cast")
     r = types.SimpleNamespace(
         _mi=mi, _dr=dr, _camera_render=np.zeros(3), _traffic_ids=(), _id_table=mi.UInt32([0, 1]),
-        _background_codes=mi.Int32([-1, 0, 1]), scene="scene", refused_recordings=0,
-        _dropped_cast_recordings=0, _frozen_cast=Refusing(),
+        _background_codes=mi.Int32([-1, 0, 1]), scene="scene", _frozen=None, _frozen_cast=Frozen(lambda: next(made)),
         world=types.SimpleNamespace(cloud_layer=lambda name: None, cloud_opacities=lambda: (), pixel_rad=1e-3))
     d = mi.Vector3f(dr.zeros(mi.Float, 4), dr.zeros(mi.Float, 4), dr.ones(mi.Float, 4))
     assert raycast.RayCasting._cast_on_device(r, d) == "cast" and len(traced) == 1
-    assert r.refused_recordings == 1 and r._frozen_cast is fresh
+    assert Renderer.refused_recordings.fget(r) == 1 and r._frozen_cast.function is fresh
     assert Renderer.cast_recordings.fget(r) == 2
 
     class Failing:
         def __call__(self, *args):
             raise RuntimeError("a kernel failed")
 
-    r._frozen_cast = Failing()
+    r._frozen_cast = Frozen(Failing)
     with pytest.raises(RuntimeError, match="a kernel failed"):
         raycast.RayCasting._cast_on_device(r, d)
 

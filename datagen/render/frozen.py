@@ -47,7 +47,7 @@ worker's first frame, if any. A recording Dr.Jit refuses traces its frame instea
 
 from __future__ import annotations
 
-__all__ = ["frozen_cast", "frozen_render", "refused", "settle"]
+__all__ = ["Frozen", "frozen_cast", "frozen_render", "refused", "settle"]
 
 
 def frozen_render(spp: int):
@@ -69,6 +69,40 @@ def frozen_cast(cast):
     import drjit as dr
 
     return dr.freeze(cast, limit=CAST_LAYOUTS)
+
+
+class Frozen:
+    """A frozen function (``make()``: a ``dr.freeze``) that traces its call instead where
+    Dr.Jit refuses to record it, or to record it again after a failed dry run of a replay:
+    the call is made by ``traced``, and a new frozen function (:attr:`function`) replaces the
+    one whose cache may hold the refused entry. Measured before the cloud layers' radiance
+    stopped asking for their mesh's UV parameterization
+    (procedural.FieldTexture.is_spatially_varying): a recording met an object Mitsuba makes
+    on first use inside the render; the traced call makes it, and the next one records."""
+
+    def __init__(self, make) -> None:
+        self._make = make
+        self.function = make()
+        self.refused = 0  # refusals (those calls traced)
+        self._dropped = 0  # recordings of the functions replaced after a refusal
+
+    @property
+    def recordings(self) -> int:
+        """How many times it recorded, the replaced functions' recordings included."""
+        return self._dropped + self.function.n_recordings
+
+    def __call__(self, traced, *args):
+        """``function(*args)``, or ``traced(*args)`` where Dr.Jit refuses to record it; any
+        other error is raised."""
+        try:
+            return self.function(*args)
+        except RuntimeError as error:
+            if not refused(error):
+                raise
+            self.refused += 1
+            self._dropped += self.function.n_recordings
+            self.function = self._make()
+        return traced(*args)
 
 
 def refused(error: BaseException) -> bool:

@@ -15,7 +15,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from datagen.core.conventions import OBJECT_NAMES, OTHER_AIRCRAFT_ID, object_id, pixel_centres
-from datagen.render.frozen import frozen_cast, refused
 from datagen.render.mitsuba import jit_array, jit_vectors, scene_array, visible
 from datagen.render.procedural import only_where
 from datagen.render.world import CLOUD_LAYERS, SURFACES
@@ -70,8 +69,8 @@ class RayCasting:
     ``variant``, ``intrinsics``, the posed camera (``_world_from_cam``, ``_camera_render``),
     the device tables its build made (``_id_table``, ``_background_codes``), the registry ids
     of its other aircraft's instances (``_traffic_ids``), its Mitsuba and Dr.Jit modules
-    (``_mi``, ``_dr``), and the frozen cast (``_frozen_cast``, None: traced) with the counts a
-    refusal to record it updates (``refused_recordings``, ``_dropped_cast_recordings``)."""
+    (``_mi``, ``_dr``), and the frozen cast (``_frozen_cast``, a :class:`~datagen.render.frozen.Frozen`
+    of :func:`cast_kernel`; None: traced)."""
 
     @functools.cache  # noqa: B019 (one renderer per process; two strides at most)
     def _pixel_rays(self, stride: int = 1) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
@@ -233,16 +232,7 @@ class RayCasting:
                float(self.world.pixel_rad), n)
         args = (self.scene, d, start, self._id_table, self._background_codes, textures, key)
         frozen = getattr(self, "_frozen_cast", None)
-        if frozen is not None:
-            try:
-                return frozen(*args)
-            except RuntimeError as error:  # as the render's (Renderer.path_trace): traced, and a new one
-                if not refused(error):
-                    raise
-                self.refused_recordings += 1
-                self._dropped_cast_recordings += frozen.n_recordings
-                self._frozen_cast = frozen_cast(cast_kernel)
-        return cast_kernel(*args)
+        return cast_kernel(*args) if frozen is None else frozen(cast_kernel, *args)  # traced where refused
 
     def feature_visibility(self, state: FrameState, features: FeatureTable
                            ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
@@ -308,10 +298,10 @@ def cast_kernel(scene, d, start: dict, id_table, codes, textures: tuple, key: tu
         dr.eval(hit_t, ids, code, surface)
         passing = dr.zeros(mi.Bool, dr.width(d))
         alpha = mi.Float(1.0)  # (read only where a layer set it)
+        p = o + d * hit_t
+        footprint = (travelled + hit_t) * pixel_rad
         for c, texture in zip(present, textures, strict=True):
             on = active & (code == c)  # the rays that met this layer
-            p = o + d * hit_t
-            footprint = (travelled + hit_t) * pixel_rad
             (opacity,) = only_where(on, (mi.Float(1.0),), lambda p=p, footprint=footprint, texture=texture:
                                      (texture.value_at(p.x, p.y, footprint),))
             passing = dr.select(on, opacity < CLOUD_PASS_OPACITY, passing)

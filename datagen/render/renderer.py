@@ -38,7 +38,7 @@ from datagen.core.conventions import RIGID_OBJECTS, object_id
 from datagen.core.transforms import make_transform
 from datagen.render.aerial import AIRLIGHT_STEP_PX
 from datagen.render.atmosphere import Atmosphere
-from datagen.render.frozen import frozen_cast, frozen_render, refused, settle
+from datagen.render.frozen import Frozen, frozen_cast, frozen_render, settle
 from datagen.render.mitsuba import (
     jit_array,
     mitsuba_mesh,
@@ -151,13 +151,10 @@ class Renderer(RayCasting):
         self.always_geometry = self.sensor is not None or self.world.any
         self.spp = spp or config.render.spp
         # The path tracing recorded once and replayed (datagen.render.frozen); None: traced each frame.
-        self._frozen = frozen_render(self.spp) if config.render.frozen and not self.variant.startswith("scalar") \
-            else None
+        frozen = config.render.frozen and not self.variant.startswith("scalar")
+        self._frozen = Frozen(lambda: frozen_render(self.spp)) if frozen else None
         # The geometry pass's ray cast, frozen with the render (datagen.render.raycast.cast_kernel).
-        self._frozen_cast = frozen_cast(cast_kernel) if self._frozen is not None else None
-        self.refused_recordings = 0  # recordings Dr.Jit refused (those frames traced instead)
-        self._dropped_recordings = 0  # recordings of frozen renders dropped after a refusal
-        self._dropped_cast_recordings = 0  # and of frozen casts
+        self._frozen_cast = Frozen(lambda: frozen_cast(cast_kernel)) if frozen else None
         self.denoise = config.render.denoise
         self.guides = self.denoise != "off" and config.render.denoise_guides
         if self.denoise != "off":
@@ -473,33 +470,27 @@ class Renderer(RayCasting):
     def path_trace(self, seed: int):
         """The posed scene path traced with sampler seed ``seed``: Mitsuba's image (not yet
         evaluated), through the frozen render where there is one."""
-        if self._frozen is not None:
-            try:
-                return self._frozen(self.scene, self._dr.opaque(self._mi.UInt32, seed))
-            except RuntimeError as error:
-                # Dr.Jit refuses a recording, or a recording again after a failed dry run of a
-                # replay, that meets an object Mitsuba makes on first use inside the render
-                # (measured before the cloud layers' radiance stopped asking for their mesh's UV
-                # parameterization: procedural.FieldTexture.is_spatially_varying). The frame is
-                # traced, which makes the object, and a new frozen render replaces the one whose
-                # cache may hold the refused entry; the next frame records.
-                if not refused(error):
-                    raise
-                self.refused_recordings += 1
-                self._dropped_recordings += self._frozen.n_recordings
-                self._frozen = frozen_render(self.spp)
-        return self._mi.render(self.scene, seed=seed, spp=self.spp)
+        def traced(*_):
+            return self._mi.render(self.scene, seed=seed, spp=self.spp)
+
+        if self._frozen is None:
+            return traced()
+        return self._frozen(traced, self.scene, self._dr.opaque(self._mi.UInt32, seed))  # traced where refused
 
     @property
     def recordings(self) -> int:
         """How many times the frozen render recorded the path tracing (0: traced every frame)."""
-        return self._dropped_recordings + (0 if self._frozen is None else self._frozen.n_recordings)
+        return 0 if self._frozen is None else self._frozen.recordings
 
     @property
     def cast_recordings(self) -> int:
         """How many times the frozen ray cast recorded (0: traced every frame)."""
-        frozen = self._frozen_cast
-        return self._dropped_cast_recordings + (0 if frozen is None else frozen.n_recordings)
+        return 0 if self._frozen_cast is None else self._frozen_cast.recordings
+
+    @property
+    def refused_recordings(self) -> int:
+        """Recordings Dr.Jit refused, of the render and of the cast (those calls traced)."""
+        return sum(f.refused for f in (self._frozen, self._frozen_cast) if f is not None)
 
     def render(self, state: FrameState, look: FrameLook, seed: int, *, geometry: bool = False) -> RenderResult:
         """Pose the scene and render it: exposure-scaled linear RGB seen through the air,
