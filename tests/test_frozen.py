@@ -50,10 +50,10 @@ def test_frozen_frames_are_the_traced_frames_bit_for_bit_over_three_approaches_a
     replayed, (recordings, after_rebuild, casts, casts_after), refused = _in_own_process(_frames, True)
     traced, none, _ = _in_own_process(_frames, False)
     assert none == (0, 0, 0, 0)
-    # The first frame records the render and the geometry pass's cast; no later frame or
-    # approach records again or is refused. The scene built anew replays the recordings or
-    # records once more (measured: about one run in six records the render again there; what
-    # decides it is not found).
+    # The first frame records the render (the frame's path tracing and the target pass's, in
+    # one recording) and the geometry pass's cast; no later frame or approach records again or is refused. The
+    # scene built anew replays the recordings or records once more (measured: about one run
+    # in six records the render again there; what decides it is not found).
     assert recordings == 1 and casts == 1 and refused == 0, (recordings, casts, refused)
     assert after_rebuild in (1, 2) and casts_after in (1, 2), (after_rebuild, casts_after)
     for i, a, b in zip(FRAMES, replayed, traced, strict=True):
@@ -160,26 +160,26 @@ def test_a_refused_recording_traces_its_frame_and_a_new_frozen_render_replaces_t
     class Refusing:
         n_recordings = 3
 
-        def __call__(self, scene, seed):
+        def __call__(self, *args):
             raise RuntimeError(message) from RuntimeError("record(): validate(): ...")
 
     fresh = types.SimpleNamespace(n_recordings=0)
     made = iter([Refusing(), fresh])
     traced = []
 
-    def render(scene, seed, spp):
-        traced.append((scene, seed, spp))
+    def trace(scene, seed, target_seed, offsets):
+        traced.append((scene, seed, offsets))
         return "image"
 
     r = types.SimpleNamespace(
-        _frozen=Frozen(lambda: next(made)), spp=2, scene="scene",
-        _dr=types.SimpleNamespace(opaque=lambda cls, v: v), _mi=types.SimpleNamespace(UInt32=int, render=render))
-    assert renderer_module.Renderer.path_trace(r, 7) == "image" and traced == [("scene", 7, 2)]
+        _frozen=Frozen(lambda: next(made)), scene="scene", trace=trace,
+        _dr=types.SimpleNamespace(opaque=lambda cls, v: v), _mi=types.SimpleNamespace(UInt32=int))
+    assert renderer_module.Renderer.path_trace(r, 7) == "image" and traced == [("scene", 7, None)]
     assert r._frozen.refused == 1 and r._frozen.function is fresh
     assert renderer_module.Renderer.recordings.fget(r) == 3
 
     class Failing:
-        def __call__(self, scene, seed):
+        def __call__(self, *args):
             raise RuntimeError("a kernel failed")
 
     r._frozen = Frozen(Failing)

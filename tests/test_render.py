@@ -454,11 +454,12 @@ def test_frames_after_the_first_compile_no_kernel(mode: str, request) -> None:
 
 def test_a_frozen_render_records_once_over_twenty_three_approaches_and_a_rebuilt_scene(
         frozen_census, traced_census) -> None:
-    """The frozen render, and the geometry pass's frozen ray cast, record at the first frame
-    and replay every later frame of every approach (the film and sampler settled when the
-    scene is built: datagen.render.frozen); its scene rebuilt after another renderer's, each
-    replays its recording or records once more (measured: dashcam75 records the render
-    again, and a rebuilt wingcam55 scene now and then). Traced, neither records."""
+    """The frozen render (the frame's and the target pass's path tracing, in one recording),
+    and the geometry pass's frozen ray cast, record at the first frame and replay every later frame of every
+    approach (the films and samplers settled when the scene is built: datagen.render.frozen);
+    its scene rebuilt after another renderer's, each replays its recording or records once
+    more (measured: dashcam75 records the render again, and a rebuilt wingcam55 scene now and
+    then). Traced, neither records."""
     assert frozen_census["recordings"] == frozen_census["cast_recordings"] == 1, frozen_census
     assert frozen_census["recordings_beside"] in (1, 2), frozen_census
     assert frozen_census["cast_recordings_beside"] in (1, 2), frozen_census
@@ -629,13 +630,15 @@ def test_scalar_fallback_agrees_with_the_vectorized_variant() -> None:
 def test_denoise_off_leaves_the_path_tracers_image_unchanged(one_thread) -> None:
     """With render.denoise off a frame is Mitsuba's own render times the exposure, bit for
     bit (what every build wrote before denoising existed); the aircraft's lights, which are
-    added after the render (tests/test_liveries.py), off."""
+    added after the render (tests/test_liveries.py), and the target pass's samples
+    (tests/test_target.py) off."""
     from datagen.render.tonemap import exposure_scale
 
     config = override_config(load_config("wingcam55"), {"camera.width": 160, "camera.height": 84,
                                                         "render.spp": 2, "render.denoise": "off",
                                                         "randomization.sensor.enabled": False,
-                                                        "randomization.livery.lights": False})
+                                                        "randomization.livery.lights": False,
+                                                        "render.target_spp": 0})
     renderer = Renderer(Scene.resolve(config))
     state = frame_state(config, 3)
     look = frame_look(config, state)

@@ -887,6 +887,14 @@ class RenderConfig(_Section):
     max_depth: Integer = Field(6, ge=1, le=64)
     """Path tracer maximum depth."""
 
+    target_spp: Integer = Field(4, ge=0, le=65536)
+    """Samples per pixel added over a window on the objects (``datagen.render.target``):
+    the denoiser keeps more of the aircraft's and the drogue's detail where a detector
+    looks (``bench/bench_detail.py``). 0: no target pass."""
+
+    target_window: Number = Field(0.5, gt=0.0, le=1.0)
+    """The target pass's window: this share of the image's width and of its height."""
+
     denoise: Literal["off", "oidn"] = "oidn"
     """Denoise the linear image with Intel Open Image Denoise (``mitsuba-oidn``) before
     exposure and encoding, on the variant's device; the EXR keeps the denoised linear image."""

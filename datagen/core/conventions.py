@@ -115,6 +115,7 @@ __all__ = [
     "PIXEL_CONVENTION",
     "RIGID_OBJECTS",
     "SEALANT_PART",
+    "TARGET_STREAM",
     "WORLD_DIMENSIONS",
     "WORLD_STREAM",
     "approach_rng",
@@ -130,6 +131,7 @@ __all__ = [
     "random_features_rng",
     "render_seed",
     "split_uniform",
+    "target_render_seed",
     "texture_part_rng",
     "texture_rng",
     "world_rng",
@@ -263,6 +265,17 @@ def frame_rng(seed: int, frame_index: int) -> np.random.Generator:
 def render_seed(seed: int, frame_index: int) -> int:
     """Mitsuba's sampler seed for frame ``frame_index``: the first word of its seed sequence."""
     return int(frame_seed_sequence(seed, frame_index).generate_state(1, dtype=np.uint32)[0])
+
+
+#: Spawn key of the target pass's sampler seed under a frame's render seed.
+TARGET_STREAM: Final[int] = 7
+
+
+def target_render_seed(seed: int) -> int:
+    """Mitsuba's sampler seed for a frame's target pass (:mod:`datagen.render.target`), whose
+    render seed is ``seed``: the first word of the seed sequence keyed by it and
+    :data:`TARGET_STREAM`, so that the pass's samples are not the frame's."""
+    return int(np.random.SeedSequence(seed, spawn_key=(TARGET_STREAM,)).generate_state(1, dtype=np.uint32)[0])
 
 
 #: Second spawn-key element of the approach streams (frame streams have one-element keys).

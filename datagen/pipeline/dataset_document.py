@@ -53,7 +53,9 @@ def _versions() -> dict[str, str]:
 def _images(config) -> dict:
     """How the images were made: what a user needs to compare two datasets' pixels."""
     r = config.render
-    return {"spp": r.spp, "max_depth": r.max_depth, "denoise": r.denoise,
+    return {"spp": r.spp, "max_depth": r.max_depth,
+            "target_spp": r.target_spp, "target_window": r.target_window if r.target_spp else None,
+            "denoise": r.denoise,
             "denoise_guides": r.denoise_guides if r.denoise != "off" else None,
             "denoise_quality": r.denoise_quality if r.denoise != "off" else None,
             "sea_model": config.randomization.sea.model, "format": r.image_format,

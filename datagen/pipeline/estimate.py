@@ -92,12 +92,15 @@ def frame_cost(config: Config, cores: int, *, render: bool = True, variant: str 
     denoiser = f"oidn {r.denoise_quality}{' guided' if r.denoise_guides else ''}" if denoised else "no denoiser"
     world_text = (f"air {'on' if world.haze.enabled else 'off'}, clouds {'on' if clouds else 'off'}, "
                   f"camera model {'on' if world.sensor.enabled else 'off'}")
-    setting = f"{cam.width}x{cam.height}, {r.spp} spp, {denoiser}, {world_text}, {variant}"
+    # Samples a pixel on average: the target pass's (datagen.render.target) over its window's share.
+    spp = r.spp + (r.target_spp * r.target_window ** 2 if not variant.startswith("scalar") else 0.0)
+    target = f" (+{r.target_spp} over the objects)" if r.target_spp and not variant.startswith("scalar") else ""
+    setting = f"{cam.width}x{cam.height}, {r.spp} spp{target}, {denoiser}, {world_text}, {variant}"
     if variant.startswith("cuda"):
-        gpu_s = mpx * r.spp * GPU_TRACE_S * tracing + (mpx * GPU_DENOISE_S if denoised else 0.0)
+        gpu_s = mpx * spp * GPU_TRACE_S * tracing + (mpx * GPU_DENOISE_S if denoised else 0.0)
         host_s = (GPU_HOST_CORE_S + mpx * GPU_HOST_CORE_S_PER_MPX) / cores
         return FrameCost(max(gpu_s, host_s), cores, setting, disk)
-    core_s = FIXED_CORE_S[integrator] + mpx * r.spp * TRACE_CORE_S[integrator] * tracing
+    core_s = FIXED_CORE_S[integrator] + mpx * spp * TRACE_CORE_S[integrator] * tracing
     if denoised:
         core_s += mpx * DENOISE_CORE_S[r.denoise_quality]
     core_s += mpx * REST_CORE_S[world.sensor.enabled]

@@ -1,5 +1,6 @@
 """The path tracing recorded once and replayed: Dr.Jit's ``dr.freeze`` around ``mi.render``
-(and around the geometry pass's ray cast).
+(the frame's, and the target pass's merged into it: :mod:`datagen.render.target`), and around
+the geometry pass's ray cast.
 
 Every ``mi.render`` traces the path tracer's kernel again in Python and C++ (the Python
 plugins included) before it runs it; a frozen function records the kernels its first call
@@ -15,7 +16,8 @@ frame's values must all be device values set before the call:
 - every array the scene holds comes from Dr.Jit's own memory
   (:func:`datagen.render.mitsuba.scene_array`): a replay takes an array mapped from numpy
   memory at the memory it had when recording;
-- the sampler seed is an opaque ``UInt32``;
+- the sampler seeds are opaque ``UInt32``, and so is the target pass's window (its
+  sensor's principal point, the merge's offsets);
 - nothing Mitsuba makes on first use inside the render: the cloud layers' radiance tells
   Mitsuba it does not vary over the surface, so their emitters never ask for their mesh's
   UV parameterization, a scene of its own that Mitsuba rebuilt inside the render after
@@ -25,8 +27,8 @@ frame's values must all be device values set before the call:
   pending inputs before the call, all of them in one kernel, whose shape then depends on
   which were pending (a new scene's hose, a new sky's sun angles) and compiled anew at some
   frames; :func:`settle` evaluates them where they are made, always in the same groups;
-- the same inputs' layout from the first frame on: the sensor's film is prepared, and the
-  film's and sampler's literals settled, when the scene is built (a first render leaves
+- the same inputs' layout from the first frame on: the sensors' films are prepared, and the
+  films' and samplers' literals settled, when the scene is built (a first render leaves
   arrays where they held literals, and the second frame recorded again).
 
 The geometry pass's ray cast is frozen the same way (:func:`frozen_cast`): its rays, the
@@ -50,14 +52,11 @@ from __future__ import annotations
 __all__ = ["Frozen", "frozen_cast", "frozen_render", "refused", "settle"]
 
 
-def frozen_render(spp: int):
-    """A frozen ``mi.render(scene, seed=seed, spp=spp)``: call it with the scene and the seed
-    as an opaque ``mi.UInt32``; ``n_recordings`` counts its recordings."""
+def frozen_render(render):
+    """``render`` (the renderer's path tracing: :meth:`datagen.render.renderer.Renderer.trace`)
+    frozen: call it with the scene and its other inputs as opaque device values (the seeds as
+    ``mi.UInt32``); ``n_recordings`` counts its recordings."""
     import drjit as dr
-    import mitsuba as mi
-
-    def render(scene, seed):
-        return mi.render(scene, seed=seed, spp=spp)
 
     return dr.freeze(render)
 

@@ -135,13 +135,17 @@ def world_from_micam(world_from_cam: ArrayLike) -> NDArray[np.float64]:
 
 
 def sensor_dict(intrinsics: Intrinsics, world_from_cam: ArrayLike, spp: int, *,
-                rfilter: str = "box", pixel_format: str = "rgb") -> dict:
-    """A perspective sensor matching ``intrinsics`` at the OpenCV ``world_from_cam``."""
+                rfilter: str = "box", pixel_format: str = "rgb", size: tuple[int, int] | None = None) -> dict:
+    """A perspective sensor matching ``intrinsics`` at the OpenCV ``world_from_cam``; with
+    ``size`` (width, height), a film of that size at the same focal length, centred until
+    its principal point is moved (:class:`datagen.render.target.TargetWindow`)."""
     import mitsuba as mi
 
+    width, height = size or (intrinsics.width, intrinsics.height)
+    hfov_rad = intrinsics.hfov_rad if size is None else 2.0 * np.arctan(width / (2.0 * intrinsics.fx))
     return {
         "type": "perspective",
-        "fov": float(np.degrees(intrinsics.hfov_rad)),
+        "fov": float(np.degrees(hfov_rad)),
         "fov_axis": "x",
         "near_clip": 0.01,
         "far_clip": 1.0e8,  # beyond the sea's edge (datagen.render.world.EARTH_CAP_M)
@@ -149,8 +153,8 @@ def sensor_dict(intrinsics: Intrinsics, world_from_cam: ArrayLike, spp: int, *,
         "sampler": {"type": "independent", "sample_count": int(spp)},
         "film": {
             "type": "hdrfilm",
-            "width": int(intrinsics.width),
-            "height": int(intrinsics.height),
+            "width": int(width),
+            "height": int(height),
             "rfilter": {"type": rfilter},
             "pixel_format": pixel_format,
         },

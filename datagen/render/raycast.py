@@ -162,24 +162,29 @@ class RayCasting:
         sample by the layers' opacity where the sample meets them, not by this)."""
         return self.geometry_and_cast(stride, np.zeros((0, 3), np.float32), opacity=opacity)[0]
 
-    def geometry_and_cast(self, stride: int, directions_render: NDArray, *, opacity: bool = False
-                          ) -> tuple[tuple[NDArray, ...], NDArray]:
+    def geometry_and_cast(self, stride: int, directions_render: NDArray, *, opacity: bool = False, grid: int = 0
+                          ) -> tuple[tuple[NDArray, ...], NDArray, NDArray | None]:
         """:meth:`geometry_pass` and, in the same cast, the distance (inf: nothing) along each
         of ``directions_render`` ((N, 3), render frame) from the posed camera, as
         :meth:`cast` gives it: a frame's few other rays from the camera (the sun's, its
-        lights') ride with the pixels' rays, so that the frame traces one cast, not three."""
+        lights') ride with the pixels' rays, so that the frame traces one cast, not three.
+        With ``grid``, also the object ids at the centres of ``grid`` x ``grid`` blocks (as
+        :meth:`geometry_pass` at that stride, not repeated; None without), the same whatever
+        ``stride`` is."""
         k = self.intrinsics
         d_cam, z_per_t = self._pixel_rays(stride)
         w, h = -(-k.width // stride), -(-k.height // stride)
         n, extra = len(d_cam), np.asarray(directions_render, dtype=np.float32).reshape(-1, 3)
+        g = len(self._pixel_rays(grid)[0]) if grid else 0
         r = self._world_from_cam[:3, :3].astype(np.float32)  # the render frame shares the world's axes
         if self.variant.startswith("scalar"):
-            t, ids, surface = self.cast(self._camera_render, np.concatenate([d_cam @ r.T, extra]))
+            grid_rays = [self._pixel_rays(grid)[0]] if grid else []
+            t, ids, surface = self.cast(self._camera_render, np.concatenate([d_cam @ r.T, *grid_rays, extra]))
             depth = t[:n] * z_per_t
             alpha = [np.full(n, -1.0, np.float32)] * len(CLOUD_LAYERS)
         else:  # the rays made and rotated on the device
             mi, dr = self._mi, self._dr
-            d_dev, z_dev = self._device_rays(stride)
+            d_dev, z_dev = self._device_rays(stride, grid)
             m = [[dr.opaque(mi.Float, float(r[i, j])) for j in range(3)] for i in range(3)]
             d = mi.Vector3f(*(m[i][0] * d_dev.x + m[i][1] * d_dev.y + m[i][2] * d_dev.z for i in range(3)))
             # The rays the frame asks for in blocks of EXTRA_RAYS (one at least): the same
@@ -194,16 +199,23 @@ class RayCasting:
         if opacity:
             layers = np.stack([np.asarray(a)[:n] for a in alpha], axis=-1)  # one per layer: a copy from the device
             out += (layers.reshape(h, w, len(CLOUD_LAYERS)).astype(np.float32),)
-        cast = np.asarray(t[n:n + len(extra)], dtype=np.float32)
+        cast = np.asarray(t[n + g:n + g + len(extra)], dtype=np.float32)
+        grid_ids = np.asarray(ids[n:n + g]).reshape(-(-k.height // grid), -(-k.width // grid)).astype(np.uint32) \
+            if grid else None
         if stride == 1:
-            return out, cast
-        return tuple(np.repeat(np.repeat(a, stride, axis=0), stride, axis=1)[:k.height, :k.width] for a in out), cast
+            return out, cast, grid_ids
+        return (tuple(np.repeat(np.repeat(a, stride, axis=0), stride, axis=1)[:k.height, :k.width] for a in out),
+                cast, grid_ids)
 
     @functools.cache  # noqa: B019 (one renderer per process; two strides at most)
-    def _device_rays(self, stride: int):
-        """:meth:`_pixel_rays` as Dr.Jit arrays on the variant's device (made once, opaque)."""
+    def _device_rays(self, stride: int, grid: int = 0):
+        """:meth:`_pixel_rays` as Dr.Jit arrays on the variant's device (made once, opaque);
+        with ``grid``, the rays through the centres of ``grid`` x ``grid`` blocks after the
+        pixels' (their z components are the pixels' alone)."""
         mi, dr = self._mi, self._dr
         d_cam, z_per_t = self._pixel_rays(stride)
+        if grid:
+            d_cam = np.concatenate([d_cam, self._pixel_rays(grid)[0]])
         rays = jit_vectors(mi.Vector3f, d_cam), jit_array(mi.Float, z_per_t)
         dr.make_opaque(*rays)
         return rays

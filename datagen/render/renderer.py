@@ -34,7 +34,7 @@ from datagen.assets.models import material_class
 from datagen.assets.models.drogue import hose_faces, hose_placeholder, hose_texcoords, hose_vertices
 from datagen.assets.rig import MOUNTS
 from datagen.core.camera import Intrinsics, distortion_margin_px
-from datagen.core.conventions import RIGID_OBJECTS, object_id
+from datagen.core.conventions import RIGID_OBJECTS, object_id, target_render_seed
 from datagen.core.transforms import make_transform
 from datagen.render.aerial import AIRLIGHT_STEP_PX
 from datagen.render.atmosphere import Atmosphere
@@ -51,6 +51,15 @@ from datagen.render.paintwork import Paintwork
 from datagen.render.raycast import RayCasting, cast_kernel
 from datagen.render.runtime import hold_scene, use_variant
 from datagen.render.sky import sky_class
+from datagen.render.target import (
+    PLACEMENT_STRIDE_PX,
+    TARGET_SENSOR,
+    TargetWindow,
+    merge_target,
+    target_size,
+    target_window,
+    window_offsets,
+)
 from datagen.render.timing import DENOISE, PATH_TRACING, StageClock
 from datagen.render.tonemap import exposure_scale
 from datagen.render.world import CLOUD_LAYERS, SEA_COLOUR, World, earth_cap
@@ -147,12 +156,17 @@ class Renderer(RayCasting):
             self.margin_px = distortion_margin_px(self.output_intrinsics, sensor.k1, sensor.k2, sensor.tangential)
         #: The pinhole render's grid (the output image grown by the margin).
         self.intrinsics = self.output_intrinsics.with_margin(self.margin_px)
-        #: Run the geometry pass on every frame: the camera model and the image statistics need it.
-        self.always_geometry = self.sensor is not None or self.world.any
         self.spp = spp or config.render.spp
+        #: Samples added over a window on the objects (datagen.render.target; 0: none, as in
+        #: scalar variants, which render no second sensor) and the window's size.
+        self.target_spp = 0 if self.variant.startswith("scalar") else config.render.target_spp
+        self._target_size = target_size(self.intrinsics, config.render.target_window)
+        #: Run the geometry pass on every frame: the camera model, the image statistics and the
+        #: target pass's window (its coarse grid rides in the pass's cast) need it.
+        self.always_geometry = self.sensor is not None or self.world.any or self.target_spp > 0
         # The path tracing recorded once and replayed (datagen.render.frozen); None: traced each frame.
         frozen = config.render.frozen and not self.variant.startswith("scalar")
-        self._frozen = Frozen(lambda: frozen_render(self.spp)) if frozen else None
+        self._frozen = Frozen(lambda: frozen_render(self.trace)) if frozen else None
         # The geometry pass's ray cast, frozen with the render (datagen.render.raycast.cast_kernel).
         self._frozen_cast = Frozen(lambda: frozen_cast(cast_kernel)) if frozen else None
         self.denoise = config.render.denoise
@@ -171,7 +185,7 @@ class Renderer(RayCasting):
     def release(self) -> None:
         """Drop every Mitsuba object of the scene (:func:`datagen.render.runtime.hold_scene`);
         the next :meth:`pose` builds them again."""
-        self.scene = self.params = self.sky = self.aerial = self._sea = None
+        self.scene = self.params = self.sky = self.aerial = self._sea = self._target_params = None
         self._meshes: dict = {}
         self._parts: dict[str, list[tuple[str, str]]] = {}  # object -> [(param key prefix, material class)]
         self._sky_probe_inputs = None
@@ -201,6 +215,8 @@ class Renderer(RayCasting):
             "type": "scene",
             "integrator": integrator,
             "sensor": sensor_dict(self.intrinsics, np.eye(4), self.spp),
+            **({"target_sensor": sensor_dict(self.intrinsics, np.eye(4), self.target_spp, size=self._target_size)}
+               if self.target_spp else {}),
             # Mitsuba 3.9's sunsky is z-up, like our world frame (it is black below z = 0).
             "sky": self.sky,
             "sea_group": {"type": "shapegroup", "sea": self._sea_mesh(sea_bsdf)},
@@ -269,11 +285,11 @@ class Renderer(RayCasting):
         self.scene = mi.load_dict(dict(description, hose=hose), optimize=False)
         self.params = mi.traverse(self.scene)
         self._unsettled = True  # the frozen render's first pose settles the scene (_apply)
-        if self._frozen is not None:  # the film and sampler as a render leaves them: one recording
-            sensor = self.scene.sensors()[0]
-            sensor.film().prepare(self.scene.integrator().aov_names())
-            settle(sensor.film(), literals=True)  # (frozen.settle)
-            settle(sensor.sampler(), literals=True)
+        if self._frozen is not None:  # the films and samplers as a render leaves them: one recording
+            for sensor in self.scene.sensors():
+                sensor.film().prepare(self.scene.integrator().aov_names())
+                settle(sensor.film(), literals=True)  # (frozen.settle)
+                settle(sensor.sampler(), literals=True)
         self._hose_points = hose_points
         if self.variant.startswith("scalar"):  # its ray casts name the shapes they hit
             return
@@ -362,6 +378,8 @@ class Renderer(RayCasting):
             p["windscreen_frame.to_world"] = mi.Transform4f((render_from_world @ state.world_from("receiver")).tolist())
         sensor = world_from_micam(render_from_world @ state.world_from_cam)
         p["sensor.to_world"] = mi.Transform4f(sensor.tolist())
+        if self.target_spp:
+            p["target_sensor.to_world"] = mi.Transform4f(sensor.tolist())
         # The earth's top under the camera (the render frame's origin is over the camera's nadir).
         p["earth.to_world"] = mi.Transform4f(make_transform(np.eye(3), [0.0, 0.0, -origin[2]]).tolist())
         self.world.apply(p, look, float(origin[2]), irradiance, camera_render=self._camera_render, sun_direction=sun)
@@ -467,19 +485,49 @@ class Renderer(RayCasting):
         p[f"{prefix}.metallic.value"] = m.metallic
         p[f"{prefix}.specular"] = m.specular
 
-    def path_trace(self, seed: int):
-        """The posed scene path traced with sampler seed ``seed``: Mitsuba's image (not yet
-        evaluated), through the frozen render where there is one."""
-        def traced(*_):
-            return self._mi.render(self.scene, seed=seed, spp=self.spp)
-
+    def path_trace(self, seed: int, window: TargetWindow | None = None):
+        """The posed scene path traced with sampler seed ``seed``, and over ``window`` by the
+        target pass (:mod:`datagen.render.target`; None: not), merged: Mitsuba's image (not
+        yet evaluated), through the frozen render where there is one."""
+        mi, dr = self._mi, self._dr
+        offsets = None
+        if window is not None:
+            self.aim_target(window)
+            offsets = window_offsets(mi, dr, window)
         if self._frozen is None:
-            return traced()
-        return self._frozen(traced, self.scene, self._dr.opaque(self._mi.UInt32, seed))  # traced where refused
+            return self.trace(self.scene, seed, target_render_seed(seed), offsets)
+        args = (self.scene, dr.opaque(mi.UInt32, seed), dr.opaque(mi.UInt32, target_render_seed(seed)), offsets)
+        return self._frozen(self.trace, *args)  # traced where refused
+
+    def trace(self, scene, seed, target_seed, offsets):
+        """What the frozen render records: the frame's path tracing with sampler seed
+        ``seed`` and, with ``offsets`` (:func:`~datagen.render.target.window_offsets`), the
+        target pass's with ``target_seed`` merged into it (:func:`~datagen.render.target.merge_target`)."""
+        mi = self._mi
+        image = mi.render(scene, seed=seed, spp=self.spp)
+        if offsets is not None:
+            window_image = mi.render(scene, sensor=TARGET_SENSOR, seed=target_seed, spp=self.target_spp)
+            merge_target(mi, self._dr, image, window_image, offsets, self.spp, self.target_spp)
+        return image
+
+    def aim_target(self, window: TargetWindow) -> None:
+        """Point the target pass's sensor at ``window``: its principal point moved (opaque
+        values, so that the recording reads them as data), everything else the frame's."""
+        mi, dr = self._mi, self._dr
+        sensor = self.scene.sensors()[TARGET_SENSOR]
+        if self._target_params is None:  # the sensor's own: an update walks its keys, not the scene's
+            self._target_params = mi.traverse(sensor)
+        x, y = window.principal_point_offset
+        self._target_params["principal_point_offset_x"] = dr.opaque(mi.Float, x)
+        self._target_params["principal_point_offset_y"] = dr.opaque(mi.Float, y)
+        self._target_params.update()
+        if self._frozen is not None:
+            settle(sensor)  # nothing pending for the frozen render's inputs (frozen.settle)
 
     @property
     def recordings(self) -> int:
-        """How many times the frozen render recorded the path tracing (0: traced every frame)."""
+        """How many times the frozen render recorded the path tracing (the frame's and the
+        target pass's, in one recording; 0: traced every frame)."""
         return 0 if self._frozen is None else self._frozen.recordings
 
     @property
@@ -509,14 +557,17 @@ class Renderer(RayCasting):
             directions = np.concatenate([np.zeros((0, 3), np.float32) if sun_world is None else sun_world[None, :],
                                          np.zeros((0, 3)) if lights is None else lights.directions]).astype(np.float32)
             if geometry or self.always_geometry:  # the camera model and the statistics: half resolution will do
-                (depth, ids, surface), t = self.geometry_and_cast(1 if geometry else 2, directions)
+                (depth, ids, surface), t, grid_ids = self.geometry_and_cast(
+                    1 if geometry else 2, directions, grid=PLACEMENT_STRIDE_PX if self.target_spp else 0)
             else:
-                depth = ids = surface = None
+                depth = ids = surface = grid_ids = None
                 t = self.cast(self._camera_render, directions)[0] if len(directions) else np.zeros(0, np.float32)
             t_sun, t_lights = (None, t) if sun_world is None else (t[0], t[1:])
             texels = self.world.texel_footprint_px(depth, ids, surface, self.intrinsics.fx)
+        window = None if grid_ids is None else \
+            target_window(grid_ids, self._target_size, (self.intrinsics.width, self.intrinsics.height))
         with clock.stage(PATH_TRACING):
-            image = self.path_trace(seed)
+            image = self.path_trace(seed, window)
             self._dr.eval(image)  # the render happens here (Dr.Jit evaluates lazily)
             self._dr.sync_thread()
         render_s = clock.seconds[PATH_TRACING]
