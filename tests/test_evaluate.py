@@ -300,3 +300,28 @@ def test_the_evaluate_lines_say_why_a_figure_is_missing_instead_of_a_dash() -> N
     assert _at_contact(solved, 0.5) == "at contact 2.10 cm (+2 sigma 3.40 cm, 2 frames)"
     assert _mean_error({"mean_m": None}) == "mean error: no figure (no frame solved)"
     assert _mean_error({"mean_m": 0.05}) == "mean error 5.00 cm"
+
+
+def test_an_evaluation_is_planned_without_the_command_line(wingcam, tmp_path: Path) -> None:
+    """:func:`plan_evaluation` is what the command runs: truth runs per radius over every frame,
+    or one predictions run on the split its files cover, with the note the command prints;
+    its refusals are one line naming the option."""
+    from datagen.analysis.evaluate import plan_evaluation
+    from datagen.core.errors import DatagenError
+
+    truth = plan_evaluation(wingcam, wingcam, noise_px="0,1.5")
+    assert [r.noise_px for r in truth.runs] == [0.0, 1.5] and truth.split is None and truth.predictions is None
+    assert [s["noise_px"] for s in truth.sources] == [0.0, 1.5] and not truth.notes and not truth.warnings
+    assert plan_evaluation(wingcam, wingcam, noise_px="0", split="train").split == "train"
+    val = [b for b in range(len(wingcam)) if wingcam.split[b] == "val"]
+    write_predictions(wingcam, tmp_path / "pred", val[:3], conf=0.9)
+    (tmp_path / "pred" / "holiday.txt").write_text("0 0.5 0.5 0.1 0.1 0.9\n")
+    found = plan_evaluation(wingcam, wingcam, predictions=tmp_path / "pred")
+    assert found.split == "val" and len(found.runs) == 1 and found.runs[0].predictions is found.predictions
+    assert found.notes == ("scoring the val split: the frames the predictions cover (--split to choose)",)
+    assert len(found.warnings) == 1 and "holiday.txt" in found.warnings[0]
+    assert found.sources[0]["files_of_no_frame"] == ["holiday.txt"]
+    for kwargs, message in (({"split": "test"}, "--split"), ({"noise_px": "a,b"}, "--noise-px")):
+        with pytest.raises(DatagenError, match=message) as info:
+            plan_evaluation(wingcam, wingcam, **kwargs)
+        assert "\n" not in str(info.value)

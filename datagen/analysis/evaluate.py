@@ -25,6 +25,7 @@ import time
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Final
 
 import numpy as np
@@ -34,12 +35,13 @@ from datagen.analysis.predictions import Predictions
 from datagen.console import NullProgress, Progress
 from datagen.core.camera import Intrinsics
 from datagen.core.conventions import evaluation_rng
-from datagen.core.errors import DatagenError
+from datagen.core.errors import DatagenError, shown
 from datagen.core.transforms import invert_rigid
 from datagen.dataset.reader import DatasetMeta, DatasetView, FrameOrder
 from datagen.parallel import map_in_order
 
 __all__ = [
+    "EvaluationPlan",
     "PnPSettings",
     "Run",
     "covered_splits",
@@ -48,6 +50,7 @@ __all__ = [
     "failure_text",
     "noise_offsets",
     "noise_radii",
+    "plan_evaluation",
     "prediction_split",
     "ptd_from_points",
     "solve_pose",
@@ -289,6 +292,85 @@ def failure_text(reason: str, settings: PnPSettings, conf: float) -> str:
         "no_detections": "with no prediction file (nothing detected, or not predicted)",
         "below_conf": f"with all detections below --conf {conf:g}",
     }.get(reason, reason)
+
+
+@dataclass(frozen=True)
+class EvaluationPlan:
+    """What an evaluation of a dataset runs (:func:`plan_evaluation`): its runs, each one's
+    description for the report (``sources``, in the runs' order), the split it scores (None:
+    every frame), the detector's predictions it reads (None: truth runs), and what a user is
+    told before it runs: ``notes`` (the split it chose) and ``warnings`` (prediction files
+    that name no frame)."""
+
+    runs: tuple[Run, ...]
+    sources: tuple[dict, ...]
+    split: str | None
+    predictions: Predictions | None
+    notes: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+
+
+def plan_evaluation(dataset: DatasetMeta, index: FrameOrder, *, noise_px: str = "0,0.5,1,2.5",
+                    predictions: Path | None = None, conf: float = 0.25, split: str | None = None
+                    ) -> EvaluationPlan:
+    """Plan the evaluation of ``dataset`` (its frames in order: ``index``, read once with
+    unique stems): truth runs at each radius of ``noise_px``, or with ``predictions`` (a
+    folder of Ultralytics ``save_txt`` files by image stem) one run of the detector's
+    detections at confidence ``conf`` or more. ``split``: ``all``, ``train`` or ``val``
+    (None: all for truth runs; with predictions, the splits their files cover).
+
+    Raises:
+        DatagenError: one line naming the option or file and what is wrong (an unknown split,
+            a bad radius list, two frames of one stem, prediction files none of which names
+            a frame, a split the build drew no frames of).
+    """
+    from datagen.analysis.predictions import parse_predictions
+
+    if split not in (None, "all", "train", "val"):
+        raise DatagenError(f"--split: {split!r}: choose all, train or val")
+    notes: list[str] = []
+    warnings: list[str] = []
+    found = None
+    if predictions is not None:
+        k = dataset.intrinsics
+        pose = dataset.pose_layout if dataset.pose_yaml is not None else None
+        stems = index.stems
+        if len(set(stems)) != len(stems):
+            twice = next(s for s in stems if stems.count(s) > 1)
+            raise DatagenError(f"{dataset.root}: two frames have files of the stem {twice!r}: a prediction file "
+                               "could not say which frame it is of (datagen audit names the manifests' paths)")
+        found = parse_predictions(predictions, k.width, k.height, len(dataset.features), min_conf=conf, pose=pose,
+                                  stems=set(stems), max_bytes=dataset.limits.prediction_bytes)
+        if found.ghosts and not found:
+            raise DatagenError(f"--predictions: {predictions}: no prediction file is named after an image of the "
+                               f"dataset ({len(found.ghosts)} files, the first: {found.ghosts[0]}; expected files "
+                               "like 00000003.txt from `yolo predict save_txt=True`)")
+        if found.ghosts:
+            warnings.append(f"{predictions}: {len(found.ghosts)} prediction files name no frame of {dataset.root} "
+                            f"(the first: {shown(found.ghosts[0])}); not read")
+        if split is None:
+            try:
+                split, why = prediction_split(index, found)
+            except ValueError as exc:
+                raise DatagenError(f"--predictions: {predictions}: {exc}") from None
+            notes.append(f"{predictions}: {why} (--split to choose)" if not found else f"{why} (--split to choose)")
+        sources = ({"source": "predictions", "predictions": str(predictions), "conf": conf, "split": split,
+                    "files_of_no_frame": found.ghosts[:100]},)
+        runs: tuple[Run, ...] = (Run(predictions=found),)
+    else:
+        split = split or "all"
+        try:
+            radii = noise_radii(noise_px)
+        except ValueError as exc:
+            raise DatagenError(f"--noise-px: {exc}") from None
+        sources = tuple({"source": "truth", "noise_px": radius, "split": split} for radius in radii)
+        runs = tuple(Run(noise_px=radius, run=run) for run, radius in enumerate(radii))
+    only = None if split == "all" else split
+    if only is not None and only not in index.split:
+        counts = ", ".join(f"{index.split.count(s)} {s}" for s in ("train", "val"))
+        raise DatagenError(f"{dataset.root}: no {only} frames to score (the build drew {counts}); choose --split "
+                           "all or the other split")
+    return EvaluationPlan(runs, sources, only, found, tuple(notes), tuple(warnings))
 
 
 # --- a whole dataset -------------------------------------------------------------------------------

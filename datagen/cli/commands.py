@@ -277,71 +277,32 @@ def evaluate(
     from datagen.analysis.evaluate import (
         DISTANCE_EDGES,
         PnPSettings,
-        Run,
         evaluate_runs,
         failure_text,
-        noise_radii,
-        prediction_split,
+        plan_evaluation,
         summarize,
     )
-    from datagen.analysis.predictions import parse_predictions
     from datagen.console import ConsoleProgress
     from datagen.dataset.reader import open_dataset
     from datagen.report.evaluation_report import write_evaluation
 
-    if split not in (None, "all", "train", "val"):
-        raise DatagenError(f"--split: {split!r}: choose all, train or val")
     folder = report_out("evaluate" if predictions is None else "evaluate --predictions", out, dataset)
     source = open_dataset(dataset)
     index = source.frames(unique=True)
     require_plan(index, partial, split if split in ("train", "val") else None)
     progress = ConsoleProgress(source.root.name, verb="evaluate", announce=False)
-    if predictions is not None:
-        k = source.intrinsics
-        pose = source.pose_layout if source.pose_yaml is not None else None
-        stems = index.stems
-        if len(set(stems)) != len(stems):
-            twice = next(s for s in stems if stems.count(s) > 1)
-            raise DatagenError(f"{source.root}: two frames have files of the stem {twice!r}: a prediction file "
-                               "could not say which frame it is of (datagen audit names the manifests' paths)")
-        found = parse_predictions(predictions, k.width, k.height, len(source.features), min_conf=conf, pose=pose,
-                                  stems=set(stems), max_bytes=source.limits.prediction_bytes)
-        if found.ghosts and not found:
-            raise DatagenError(f"--predictions: {predictions}: no prediction file is named after an image of the "
-                               f"dataset ({len(found.ghosts)} files, the first: {found.ghosts[0]}; expected files "
-                               "like 00000003.txt from `yolo predict save_txt=True`)")
-        if found.ghosts:
-            typer.echo(f"{predictions}: {len(found.ghosts)} prediction files name no frame of {source.root} "
-                       f"(the first: {shown(found.ghosts[0])}); not read", err=True)
-        if split is None:
-            try:
-                split, why = prediction_split(index, found)
-            except ValueError as exc:
-                raise DatagenError(f"--predictions: {predictions}: {exc}") from None
-            typer.echo(f"{predictions}: {why} (--split to choose)" if not found else f"{why} (--split to choose)")
-        sources = [{"source": "predictions", "predictions": str(predictions), "conf": conf, "split": split,
-                    "files_of_no_frame": found.ghosts[:100]}]
-        plan = [Run(predictions=found)]
-    else:
-        split = split or "all"
-        try:
-            radii = noise_radii(noise_px)
-        except ValueError as exc:
-            raise DatagenError(f"--noise-px: {exc}") from None
-        sources = [{"source": "truth", "noise_px": radius, "split": split} for radius in radii]
-        plan = [Run(noise_px=radius, run=run) for run, radius in enumerate(radii)]
-    only = None if split == "all" else split
-    if only is not None and only not in index.split:
-        counts = ", ".join(f"{index.split.count(s)} {s}" for s in ("train", "val"))
-        raise DatagenError(f"{source.root}: no {only} frames to score (the build drew {counts}); choose --split "
-                           "all or the other split")
+    plan = plan_evaluation(source, index, noise_px=noise_px, predictions=predictions, conf=conf, split=split)
+    for line in plan.warnings:
+        typer.echo(line, err=True)
+    for line in plan.notes:
+        typer.echo(line)
     settings = PnPSettings()  # the paper's: every run is solved, summarized and reported with these
-    results = evaluate_runs(source, plan, seed=seed, settings=settings, split=only, workers=workers,
+    results = evaluate_runs(source, list(plan.runs), seed=seed, settings=settings, split=plan.split, workers=workers,
                             progress=progress)
-    runs = list(zip(sources, results, strict=True))
+    runs = list(zip(plan.sources, results, strict=True))
     detector = None
-    if predictions is not None:
-        detector = score_detections(source, found, split=only, match_px=match_px)
+    if plan.predictions is not None:
+        detector = score_detections(source, plan.predictions, split=plan.split, match_px=match_px)
     written = write_evaluation(index, runs, folder, settings=settings, detector=detector)
     if detector is not None:
         d = summarize_detections(detector, DISTANCE_EDGES)["overall"]
