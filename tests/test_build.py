@@ -218,6 +218,18 @@ def test_manifest_readme_documents_every_column() -> None:
     assert columns | feature_fields <= documented, sorted((columns | feature_fields) - documented)
 
 
+def test_the_manifest_readme_holds_the_table_of_columns_derived_from_the_column_table() -> None:
+    """manifests/README.md's table of manifest columns is :func:`manifest_table` as it is
+    derived from ``MANIFEST_COLUMNS``, which is also the schema, column for column."""
+    from datagen.dataset.columns import MANIFEST_COLUMNS, manifest_table
+
+    text = (ROOT / "manifests" / "README.md").read_text()
+    assert manifest_table() in text, "run: python -c 'from datagen.dataset.columns import manifest_table; " \
+                                     "print(manifest_table())' and paste it under Manifest rows"
+    assert [c.name for c in MANIFEST_COLUMNS] == manifest_schema().names
+    assert MANIFEST_COLUMNS[0].meaning and all(c.type_text for c in MANIFEST_COLUMNS)
+
+
 def test_features_parquet_round_trips(tmp_path: Path) -> None:
     from datagen.dataset.columns import write_features
 

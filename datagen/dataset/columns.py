@@ -1,7 +1,9 @@
 """Parquet schemas of a dataset: the per-frame manifests and the feature table.
 
-The one place that knows the column names and types. ``manifests/README.md``
-documents every column; a test checks that the two agree.
+The one place that knows the column names and types. The manifest's columns are one table
+(:data:`MANIFEST_COLUMNS`: name, type, nullability, meaning, version, group) from which the
+Arrow schema and ``manifests/README.md``'s table of columns are derived; a test checks that
+the page holds that table as derived.
 
 - ``manifests/{split}-{shard:05d}.parquet``: one row per frame (:func:`manifest_schema`).
   The schema metadata carries ``datagen.manifest_version`` and the shard's
@@ -65,70 +67,6 @@ MANIFEST_VERSION: Final = "12"
 #: (:func:`stored_type`); a column added since a version is read as nulls from it
 #: (:data:`COLUMNS_SINCE`).
 READABLE_MANIFEST_VERSIONS: Final = ("7", "8", "9", "10", "11", MANIFEST_VERSION)
-#: Columns added after version 7, with the version that added them.
-COLUMNS_SINCE: Final = {"haze_scale_height_m": "9", "cloud_type": "10", "cloud_deck_thickness_m": "10",
-                         "cloud_layer_thickness_m": "10", "ground_type": "10", "ground_seed": "10",
-                         **dict.fromkeys(("camera_vibration_rms_deg", "camera_vibration_hz", "drogue_canopy",
-                                          "drogue_tape", "hose_band_colour", "hose_band_spacing_m",
-                                          "hose_band_width_m", "other_aircraft", "other_aircraft_tanker_m",
-                                          "other_aircraft_heading_deg", "window_dirt", "window_droplets",
-                                          "window_reflection", "window_seed", "sensor_lens_blur_px",
-                                          "sensor_chromatic_aberration_px", "sensor_white_balance_k", "sensor_tint",
-                                          "sensor_tone_gamma", "sensor_tone_shoulder", "sensor_video_crf",
-                                          "sensor_readout_s", "cam_from_tanker_per_s", "cam_from_receiver_per_s",
-                                          "cam_from_drogue_per_s", "drogue_luminance", "drogue_contrast"), "11"),
-                         "aircraft_lights": "12", "aircraft_light_scale": "12"}
-
-#: The image statistics a manifest records per rendered frame
-#: (:func:`datagen.render.tonemap.image_statistics` measures them).
-IMAGE_STATISTICS: Final = ("image_mean_luminance", "image_rms_contrast", "share_sky", "share_sea", "share_cloud",
-                           "share_object", "drogue_luminance", "drogue_contrast")
-#: The largest on-screen footprint (px) of a texel the frame sampled: of the world's textures
-#: (the sea's wave normals; clouds are procedural, without texels) and of the aircraft's
-#: liveries (:meth:`datagen.render.world.World.texel_footprint_px`); null where none is seen.
-TEXEL_COLUMNS: Final = ("world_texel_px", "livery_texel_px")
-#: Manifest columns that name a frame's files (relative to the dataset root; null when absent).
-FILE_COLUMNS: Final = ("image_path", "label_path", "pose_label_path", "exr_path")
-#: Manifest columns that describe the run rather than the frame: they differ between
-#: two builds of the same config; every other column is identical.
-RUN_COLUMNS: Final = ("render_s", "denoise_s", "frame_s", "worker", "worker_rss_mib")
-#: Manifest columns measured on the rendered pixels, whose last bits depend on how many threads
-#: Mitsuba renders with (the order in which a pixel's samples are summed): the promise of a
-#: build is that the same config and seed give the same label files and the same manifests,
-#: :data:`RUN_COLUMNS` aside, for any worker count; these columns (and the images) too when
-#: every worker renders with the same number of threads (``--threads 1``: on any machine).
-#: With the default threads (the cores divided among the workers) they differ in the last
-#: bits, about 1e-7 relative.
-PIXEL_COLUMNS: Final = ("auto_exposure_ev", "image_mean_luminance", "image_rms_contrast", "drogue_luminance",
-                         "drogue_contrast")
-#: Manifest columns measured on the rendered frame (the camera model's metering and motion,
-#: the image statistics): null where the frame was not rendered (labels-only builds).
-MEASURED_COLUMNS: Final = ("auto_exposure_ev", "motion_blur_px", "sun_in_view", *IMAGE_STATISTICS, *TEXEL_COLUMNS)
-#: The appearance dimensions of a frame and their manifest columns, as the audit's appearance
-#: section shows their coverage (a column is null in every row where its randomizer is off).
-APPEARANCE: Final[dict[str, tuple[str, ...]]] = {
-    "sun and sky": ("sun_elevation_deg", "sun_azimuth_deg", "sun_backlit", "turbidity", "sun_scale", "sky_scale",
-                    "exposure_ev"),
-    "atmosphere": ("haze_visibility_m", "haze_scale_height_m"),
-    "clouds": ("cloud_type", "cloud_deck_coverage", "cloud_deck_altitude_m", "cloud_deck_thickness_m",
-               "cloud_layer_coverage", "cloud_layer_altitude_m", "cloud_layer_thickness_m", "cloud_opacity",
-               "cloud_albedo"),
-    "ground": ("ground_type",),
-    "sea": ("sea_wind_speed_mps", "sea_roughness", "sea_wind_direction_deg", "sea_wave_slope_variance",
-            "sea_whitecap_fraction"),
-    "livery": ("receiver_livery", "tanker_livery", "livery_weathering", "aircraft_lights", "aircraft_light_scale"),
-    "drogue": ("drogue_canopy", "drogue_tape", "hose_band_spacing_m", "drogue_luminance", "drogue_contrast"),
-    "camera": ("camera_vibration_rms_deg", "camera_vibration_hz", "motion_blur_px"),
-    "window": ("window_dirt", "window_droplets", "window_reflection"),
-    "traffic": ("other_aircraft",),
-    "sensor": ("sensor_iso", "sensor_exposure_time_s", "sensor_vignetting", "sensor_glare", "sensor_jpeg_quality",
-               "sensor_lens_blur_px", "sensor_chromatic_aberration_px", "sensor_white_balance_k", "sensor_tint",
-               "sensor_tone_gamma", "sensor_tone_shoulder", "sensor_video_crf", "sensor_readout_s", "auto_exposure_ev",
-               "sun_in_view"),
-    "image": IMAGE_STATISTICS,
-    "texels": TEXEL_COLUMNS,
-}
-
 _F64 = pa.float64()
 
 
@@ -174,121 +112,319 @@ MATERIAL_RECORD: Final = pa.struct([
 ])
 
 
+@dataclass(frozen=True)
+class Column:
+    """A manifest column: its name, Arrow type and meaning (as ``manifests/README.md``'s table
+    of columns gives it; empty: the column shares the row of the one before it), whether it
+    is never null (``required``: the schema says so), or is nullable in the schema but always
+    written (``filled``), the manifest version that added it, and the group that names it
+    together (:data:`IMAGE_STATISTICS`, :data:`TEXEL_COLUMNS`, :data:`FILE_COLUMNS`,
+    :data:`RUN_COLUMNS`)."""
+
+    name: str
+    type: pa.DataType
+    meaning: str = ""
+    required: bool = False
+    filled: bool = False
+    since: str = "7"
+    group: str = ""
+
+    @property
+    def field(self) -> pa.Field:
+        """Its Arrow field."""
+        return pa.field(self.name, self.type, nullable=not self.required)
+
+    @property
+    def type_text(self) -> str:
+        """Its type as the table of columns gives it: ``int64``, ``3 float64``, ``4 x 4
+        float64``, ``list of struct``, ``... or null``."""
+        t = self.type
+        if pa.types.is_fixed_size_list(t):
+            inner = t.value_type
+            text = (f"{t.list_size} x {inner.list_size} float64" if pa.types.is_fixed_size_list(inner)
+                    else f"{t.list_size} float64")
+        elif pa.types.is_list(t):
+            text = "list of struct"
+        else:
+            text = {"double": "float64"}.get(str(t), str(t))
+        return text if self.required or self.filled else f"{text} or null"
+
+
+#: Every manifest column, in the schema's order: the one table from which the Arrow schema
+#: (:func:`manifest_schema`), the versions that added columns (:data:`COLUMNS_SINCE`), the
+#: named groups and ``manifests/README.md``'s table of columns (:func:`manifest_table`) are
+#: derived. Adding a column is one line here plus its computation (and a version).
+MANIFEST_COLUMNS: Final[tuple[Column, ...]] = (
+    Column("frame_id", pa.int64(), "frame index; with `seed`, it fixes every draw of the frame", required=True),
+    Column("split", pa.string(), "`train` or `val`", required=True),
+    Column("shard", pa.int32(), "shard number within the split", required=True),
+    Column("image_path", pa.string(), "training image (null in a `--no-render` build)", group="files"),
+    Column("label_path", pa.string(), "YOLO detection label file (null with `labels.format: pose`)", group="files"),
+    Column("pose_label_path", pa.string(), "YOLO pose label file (null with `labels.format: detect`)", group="files"),
+    Column("exr_path", pa.string(), "linear EXR, when written", group="files"),
+    Column("width", pa.int32(), "image size, pixels", required=True),
+    Column("height", pa.int32(), required=True),
+    Column("fx", _F64, "pinhole intrinsics, pixels", required=True),
+    Column("fy", _F64, required=True),
+    Column("cx", _F64, required=True),
+    Column("cy", _F64, required=True),
+    Column("cam_from_world", MATRIX, "world to OpenCV camera", required=True),
+    Column("world_from_tanker", MATRIX,
+           "tanker body frame (origin: the average drogue centre) to world", required=True),
+    Column("world_from_receiver", MATRIX, "receiver body frame (origin: the probe tip) to world", required=True),
+    Column("world_from_drogue", MATRIX, "drogue body frame (origin: the drogue centre) to world", required=True),
+    Column("cam_from_tanker_per_s", MATRIX,
+           "the time derivative of `cam_from_world @ world_from_<object>` at the frame's time, per "
+           "second (by finite difference over 1 ms): with `sensor_readout_s`, each label point is "
+           "where `(M + rate t) X` projects at its row's time t (null without a rolling shutter; "
+           "version 11)", since="11"),
+    Column("cam_from_receiver_per_s", MATRIX, since="11"),
+    Column("cam_from_drogue_per_s", MATRIX, since="11"),
+    Column("ptd_receiver_m", _vec(3), "probe-to-drogue vector in the receiver frame, metres", required=True),
+    Column("distance_m", _F64, "its length", required=True),
+    Column("seed", pa.int64(), "the dataset's root seed", required=True),
+    Column("render_seed", pa.int64(),
+           "Mitsuba sampler seed of the frame (derived from `seed`, `frame_id`)", required=True),
+    Column("spp", pa.int32(), "samples per pixel (null without rendering)"),
+    Column("denoise", pa.string(), "denoiser applied to the linear image: `off` or `oidn` (null without rendering)"),
+    Column("mount", pa.string(), "camera mount: `wingcam`, `dashcam` or `podcam`", required=True),
+    Column("approach_index", pa.int64(), "approach chain the frame comes from", required=True),
+    Column("approach_number", pa.int32(),
+           "approach within the chain (0 unless 'time' sampling passed a contact)", required=True),
+    Column("time_s", _F64, "time since the chain started, seconds", required=True),
+    Column("turbulence_intensity", _F64, "turbulence multiplier of the approach", required=True),
+    Column("bank_deg", _F64, "tanker bank angle, degrees (0: straight and level)", required=True),
+    Column("sun_elevation_deg", _F64, "sun draw (azimuth from the tanker's heading)", required=True),
+    Column("sun_azimuth_deg", _F64, required=True),
+    Column("sun_direction_world", _vec(3), "unit vector towards the sun, world frame", required=True),
+    Column("turbidity", _F64, "sky draws (Mitsuba `sunsky`)", required=True),
+    Column("sun_scale", _F64, required=True),
+    Column("sky_scale", _F64, required=True),
+    Column("exposure_ev", _F64, "exposure compensation, stops", required=True),
+    Column("sea_roughness", _F64, "principled roughness of the sea surface", required=True),
+    Column("sea_wind_speed_mps", _F64, "wind speed the roughness follows (Cox-Munk), m/s; null when drawn uniformly"),
+    Column("haze_visibility_m", _F64,
+           "the approach's meteorological visibility at sea level, metres (Koschmieder, 550 nm), when"
+           " aerial perspective is on"),
+    Column("haze_scale_height_m", _F64,
+           "the approach's aerosol scale height, metres, when aerial perspective is on (version 9; "
+           "null in rows read from older versions)", since="9"),
+    Column("materials", pa.list_(MATERIAL_RECORD),
+           "per object and part class: `object`, `part_class`, `base_color` (linear RGB), "
+           "`roughness`, `metallic`, `specular`", required=True),
+    Column("sun_backlit", pa.bool_(),
+           "the sun was put within `randomization.sky.backlit_azimuth_deg` of the camera's forward "
+           "azimuth (null: `backlit_fraction` 0)"),
+    Column("cloud_type", pa.string(),
+           "the deck's form: `cumulus`, `stratocumulus` or `overcast` (version 10; null: clouds off, "
+           "or rows read from older versions)", since="10"),
+    Column("cloud_deck_coverage", _F64, "share of the cloud deck's area that is cloud (null: clouds off)"),
+    Column("cloud_deck_altitude_m", _F64, "the deck's altitude above sea level, m"),
+    Column("cloud_deck_thickness_m", _F64,
+           "how thick the deck's thickest cells are, m (its body: slopes, self-shadowing, bases; "
+           "version 10)", since="10"),
+    Column("cloud_layer_coverage", _F64, "share of the scattered layer's area that is cloud"),
+    Column("cloud_layer_altitude_m", _F64,
+           "the scattered layer's altitude above sea level, m (above or below the tanker; constant "
+           "over an approach)"),
+    Column("cloud_layer_thickness_m", _F64,
+           "how thick the scattered layer's thickest cells are, m (version 10)", since="10"),
+    Column("cloud_opacity", _F64, "opacity of a cloud's thick core"),
+    Column("cloud_albedo", _F64, "diffuse reflectance of the clouds"),
+    Column("cloud_seed", pa.int64(), "seed of the layers' noise fields"),
+    Column("sea_wind_direction_deg", _F64,
+           "direction the wind blows towards, degrees counter-clockwise from world x (null: waves "
+           "off)"),
+    Column("sea_wave_slope_variance", _F64,
+           "mean square slope the wave trains carry where a pixel resolves them all (the microfacet "
+           "roughness keeps the rest of the sea's)"),
+    Column("sea_whitecap_fraction", _F64, "share of the sea under whitecaps (Monahan 1980; null: whitecaps off)"),
+    Column("sea_colour", _vec(3), "the sea's body colour, linear RGB (null: colour off)"),
+    Column("sea_seed", pa.int64(), "seed of the wave phases and whitecaps"),
+    Column("ground_type", pa.string(),
+           "the approach's ground: `sea`, `coast`, `farmland`, `desert`, `snow` or `mountains` "
+           "(version 10; null: ground off, open sea)", since="10"),
+    Column("ground_seed", pa.int64(), "seed of the land's fields (shore, detail, relief, fields)", since="10"),
+    Column("receiver_livery", pa.string(), "the receiver's livery scheme (null: liveries off)"),
+    Column("tanker_livery", pa.string(), "the tanker's livery scheme"),
+    Column("livery_weathering", _F64, "grime, streaks, soot and fading strength, 0-1"),
+    Column("livery_seed", pa.int64(),
+           "seed of the liveries' draws (colours, pattern, panels, markings; "
+           "`datagen.render.paintwork`)"),
+    Column("aircraft_lights", pa.bool_(),
+           "the aircraft's navigation lights and beacons are on this approach (version 12; null: "
+           "lights off, or rows read from older versions)", since="12"),
+    Column("aircraft_light_scale", _F64,
+           "a steady light's radiance over that of a white diffuser in the frame's daylight (beacons "
+           "3x; version 12)", since="12"),
+    Column("sensor_iso", _F64, "sensor gain, ISO (null: camera model or its noise off)"),
+    Column("sensor_exposure_time_s", _F64, "exposure time, s: the length of the motion blur (null: motion blur off)"),
+    Column("sensor_vignetting", _F64, "corner light falloff, 0-1"),
+    Column("sensor_glare", _F64, "strength of the sun's veiling glare and ghosts"),
+    Column("sensor_distortion", _vec(5),
+           "OpenCV lens distortion `k1, k2, p1, p2, k3` the image and the labels went through (null: "
+           "pinhole)"),
+    Column("sensor_jpeg_quality", pa.int32(),
+           "quality of the JPEG round trip (null: off, or the frame went through H.264: "
+           "`sensor_video_crf`)"),
+    Column("sensor_seed", pa.int64(), "seed of the sensor noise"),
+    Column("camera_vibration_rms_deg", _F64,
+           "the approach's camera vibration: RMS pointing angle, degrees (version 11; null: vibration"
+           " off, or rows read from older versions)", since="11"),
+    Column("camera_vibration_hz", _F64, "its power-weighted mean frequency, Hz (version 11)", since="11"),
+    Column("drogue_canopy", pa.string(),
+           "the approach's canopy scheme (`datagen.assets.drogues.CANOPIES`; its parts' colours are "
+           "in `materials`; version 11; null: drogue draws off)", since="11"),
+    Column("drogue_tape", pa.bool_(), "the canopy's rim carries reflective tape (version 11)", since="11"),
+    Column("hose_band_colour", _vec(3),
+           "linear RGB of the hose's marker bands (version 11; null: no bands)", since="11"),
+    Column("hose_band_spacing_m", _F64, "distance between the hose's marker bands, m (version 11)", since="11"),
+    Column("hose_band_width_m", _F64, "length of each marker band along the hose, m (version 11)", since="11"),
+    Column("other_aircraft", pa.string(),
+           "another aircraft flying in formation with the tanker in the camera's field of view: "
+           "`none`, `receiver` or `tanker`; drawn, never labeled (version 11; null: traffic off)", since="11"),
+    Column("other_aircraft_tanker_m", _vec(3), "its place in the tanker frame, m (null: none)", since="11"),
+    Column("other_aircraft_heading_deg", _F64, "its heading off the tanker's, degrees (null: none)", since="11"),
+    Column("window_dirt", _F64,
+           "strength of the dirt on the camera's window, 0-1 (version 11; null: window off)", since="11"),
+    Column("window_droplets", pa.int32(),
+           "water droplets on a pod camera's window (0 on a dry approach; null: a windscreen, or "
+           "window off; version 11)", since="11"),
+    Column("window_reflection", _F64,
+           "strength of a cockpit windscreen's reflection of the cockpit, a share of the image's mean"
+           " light (null: a pod's window; version 11)", since="11"),
+    Column("window_seed", pa.int64(),
+           "seed of the window's dirt and reflection fields and its droplets (version 11)", since="11"),
+    Column("sensor_lens_blur_px", _F64,
+           "standard deviation of the lens's Gaussian blur, px (version 11; null: lens off)", since="11"),
+    Column("sensor_chromatic_aberration_px", _F64,
+           "red-blue separation at the image's farthest corner, px (version 11)", since="11"),
+    Column("sensor_white_balance_k", _F64,
+           "the daylight temperature the camera is white-balanced for (the scene's white is D65), K "
+           "(version 11; null: colour off)", since="11"),
+    Column("sensor_tint", _F64, "the white balance's green gain offset (version 11)", since="11"),
+    Column("sensor_tone_gamma", _F64, "exponent of the tone curve on display-linear values (version 11)", since="11"),
+    Column("sensor_tone_shoulder", _F64,
+           "strength of the tone curve's highlight shoulder, 0-1 (0: hard clip; version 11)", since="11"),
+    Column("sensor_video_crf", pa.int32(),
+           "x264's constant rate factor of the frame's H.264 round trip, which replaced its JPEG one "
+           "(null: none; version 11)", since="11"),
+    Column("sensor_readout_s", _F64,
+           "a rolling shutter's top-to-bottom readout, seconds: row v was exposed (v / height - 1/2) "
+           "times it after the frame's time (null: a global shutter; version 11)", since="11"),
+    Column("auto_exposure_ev", _F64, "measured: the auto-exposure's correction against the fixed exposure, stops"),
+    Column("motion_blur_px", _F64, "measured: the longest image motion over the exposure, px"),
+    Column("sun_in_view", pa.bool_(), "measured: the sun's direction projects inside the image"),
+    Column("image_mean_luminance", _F64,
+           "measured: mean Rec. 709 luma of the final 8-bit image, 0-1", group="image statistics"),
+    Column("image_rms_contrast", _F64, "measured: standard deviation of that luma", group="image statistics"),
+    Column("share_sky", _F64, "measured: share of pixels whose ray meets nothing (sky)", group="image statistics"),
+    Column("share_sea", _F64, "measured: share of pixels whose ray meets the sea", group="image statistics"),
+    Column("share_cloud", _F64,
+           "measured: share of pixels whose ray meets a cloud's opaque part", group="image statistics"),
+    Column("share_object", _F64,
+           "measured: share of pixels whose ray meets an aircraft, the drogue or the hose", group="image statistics"),
+    Column("drogue_luminance", _F64,
+           "measured: mean Rec. 709 luma of the drogue's pixels in the final image, 0-1 (version 11; "
+           "null: fewer than 16 of them)", since="11", group="image statistics"),
+    Column("drogue_contrast", _F64,
+           "measured: (L_drogue - L_background) / (L_drogue + L_background), the background being the"
+           " pixels of no object within the drogue's box grown by half its size (negative: darker "
+           "than behind; version 11)", since="11", group="image statistics"),
+    Column("world_texel_px", _F64,
+           "measured: the largest on-screen size of a world texture's texel the frame shows (0: the "
+           "sea and the clouds are procedural, no texels), px; the audit fails a frame over 1.5 px; "
+           "null where no sea or cloud is seen", group="texels"),
+    Column("livery_texel_px", _F64,
+           "measured: the same for the aircraft's liveries, px (0 from version 12: procedural, "
+           "band-limited to the pixel); null where no livery is seen", group="texels"),
+    Column("n_labeled", pa.int32(), "labeled features: the lines of the detection label file", required=True),
+    Column("features", pa.list_(FEATURE_RECORD), "one record per class, in class-id order (below)", required=True),
+    Column("objects", pa.list_(OBJECT_RECORD),
+           "one record per labeled object, in pose-class order (below)", required=True),
+    Column("render_s", _F64, "seconds inside `mi.render` (null: not rendered by this run)", group="run"),
+    Column("denoise_s", _F64, "seconds in the denoiser (null: not denoised by this run)", group="run"),
+    Column("frame_s", _F64, "seconds for the whole frame in its worker", filled=True, group="run"),
+    Column("worker", pa.string(), "the process that wrote the frame, `host:pid`", filled=True, group="run"),
+    Column("worker_rss_mib", _F64, "resident memory of the worker after the frame, MiB", filled=True, group="run"),
+)
+
+
+def _group(name: str) -> tuple[str, ...]:
+    """The names of :data:`MANIFEST_COLUMNS` of group ``name``, in the schema's order."""
+    return tuple(c.name for c in MANIFEST_COLUMNS if c.group == name)
+
+
+#: Columns added after version 7, with the version that added them.
+COLUMNS_SINCE: Final = {c.name: c.since for c in MANIFEST_COLUMNS if c.since != "7"}
+#: The image statistics a manifest records per rendered frame
+#: (:func:`datagen.render.tonemap.image_statistics` measures them).
+IMAGE_STATISTICS: Final = _group("image statistics")
+#: The largest on-screen footprint (px) of a texel the frame sampled: of the world's textures
+#: (the sea's wave normals; clouds are procedural, without texels) and of the aircraft's
+#: liveries (:meth:`datagen.render.world.World.texel_footprint_px`); null where none is seen.
+TEXEL_COLUMNS: Final = _group("texels")
+#: Manifest columns that name a frame's files (relative to the dataset root; null when absent).
+FILE_COLUMNS: Final = _group("files")
+#: Manifest columns that describe the run rather than the frame: they differ between
+#: two builds of the same config; every other column is identical.
+RUN_COLUMNS: Final = _group("run")
+#: Manifest columns measured on the rendered pixels, whose last bits depend on how many threads
+#: Mitsuba renders with (the order in which a pixel's samples are summed): the promise of a
+#: build is that the same config and seed give the same label files and the same manifests,
+#: :data:`RUN_COLUMNS` aside, for any worker count; these columns (and the images) too when
+#: every worker renders with the same number of threads (``--threads 1``: on any machine).
+#: With the default threads (the cores divided among the workers) they differ in the last
+#: bits, about 1e-7 relative.
+PIXEL_COLUMNS: Final = ("auto_exposure_ev", "image_mean_luminance", "image_rms_contrast", "drogue_luminance",
+                         "drogue_contrast")
+#: Manifest columns measured on the rendered frame (the camera model's metering and motion,
+#: the image statistics): null where the frame was not rendered (labels-only builds).
+MEASURED_COLUMNS: Final = ("auto_exposure_ev", "motion_blur_px", "sun_in_view", *IMAGE_STATISTICS, *TEXEL_COLUMNS)
+#: The appearance dimensions of a frame and their manifest columns, as the audit's appearance
+#: section shows their coverage (a column is null in every row where its randomizer is off).
+APPEARANCE: Final[dict[str, tuple[str, ...]]] = {
+    "sun and sky": ("sun_elevation_deg", "sun_azimuth_deg", "sun_backlit", "turbidity", "sun_scale", "sky_scale",
+                    "exposure_ev"),
+    "atmosphere": ("haze_visibility_m", "haze_scale_height_m"),
+    "clouds": ("cloud_type", "cloud_deck_coverage", "cloud_deck_altitude_m", "cloud_deck_thickness_m",
+               "cloud_layer_coverage", "cloud_layer_altitude_m", "cloud_layer_thickness_m", "cloud_opacity",
+               "cloud_albedo"),
+    "ground": ("ground_type",),
+    "sea": ("sea_wind_speed_mps", "sea_roughness", "sea_wind_direction_deg", "sea_wave_slope_variance",
+            "sea_whitecap_fraction"),
+    "livery": ("receiver_livery", "tanker_livery", "livery_weathering", "aircraft_lights", "aircraft_light_scale"),
+    "drogue": ("drogue_canopy", "drogue_tape", "hose_band_spacing_m", "drogue_luminance", "drogue_contrast"),
+    "camera": ("camera_vibration_rms_deg", "camera_vibration_hz", "motion_blur_px"),
+    "window": ("window_dirt", "window_droplets", "window_reflection"),
+    "traffic": ("other_aircraft",),
+    "sensor": ("sensor_iso", "sensor_exposure_time_s", "sensor_vignetting", "sensor_glare", "sensor_jpeg_quality",
+               "sensor_lens_blur_px", "sensor_chromatic_aberration_px", "sensor_white_balance_k", "sensor_tint",
+               "sensor_tone_gamma", "sensor_tone_shoulder", "sensor_video_crf", "sensor_readout_s", "auto_exposure_ev",
+               "sun_in_view"),
+    "image": IMAGE_STATISTICS,
+    "texels": TEXEL_COLUMNS,
+}
+
+
+
 def manifest_schema() -> pa.Schema:
-    """The schema of a manifest shard (version in the metadata)."""
-    fields = [
-        pa.field("frame_id", pa.int64(), nullable=False),
-        pa.field("split", pa.string(), nullable=False),
-        pa.field("shard", pa.int32(), nullable=False),
-        pa.field("image_path", pa.string()),
-        pa.field("label_path", pa.string()),
-        pa.field("pose_label_path", pa.string()),
-        pa.field("exr_path", pa.string()),
-        pa.field("width", pa.int32(), nullable=False),
-        pa.field("height", pa.int32(), nullable=False),
-        pa.field("fx", _F64, nullable=False),
-        pa.field("fy", _F64, nullable=False),
-        pa.field("cx", _F64, nullable=False),
-        pa.field("cy", _F64, nullable=False),
-        pa.field("cam_from_world", MATRIX, nullable=False),
-        pa.field("world_from_tanker", MATRIX, nullable=False),
-        pa.field("world_from_receiver", MATRIX, nullable=False),
-        pa.field("world_from_drogue", MATRIX, nullable=False),
-        pa.field("cam_from_tanker_per_s", MATRIX),
-        pa.field("cam_from_receiver_per_s", MATRIX),
-        pa.field("cam_from_drogue_per_s", MATRIX),
-        pa.field("ptd_receiver_m", _vec(3), nullable=False),
-        pa.field("distance_m", _F64, nullable=False),
-        pa.field("seed", pa.int64(), nullable=False),
-        pa.field("render_seed", pa.int64(), nullable=False),
-        pa.field("spp", pa.int32()),
-        pa.field("denoise", pa.string()),
-        pa.field("mount", pa.string(), nullable=False),
-        pa.field("approach_index", pa.int64(), nullable=False),
-        pa.field("approach_number", pa.int32(), nullable=False),
-        pa.field("time_s", _F64, nullable=False),
-        pa.field("turbulence_intensity", _F64, nullable=False),
-        pa.field("bank_deg", _F64, nullable=False),
-        pa.field("sun_elevation_deg", _F64, nullable=False),
-        pa.field("sun_azimuth_deg", _F64, nullable=False),
-        pa.field("sun_direction_world", _vec(3), nullable=False),
-        pa.field("turbidity", _F64, nullable=False),
-        pa.field("sun_scale", _F64, nullable=False),
-        pa.field("sky_scale", _F64, nullable=False),
-        pa.field("exposure_ev", _F64, nullable=False),
-        pa.field("sea_roughness", _F64, nullable=False),
-        pa.field("sea_wind_speed_mps", _F64),
-        pa.field("haze_visibility_m", _F64),
-        pa.field("haze_scale_height_m", _F64),
-        pa.field("materials", pa.list_(MATERIAL_RECORD), nullable=False),
-        pa.field("sun_backlit", pa.bool_()),
-        pa.field("cloud_type", pa.string()),
-        pa.field("cloud_deck_coverage", _F64),
-        pa.field("cloud_deck_altitude_m", _F64),
-        pa.field("cloud_deck_thickness_m", _F64),
-        pa.field("cloud_layer_coverage", _F64),
-        pa.field("cloud_layer_altitude_m", _F64),
-        pa.field("cloud_layer_thickness_m", _F64),
-        pa.field("cloud_opacity", _F64),
-        pa.field("cloud_albedo", _F64),
-        pa.field("cloud_seed", pa.int64()),
-        pa.field("sea_wind_direction_deg", _F64),
-        pa.field("sea_wave_slope_variance", _F64),
-        pa.field("sea_whitecap_fraction", _F64),
-        pa.field("sea_colour", _vec(3)),
-        pa.field("sea_seed", pa.int64()),
-        pa.field("ground_type", pa.string()),
-        pa.field("ground_seed", pa.int64()),
-        pa.field("receiver_livery", pa.string()),
-        pa.field("tanker_livery", pa.string()),
-        pa.field("livery_weathering", _F64),
-        pa.field("livery_seed", pa.int64()),
-        pa.field("aircraft_lights", pa.bool_()),
-        pa.field("aircraft_light_scale", _F64),
-        pa.field("sensor_iso", _F64),
-        pa.field("sensor_exposure_time_s", _F64),
-        pa.field("sensor_vignetting", _F64),
-        pa.field("sensor_glare", _F64),
-        pa.field("sensor_distortion", _vec(5)),
-        pa.field("sensor_jpeg_quality", pa.int32()),
-        pa.field("sensor_seed", pa.int64()),
-        pa.field("camera_vibration_rms_deg", _F64),
-        pa.field("camera_vibration_hz", _F64),
-        pa.field("drogue_canopy", pa.string()),
-        pa.field("drogue_tape", pa.bool_()),
-        pa.field("hose_band_colour", _vec(3)),
-        pa.field("hose_band_spacing_m", _F64),
-        pa.field("hose_band_width_m", _F64),
-        pa.field("other_aircraft", pa.string()),
-        pa.field("other_aircraft_tanker_m", _vec(3)),
-        pa.field("other_aircraft_heading_deg", _F64),
-        pa.field("window_dirt", _F64),
-        pa.field("window_droplets", pa.int32()),
-        pa.field("window_reflection", _F64),
-        pa.field("window_seed", pa.int64()),
-        pa.field("sensor_lens_blur_px", _F64),
-        pa.field("sensor_chromatic_aberration_px", _F64),
-        pa.field("sensor_white_balance_k", _F64),
-        pa.field("sensor_tint", _F64),
-        pa.field("sensor_tone_gamma", _F64),
-        pa.field("sensor_tone_shoulder", _F64),
-        pa.field("sensor_video_crf", pa.int32()),
-        pa.field("sensor_readout_s", _F64),
-        pa.field("auto_exposure_ev", _F64),
-        pa.field("motion_blur_px", _F64),
-        pa.field("sun_in_view", pa.bool_()),
-        *(pa.field(name, _F64) for name in IMAGE_STATISTICS),
-        *(pa.field(name, _F64) for name in TEXEL_COLUMNS),
-        pa.field("n_labeled", pa.int32(), nullable=False),
-        pa.field("features", pa.list_(FEATURE_RECORD), nullable=False),
-        pa.field("objects", pa.list_(OBJECT_RECORD), nullable=False),
-        pa.field("render_s", _F64),
-        pa.field("denoise_s", _F64),
-        pa.field("frame_s", _F64),
-        pa.field("worker", pa.string()),
-        pa.field("worker_rss_mib", _F64),
-    ]
-    return pa.schema(fields, metadata={"datagen.manifest_version": MANIFEST_VERSION})
+    """The schema of a manifest shard (version in the metadata): :data:`MANIFEST_COLUMNS`'s fields."""
+    return pa.schema([c.field for c in MANIFEST_COLUMNS], metadata={"datagen.manifest_version": MANIFEST_VERSION})
+
+
+def manifest_table() -> str:
+    """``manifests/README.md``'s table of manifest columns, from :data:`MANIFEST_COLUMNS`: a
+    row per meaning, naming the columns that share it."""
+    rows: list[list[Column]] = []
+    for c in MANIFEST_COLUMNS:
+        if c.meaning or not rows:
+            rows.append([c])
+        else:
+            rows[-1].append(c)
+    lines = ["| column | type | meaning |", "|---|---|---|"]
+    lines += [f"| {', '.join(f'`{c.name}`' for c in row)} | {row[0].type_text} | {row[0].meaning} |" for row in rows]
+    return "\n".join(lines) + "\n"
 
 
 def stored_type(t: pa.DataType) -> pa.DataType:
