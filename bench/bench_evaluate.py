@@ -62,13 +62,13 @@ def main() -> None:
         for run, radius in enumerate((0.0, 0.5, 1.0, 2.5)):
             s = summarize(evaluate(view, noise_px=radius, run=run))
 
-            def cell(at: dict) -> str:
-                if at["mean_m"] is None:
+            def cell(at) -> str:  # an ErrorStats
+                if at.mean_m is None or at.std_m is None:
                     return "-"
-                return f"{100 * at['mean_m']:.2f} cm +- {200 * at['std_m']:.2f} (n={at['successes']})"
+                return f"{100 * at.mean_m:.2f} cm +- {200 * at.std_m:.2f} (n={at.successes})"
 
-            print(f"| {radius:g} px | {cell(s['at']['contact'])} | {cell(s['at']['20m'])} | {cell(s['at']['50m'])} | "
-                  f"{cell(s['at']['120m'])} | {100 * s['overall']['reliability']:.1f}% |")
+            print(f"| {radius:g} px | {cell(s.at['contact'])} | {cell(s.at['20m'])} | {cell(s.at['50m'])} | "
+                  f"{cell(s.at['120m'])} | {100 * (s.overall.reliability or 0.0):.1f}% |")
 
 
 if __name__ == "__main__":

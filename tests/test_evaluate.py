@@ -58,8 +58,8 @@ def test_noise_free_points_give_the_true_vector_within_a_millimetre(wingcam) -> 
     assert ok.mean() > 0.9
     assert result["error_m"][ok].max() < 1e-3
     summary = summarize(result)
-    for b in summary["by_distance"]:
-        assert b["max_m"] is None or b["max_m"] < 1e-3
+    for b in summary.by_distance:
+        assert b.stats.max_m is None or b.stats.max_m < 1e-3
     # Frames without a vector have a reason, and it is the right one.
     few = (result["matches_receiver"] < 3) | (result["matches_target"] < 3)
     assert np.array_equal(result["reason"] == 1, few)
@@ -129,7 +129,7 @@ def test_three_matches_that_fit_two_poses_apart_give_none() -> None:
 
 
 def test_error_grows_with_the_noise_radius(wingcam) -> None:
-    means = [summarize(evaluate(wingcam, noise_px=r, run=i))["overall"]["mean_m"]
+    means = [summarize(evaluate(wingcam, noise_px=r, run=i)).overall.mean_m
              for i, r in enumerate((0.0, 0.5, 1.0, 2.5))]
     assert means == sorted(means) and means[0] < 1e-3 < means[1] and means[3] > 2 * means[1]
     # The noise is seeded: the same run gives the same vectors.
@@ -290,16 +290,17 @@ def test_failure_texts_state_the_settings_they_were_judged_by() -> None:
 
 
 def test_the_evaluate_lines_say_why_a_figure_is_missing_instead_of_a_dash() -> None:
+    from datagen.analysis.evaluate import ErrorStats
     from datagen.cli.commands import _at_contact, _mean_error
 
-    none = {"attempts": 0, "successes": 0, "mean_m": None, "plus_2sigma_m": None}
-    failed = {"attempts": 3, "successes": 0, "mean_m": None, "plus_2sigma_m": None}
-    solved = {"attempts": 3, "successes": 2, "mean_m": 0.021, "plus_2sigma_m": 0.034}
+    none = ErrorStats.of(np.zeros(0), np.zeros(0, bool))
+    failed = ErrorStats.of(np.zeros(3), np.zeros(3, bool))
+    solved = ErrorStats.of(np.array([0.018, 0.024, 9.0]), np.array([True, True, False]))
     assert _at_contact(none, 0.5) == "at contact: no figure (no frame within 0.5 m of contact)"
     assert _at_contact(failed, 0.5) == "at contact: no figure (none of the 3 frames within 0.5 m solved)"
-    assert _at_contact(solved, 0.5) == "at contact 2.10 cm (+2 sigma 3.40 cm, 2 frames)"
-    assert _mean_error({"mean_m": None}) == "mean error: no figure (no frame solved)"
-    assert _mean_error({"mean_m": 0.05}) == "mean error 5.00 cm"
+    assert _at_contact(solved, 0.5) == "at contact 2.10 cm (+2 sigma 2.70 cm, 2 frames)"
+    assert _mean_error(none) == "mean error: no figure (no frame solved)"
+    assert _mean_error(solved) == "mean error 2.10 cm"
 
 
 def test_an_evaluation_is_planned_without_the_command_line(wingcam, tmp_path: Path) -> None:

@@ -19,6 +19,7 @@ outlier beyond 6 sigma of a rolling average fail), and accuracy at contact
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import time
@@ -41,9 +42,12 @@ from datagen.dataset.reader import DatasetMeta, DatasetView, FrameOrder
 from datagen.parallel import map_in_order
 
 __all__ = [
+    "DistanceBin",
+    "ErrorStats",
     "EvaluationPlan",
     "PnPSettings",
     "Run",
+    "RunSummary",
     "covered_splits",
     "evaluate",
     "evaluate_runs",
@@ -574,35 +578,83 @@ DISTANCE_EDGES: Final = np.array([0.0, 0.5, 2.5, 5.0, 10.0, 15.0, 20.0, 25.0, 30
 TABLE_DISTANCES_M: Final = (20.0, 50.0, 120.0)
 
 
-def _stats(errors: NDArray, success: NDArray) -> dict:
-    e = errors[success]
-    return {
-        "attempts": int(success.size),
-        "successes": int(success.sum()),
-        "reliability": float(success.mean()) if success.size else None,
-        "mean_m": float(e.mean()) if e.size else None,
-        "std_m": float(e.std()) if e.size else None,
-        "plus_2sigma_m": float(e.mean() + 2 * e.std()) if e.size else None,
-        "median_m": float(np.median(e)) if e.size else None,
-        "max_m": float(e.max()) if e.size else None,
-    }
+@dataclass(frozen=True)
+class ErrorStats:
+    """PtD prediction errors of a set of frames: attempts and successes, reliability (None:
+    no attempt) and the successes' error magnitude, metres (None: no success)."""
+
+    attempts: int
+    successes: int
+    reliability: float | None
+    mean_m: float | None
+    std_m: float | None
+    plus_2sigma_m: float | None
+    median_m: float | None
+    max_m: float | None
+
+    @classmethod
+    def of(cls, errors: NDArray, success: NDArray) -> ErrorStats:
+        """The statistics of frames with PtD errors ``errors`` that succeeded where ``success``."""
+        e = errors[success]
+        return cls(int(success.size), int(success.sum()), float(success.mean()) if success.size else None,
+                   float(e.mean()) if e.size else None, float(e.std()) if e.size else None,
+                   float(e.mean() + 2 * e.std()) if e.size else None, float(np.median(e)) if e.size else None,
+                   float(e.max()) if e.size else None)
+
+    def to_json(self) -> dict:
+        """Its JSON form (``evaluation.json``)."""
+        return dataclasses.asdict(self)
 
 
-def summarize(result: dict, settings: PnPSettings = PnPSettings()) -> dict:
+@dataclass(frozen=True)
+class DistanceBin:
+    """:class:`ErrorStats` of the frames whose probe-to-drogue distance is in ``[lo_m, hi_m)``."""
+
+    lo_m: float
+    hi_m: float
+    stats: ErrorStats
+
+    def to_json(self) -> dict:
+        """Its JSON form: the bin's edges and its statistics, in one mapping."""
+        return {"lo_m": self.lo_m, "hi_m": self.hi_m, **self.stats.to_json()}
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """The metrics of one evaluation run (:func:`summarize`): the target object, overall, per
+    distance bin (:data:`DISTANCE_EDGES`), at contact and at the paper's table distances
+    (``at``: ``contact``, ``2m``, ...), frames per failure reason (:data:`REASONS`) and the
+    mean solve time (ms; None: no frame)."""
+
+    target: str
+    overall: ErrorStats
+    by_distance: tuple[DistanceBin, ...]
+    at: Mapping[str, ErrorStats]
+    reasons: Mapping[str, int]
+    solve_ms_mean: float | None
+
+    def to_json(self) -> dict:
+        """Its JSON form (a run of ``evaluation.json``)."""
+        return {"target": self.target, "overall": self.overall.to_json(),
+                "by_distance": [b.to_json() for b in self.by_distance],
+                "at": {k: v.to_json() for k, v in self.at.items()}, "reasons": dict(self.reasons),
+                "solve_ms_mean": self.solve_ms_mean}
+
+
+def summarize(result: dict, settings: PnPSettings = PnPSettings()) -> RunSummary:
     """Metrics of one run: overall, per distance bin, at contact, at the table distances,
     and the failure reasons."""
     d, e, ok = result["distance_m"], result["error_m"], result["success"]
-    bins = []
-    for lo, hi in itertools.pairwise(DISTANCE_EDGES):
-        sel = (d >= lo) & (d < hi)
-        bins.append({"lo_m": float(lo), "hi_m": float(hi), **_stats(e[sel], ok[sel])})
-    at = {"contact": _stats(e[d < settings.contact_m], ok[d < settings.contact_m])}
+    bins = tuple(DistanceBin(float(lo), float(hi), ErrorStats.of(e[(d >= lo) & (d < hi)], ok[(d >= lo) & (d < hi)]))
+                 for lo, hi in itertools.pairwise(DISTANCE_EDGES))
+    contact = d < settings.contact_m
+    at = {"contact": ErrorStats.of(e[contact], ok[contact])}
     for x in TABLE_DISTANCES_M:
         sel = np.abs(d - x) < 2.5
-        at[f"{x:g}m"] = _stats(e[sel], ok[sel])
+        at[f"{x:g}m"] = ErrorStats.of(e[sel], ok[sel])
     reasons = {r: int((result["reason"] == i).sum()) for i, r in enumerate(REASONS)}
     solve = result["solve_s"]
-    return {"target": result["target"], "overall": _stats(e, ok), "by_distance": bins, "at": at,
-            "reasons": reasons, "solve_ms_mean": float(solve.mean() * 1e3) if solve.size else None}
+    return RunSummary(result["target"], ErrorStats.of(e, ok), bins, at, reasons,
+                      float(solve.mean() * 1e3) if solve.size else None)
 
 

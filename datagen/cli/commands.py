@@ -5,7 +5,7 @@ audit, preview, evaluate, export, train, render, gallery."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -30,6 +30,9 @@ from datagen.config import find_config, load_config
 from datagen.core.errors import ConfigError, DatagenError, shown
 from datagen.core.training import MATCH_PX
 from datagen.pipeline.estimate import CPU_WORKERS
+
+if TYPE_CHECKING:
+    from datagen.analysis.evaluate import ErrorStats
 
 
 @app.command()
@@ -314,11 +317,10 @@ def evaluate(
     for source, result in runs:
         s = summarize(result, settings)
         what = f"noise {source['noise_px']:g} px" if source["source"] == "truth" else "predictions"
-        contact = s["at"]["contact"]
-        typer.echo(f"{what}: reliability {100 * (s['overall']['reliability'] or 0):.1f}% of {len(result['frame_id'])}, "
-                   f"{_mean_error(s['overall'])}, {_at_contact(contact, settings.contact_m)}, "
-                   f"target {s['target']}")
-        failures = [(r, n) for r, n in s["reasons"].items() if r != "ok" and n]
+        typer.echo(f"{what}: reliability {100 * (s.overall.reliability or 0):.1f}% of {len(result['frame_id'])}, "
+                   f"{_mean_error(s.overall)}, {_at_contact(s.at['contact'], settings.contact_m)}, "
+                   f"target {s.target}")
+        failures = [(r, n) for r, n in s.reasons.items() if r != "ok" and n]
         if failures:
             typer.echo("  failed: " + ", ".join(f"{n} {failure_text(r, settings, conf)}" for r, n in failures))
     typer.echo(f"wrote {written['json']}")
@@ -407,22 +409,21 @@ def train(
     typer.echo(f"score them: {run.evaluate_command()}")
 
 
-def _at_contact(contact: dict, contact_m: float) -> str:
+def _at_contact(contact: ErrorStats, contact_m: float) -> str:
     """The error at contact, or why there is no figure: no frame within ``contact_m`` of
     contact, or none of them solved."""
-    if not contact["attempts"]:
+    if not contact.attempts:
         return f"at contact: no figure (no frame within {contact_m:g} m of contact)"
-    if not contact["successes"]:
-        return f"at contact: no figure (none of the {contact['attempts']} frames within {contact_m:g} m solved)"
-    return (f"at contact {_m(contact['mean_m'])} (+2 sigma {_m(contact['plus_2sigma_m'])}, "
-            f"{contact['successes']} frames)")
+    if not contact.successes or contact.mean_m is None or contact.plus_2sigma_m is None:
+        return f"at contact: no figure (none of the {contact.attempts} frames within {contact_m:g} m solved)"
+    return f"at contact {_m(contact.mean_m)} (+2 sigma {_m(contact.plus_2sigma_m)}, {contact.successes} frames)"
 
 
-def _mean_error(overall: dict) -> str:
+def _mean_error(overall: ErrorStats) -> str:
     """The mean PtD error, or why there is none (no frame solved)."""
-    if overall["mean_m"] is None:
+    if overall.mean_m is None:
         return "mean error: no figure (no frame solved)"
-    return f"mean error {_m(overall['mean_m'])}"
+    return f"mean error {_m(overall.mean_m)}"
 
 
 def _m(value: float) -> str:

@@ -44,9 +44,10 @@ def write_evaluation(view: FrameOrder, runs: list[tuple[dict, dict]], out: Path,
     kind = REPORTS["evaluate" if detector is None else "evaluate --predictions"]
     out = claim_report_folder(kind, out, view.root)
     real_folder(out / "plots")
-    summaries = [{**source, **summarize(result, settings)} for source, result in runs]
+    summaries = [summarize(result, settings) for _, result in runs]
     doc = {"dataset": str(view.root), "name": view.doc.get("name"), "frames": len(view),
-           "settings": dataclasses.asdict(settings), "reasons": list(REASONS), "runs": summaries}
+           "settings": dataclasses.asdict(settings), "reasons": list(REASONS),
+           "runs": [{**source, **s.to_json()} for (source, _), s in zip(runs, summaries, strict=True)]}
     tables = []
     for source, r in runs:
         n = len(r["frame_id"])

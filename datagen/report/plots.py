@@ -152,7 +152,8 @@ def _label(source: dict) -> str:
 
 def plot_evaluation(runs, summaries, folder: Path, *, name: str = "") -> dict[str, Path]:
     """PtD error magnitude against distance, one panel per run with the mean and +-2 sigma
-    per distance bin (paper Figs 14-17), and reliability against distance."""
+    per distance bin (paper Figs 14-17), and reliability against distance; ``summaries``:
+    each run's :class:`~datagen.analysis.evaluate.RunSummary`."""
     import numpy as np
 
     out: dict[str, Path] = {}
@@ -167,13 +168,13 @@ def plot_evaluation(runs, summaries, folder: Path, *, name: str = "") -> dict[st
         below = int((e[ok] < floor).sum())
         ax.scatter(d[ok], np.maximum(e[ok], floor), s=2, alpha=0.3, color="C0",
                    label="prediction error" + (f" ({below} below {floor:g} m drawn at it)" if below else ""))
-        bins = [b for b in summary["by_distance"] if b["mean_m"] is not None]
-        mid = [(b["lo_m"] + b["hi_m"]) / 2 for b in bins]
-        ax.plot(mid, [max(b["mean_m"], floor) for b in bins], "-", color="C3", label="mean")
-        ax.plot(mid, [max(b["plus_2sigma_m"], floor) for b in bins], "--", color="C1", label="mean + 2 sigma")
+        bins = [b for b in summary.by_distance if b.stats.mean_m is not None]
+        mid = [(b.lo_m + b.hi_m) / 2 for b in bins]
+        ax.plot(mid, [max(b.stats.mean_m, floor) for b in bins], "-", color="C3", label="mean")
+        ax.plot(mid, [max(b.stats.plus_2sigma_m, floor) for b in bins], "--", color="C1", label="mean + 2 sigma")
         ax.axhline(0.07, color="k", lw=0.8, ls=":", label="7 cm (acceptable at contact)")
         ax.set(xscale="symlog", xlim=(0, 125), yscale="log", xlabel="probe-to-drogue distance (m)",
-               ylabel="PtD error magnitude (m)", title=f"{_label(source)}: target {summary['target']}")
+               ylabel="PtD error magnitude (m)", title=f"{_label(source)}: target {summary.target}")
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
     for ax in axes.ravel()[n:]:
@@ -183,8 +184,8 @@ def plot_evaluation(runs, summaries, folder: Path, *, name: str = "") -> dict[st
 
     fig, ax = _figure(figsize=(8, 4))
     for (source, _), summary in zip(runs, summaries):
-        bins = [b for b in summary["by_distance"] if b["attempts"]]
-        ax.plot([(b["lo_m"] + b["hi_m"]) / 2 for b in bins], [100 * b["reliability"] for b in bins], "o-",
+        bins = [b for b in summary.by_distance if b.stats.attempts]
+        ax.plot([(b.lo_m + b.hi_m) / 2 for b in bins], [100 * b.stats.reliability for b in bins], "o-",
                 ms=3, label=_label(source))
     ax.set(xlabel="probe-to-drogue distance (m)", ylabel="reliability (%)", ylim=(0, 102),
            title=f"{name}: successful PtD predictions / attempts")
