@@ -191,3 +191,28 @@ def test_a_renderers_target_pass_renders_the_frames_own_pixels_in_its_window() -
 
     assert crop.shape[:2] == (window.height, window.width) and crop.mean() > 0
     assert error(0) < 0.5 * min(error(-1), error(1)), (error(-1), error(0), error(1))
+
+
+@pytest.mark.render
+@pytest.mark.parametrize("variant", ["llvm_ad_rgb", "scalar_rgb"])
+def test_the_grids_object_ids_are_the_geometry_pass_at_the_grids_stride_whatever_the_pass_stride(variant) -> None:
+    """The target pass's window is placed from ids the geometry pass's cast finds on a grid of
+    block centres: the same ids as the pass at that stride, for a pass at stride 1 or 2."""
+    pytest.importorskip("mitsuba")
+    from datagen.config import load_config, override_config
+    from datagen.render.renderer import Renderer
+    from datagen.scene.approach import frame_state
+    from datagen.scene.look import frame_look
+    from datagen.scene.resolved import Scene
+
+    config = override_config(load_config("podcam15"), {"camera.width": 40, "camera.height": 21,
+                                                      "labels.edge_margin_px": 1.0, "render.variant": variant})
+    renderer = Renderer(Scene.resolve(config))
+    state = frame_state(config, 3)
+    renderer.pose(state, frame_look(config, state))
+    _, coarse, _ = renderer.geometry_pass(PLACEMENT_STRIDE_PX)
+    want = coarse[::PLACEMENT_STRIDE_PX, ::PLACEMENT_STRIDE_PX]
+    assert (want > 0).any()
+    for stride in (1, 2):
+        _, _, grid = renderer.geometry_and_cast(stride, np.zeros((1, 3), np.float32), grid=PLACEMENT_STRIDE_PX)
+        np.testing.assert_array_equal(grid, want)

@@ -178,7 +178,7 @@ class RayCasting:
         g = len(self._pixel_rays(grid)[0]) if grid else 0
         r = self._world_from_cam[:3, :3].astype(np.float32)  # the render frame shares the world's axes
         if self.variant.startswith("scalar"):
-            grid_rays = [self._pixel_rays(grid)[0]] if grid else []
+            grid_rays = [self._pixel_rays(grid)[0] @ r.T] if grid else []
             t, ids, surface = self.cast(self._camera_render, np.concatenate([d_cam @ r.T, *grid_rays, extra]))
             depth = t[:n] * z_per_t
             alpha = [np.full(n, -1.0, np.float32)] * len(CLOUD_LAYERS)
