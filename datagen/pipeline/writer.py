@@ -18,6 +18,7 @@ import time
 from collections import Counter, deque
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -47,7 +48,8 @@ from datagen.scene.resolved import Scene
 if TYPE_CHECKING:
     from datagen.render.renderer import FrameRenderer
 
-__all__ = ["MAX_GROUP_SHARDS", "MAX_PENDING_WRITES", "FramesDone", "ShardWriter", "shard_groups", "timed_frame"]
+__all__ = ["MAX_GROUP_SHARDS", "MAX_PENDING_WRITES", "FrameRecord", "FramesDone", "ShardWriter", "shard_groups",
+           "timed_frame"]
 
 #: Told the number of frames just done (a worker's messages to the build's progress).
 FramesDone = Callable[[int], None]
@@ -97,6 +99,23 @@ def shard_groups(jobs: list[ShardJob], workers: int, together: bool = True) -> l
     return groups
 
 
+@dataclass(frozen=True)
+class FrameRecord:
+    """What writing one frame gives its shard (:meth:`ShardWriter.frame`): the manifest row,
+    and for a rendered frame the label boxes that show nothing of their feature (``blank``,
+    :func:`datagen.core.box_content.blank_boxes`) and the seconds per stage of the frame
+    (None: not rendered)."""
+
+    row: dict
+    blank: int = 0
+    stages: dict[str, float] | None = None
+
+    @property
+    def rendered(self) -> bool:
+        """Whether the frame was rendered (its row has a render time)."""
+        return self.row["render_s"] is not None
+
+
 class ShardWriter:
     """Renders and labels whole shards in one process: one scene, one feature table."""
 
@@ -111,7 +130,6 @@ class ShardWriter:
         self._io = ThreadPoolExecutor(1, thread_name_prefix="datagen-write")
         self._writes: deque[Future] = deque()
         self._clock = StageClock()  # the frame being written
-        self._stages: dict[str, float] = {}  # the last rendered frame's seconds per stage
         self._census = None  # the kernels each rendered frame launches (datagen.render.runtime.KernelCensus)
         self._first_frame = True  # this process has rendered no frame yet
         self._recordings = 0  # the frozen render's and ray cast's recordings so far (datagen.render.frozen)
@@ -158,12 +176,13 @@ class ShardWriter:
             for b, frame_draws in enumerate(draws):
                 if self._stop():
                     raise KeyboardInterrupt
-                row = self.frame(job, frame_draws, labels_all.frame(b), objects_all.frame(b))
+                record = self.frame(job, frame_draws, labels_all.frame(b), objects_all.frame(b))
+                row = record.row
                 rows.append(row)
                 labels += row["n_labeled"]
                 per_class += row["features"].labeled
                 excluded.update(row["features"].exclusion_counts())
-                if row["render_s"] is not None:
+                if record.rendered:
                     rendered += 1
                     new = self._census.new_kernels()
                     compiled += 0 if self._first_frame else new  # the first frame compiles (or loads) them all
@@ -172,11 +191,11 @@ class ShardWriter:
                     self._recordings = recordings
                     self._first_frame = False
                     render_s += row["render_s"]
-                    blank += self._blank
-                    blank_frames += self._blank > 0
+                    blank += record.blank
+                    blank_frames += record.blank > 0
                     denoise_s += row["denoise_s"] or 0.0
                     frame_s += row["frame_s"]
-                    stages.update(self._stages)
+                    stages.update(record.stages or {})
                 if progress is not None:
                     progress(1)
         self._wait_for_writes(0)
@@ -187,9 +206,10 @@ class ShardWriter:
         summary.wall_s = time.perf_counter() - start
         return summary
 
-    def frame(self, job: ShardJob, draws: FrameDraws, labels: FrameLabels, objects: FrameLabels) -> dict:
+    def frame(self, job: ShardJob, draws: FrameDraws, labels: FrameLabels, objects: FrameLabels) -> FrameRecord:
         """Render (when rendering) and write frame ``draws`` with its feature ``labels``
-        (before the occlusion rule) and pose boxes ``objects``; return its manifest row."""
+        (before the occlusion rule) and pose boxes ``objects``; return its manifest row and
+        what else its shard sums (:class:`FrameRecord`)."""
         started = time.perf_counter()
         scene, layout = self.scene, self.layout
         k, features = scene.intrinsics, scene.features
@@ -197,6 +217,7 @@ class ShardWriter:
         image_rel = exr_rel = None
         fraction = center_visible = render_s = denoise_s = None
         rendered: dict = {}
+        blank = 0
         if self.renderer is not None:
             image_rel = layout.image_rel(job.split, job.shard, i)
             exr_rel = layout.exr_rel(job.split, job.shard, i) if scene.config.render.exr else None
@@ -205,7 +226,7 @@ class ShardWriter:
             with self._clock.stage("feature visibility"):
                 fraction, center_visible = self.renderer.feature_visibility(draws.state, features)
             labels = scene.labelling.occlude(labels, fraction)
-            self._blank = int(np.count_nonzero(blank_boxes(srgb, labels.label_xyxy[labels.labeled])))
+            blank = int(np.count_nonzero(blank_boxes(srgb, labels.label_xyxy[labels.labeled])))
         records = feature_records(labels, features.class_id, fraction, center_visible)
         label_rel = layout.label_rel(job.split, job.shard, i)
         pose_rel = layout.pose_label_rel(job.split, job.shard, i)
@@ -225,9 +246,10 @@ class ShardWriter:
             n_labeled=int(labels.labeled.sum()),
             rendered=rendered, render_s=render_s, denoise_s=denoise_s, frame_s=time.perf_counter() - started,
             worker=f"{platform.node()}:{os.getpid()}", worker_rss_mib=_rss_mib())
-        if self.renderer is not None:  # what the named stages leave of the frame's time
-            self._stages = dict(self._clock.seconds, other=row["frame_s"] - sum(self._clock.seconds.values()))
-        return row
+        if self.renderer is None:
+            return FrameRecord(row)
+        seconds = self._clock.seconds  # and "other": what the named stages leave of the frame's time
+        return FrameRecord(row, blank, dict(seconds, other=row["frame_s"] - sum(seconds.values())))
 
     def _render(self, draws: FrameDraws, image: Path, exr: Path | None
                 ) -> tuple[float | None, float | None, dict, np.ndarray]:
