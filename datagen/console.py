@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import sys
 import time
-from typing import Protocol
+from typing import Any, Protocol
 
 __all__ = ["ConsoleProgress", "Estimate", "NullProgress", "Progress", "ShardDone"]
 
@@ -15,10 +15,17 @@ __all__ = ["ConsoleProgress", "Estimate", "NullProgress", "Progress", "ShardDone
 class Estimate(Protocol):
     """What a command predicts a frame costs (:class:`datagen.pipeline.estimate.FrameCost`)."""
 
-    seconds: float
-    cores: int
-    setting: str
-    disk_bytes: float  # per frame
+    @property
+    def seconds(self) -> float: ...
+
+    @property
+    def cores(self) -> int: ...
+
+    @property
+    def setting(self) -> str: ...
+
+    @property
+    def disk_bytes(self) -> float: ...  # per frame
 
     @property
     def frames_per_hour(self) -> float: ...
@@ -27,10 +34,17 @@ class Estimate(Protocol):
 class ShardDone(Protocol):
     """A finished shard as a build reports it (:class:`datagen.pipeline.progress.ShardSummary`)."""
 
-    name: str
-    frames: int
-    labels: int
-    wall_s: float
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def frames(self) -> int: ...
+
+    @property
+    def labels(self) -> int: ...
+
+    @property
+    def wall_s(self) -> float: ...
 
 
 class Progress(Protocol):
@@ -76,7 +90,7 @@ class ConsoleProgress:
         self.live = self.stream.isatty() if live is None else live
         self.interval_s = interval_s
         self.clock = clock
-        self._bar = None
+        self._bar: Any = None  # rich's Progress, where the stream is a terminal
         self._estimate: Estimate | None = None  # the model's, until the first frames are measured
 
     def start(self, total: int, done: int, estimate: Estimate | None = None) -> None:

@@ -49,8 +49,7 @@ def map_in_order(fn: Callable, tasks: list[tuple], workers: int) -> Iterator:
         pending = deque(pool.submit(fn, *task) for task in itertools.islice(todo, IN_FLIGHT_PER_WORKER * workers))
         while pending:
             result = pending.popleft().result()
-            task = next(todo, None)
-            if task is not None:
+            for task in itertools.islice(todo, 1):
                 pending.append(pool.submit(fn, *task))
             yield result
             del result

@@ -27,7 +27,7 @@ from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -127,8 +127,8 @@ def _solve_pose(points_model: NDArray, uv_px: NDArray, k: Intrinsics, settings: 
     if n < 4:
         return _three_point_pose(obj, img, camera, distortion)
     use_guess = guess is not None
-    rvec0 = np.array(guess[0], dtype=np.float64).reshape(3, 1) if use_guess else None
-    tvec0 = np.array(guess[1], dtype=np.float64).reshape(3, 1) if use_guess else None
+    rvec0 = None if guess is None else np.array(guess[0], dtype=np.float64).reshape(3, 1)
+    tvec0 = None if guess is None else np.array(guess[1], dtype=np.float64).reshape(3, 1)
     ok, rvec, tvec, inliers = cv2.solvePnPRansac(
         obj, img, camera, distortion, rvec=rvec0, tvec=tvec0, useExtrinsicGuess=use_guess,
         iterationsCount=settings.iterations, reprojectionError=settings.reprojection_px,
@@ -358,8 +358,9 @@ def plan_evaluation(dataset: DatasetMeta, index: FrameOrder, *, noise_px: str = 
             except ValueError as exc:
                 raise DatagenError(f"--predictions: {predictions}: {exc}") from None
             notes.append(f"{predictions}: {why} (--split to choose)" if not found else f"{why} (--split to choose)")
-        sources = ({"source": "predictions", "predictions": str(predictions), "conf": conf, "split": split,
-                    "files_of_no_frame": found.ghosts[:100]},)
+        sources: tuple[dict[str, object], ...] = (
+            {"source": "predictions", "predictions": str(predictions), "conf": conf, "split": split,
+             "files_of_no_frame": found.ghosts[:100]},)
         runs: tuple[Run, ...] = (Run(predictions=found),)
     else:
         split = split or "all"
@@ -424,7 +425,7 @@ def _evaluate_rows(view: DatasetView, rows: NDArray[np.int64], runs: list[Run], 
     receiver_from_world = invert_rigid(view.world_from["receiver"][rows])
     truth = np.einsum("bij,bj->bi", receiver_from_world[:, :3, :3], view.world_from[target][rows][:, :3, 3]) \
         + receiver_from_world[:, :3, 3]
-    stems = view.stems if any(r.predictions is not None for r in runs) else None
+    stems = view.stems if any(r.predictions is not None for r in runs) else []
     for j, i in enumerate(rows.tolist()):
         key = (int(view.approach_index[i]), int(view.approach_number[i]))
         distortion = view.distortion[i] if view.distortion[i].any() else None
@@ -450,13 +451,14 @@ def _evaluate_rows(view: DatasetView, rows: NDArray[np.int64], runs: list[Run], 
             res["ptd_receiver_m"].append(view.ptd_receiver_m[i])
             res["has_predictions"].append(predictions is None or stems[i] in predictions)
             start = time.perf_counter()
-            poses = {}
+            poses: dict[str, tuple[NDArray, NDArray] | None] = {}
+            few = False
             matches = {}
             for name, mask in masks:
                 sel = mask & have
                 matches[name] = int(sel.sum())
                 if matches[name] < settings.min_matches:
-                    poses[name] = "few"
+                    few = True
                     continue
                 poses[name] = solve_pose(centers[sel], uv[sel], k, settings, chain.guesses.get(name), distortion)
             res["solve_s"].append(time.perf_counter() - start)
@@ -464,7 +466,8 @@ def _evaluate_rows(view: DatasetView, rows: NDArray[np.int64], runs: list[Run], 
             res["matches_target"].append(matches[target])
             ptd = np.full(3, np.nan)
             reason = "ok"
-            if "few" in poses.values():
+            receiver_pose, target_pose = poses.get("receiver"), poses.get(target)
+            if few:
                 reason = "too_few_matches"
                 if predictions is not None:
                     stem = stems[i]
@@ -472,10 +475,10 @@ def _evaluate_rows(view: DatasetView, rows: NDArray[np.int64], runs: list[Run], 
                         reason = "no_detections"
                     elif isinstance(predictions, Predictions) and predictions.all_below_conf(stem):
                         reason = "below_conf"
-            elif poses["receiver"] is None or poses[target] is None:
+            elif receiver_pose is None or target_pose is None:
                 reason = "pnp_failed"
             else:
-                ptd = ptd_from_poses(poses["receiver"], poses[target])
+                ptd = ptd_from_poses(receiver_pose, target_pose)
                 if np.linalg.norm(ptd) > settings.max_range_m:
                     reason = "beyond_range"
                 elif len(chain.history) >= settings.rolling_min and _outlier(ptd, chain.history, settings):
@@ -513,7 +516,8 @@ def _blocks(index: FrameOrder, attempted: NDArray[np.int64], n: int) -> list[NDA
         return [attempted]
     key = index.approach_index[attempted] * (1 << 32) + index.approach_number[attempted]
     starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])  # where an approach begins
-    cuts = starts[np.searchsorted(starts, np.linspace(0, len(attempted), n + 1)[1:-1])] if len(starts) > 1 else []
+    cuts = starts[np.searchsorted(starts, np.linspace(0, len(attempted), n + 1)[1:-1])] if len(starts) > 1 else \
+        np.zeros(0, np.int64)
     return [b for b in np.split(attempted, np.unique(cuts)) if len(b)]
 
 
@@ -544,7 +548,7 @@ def evaluate_runs(dataset: DatasetMeta, runs: list[Run], *, seed: int | None = N
     progress.close()
     results = []
     for r, run in enumerate(runs):
-        out = {c: np.concatenate([p[r][c] for p in parts]) for c in _COLUMNS}
+        out: dict[str, Any] = {c: np.concatenate([p[r][c] for p in parts]) for c in _COLUMNS}
         out["success"] = out["reason"] == 0
         out["error_m"] = np.linalg.norm(out["ptd_m"] - out["truth_m"], axis=1)
         out["error_to_drogue_m"] = np.linalg.norm(out["ptd_m"] - out.pop("ptd_receiver_m"), axis=1)

@@ -248,10 +248,10 @@ def order_statistics(chunks: Chunks, wanted: dict[int, set[int]], *, gather: int
         order = np.argsort(at, kind="stable")
         for j, piece in enumerate(np.split(values[order], np.searchsorted(at[order], np.arange(1, len(c))))):
             pools[(shift, int(c[j]))] = piece
-    for (slot, k), (prefix, shift, rank) in state.items():
-        if (slot, k) not in out:
-            pool = pools[(shift, (slot << shift) | prefix)]
-            out[(slot, k)] = float(pool[np.argsort(_keys(pool), kind="stable")][rank])
+    for key, (prefix, shift, rank) in state.items():
+        if key not in out:
+            pool = pools[(shift, (key[0] << shift) | prefix)]
+            out[key] = float(pool[np.argsort(_keys(pool), kind="stable")][rank])
     return {(int(groups[slot]), k): v for (slot, k), v in out.items()}
 
 
@@ -356,7 +356,7 @@ class Spill:
         for name, values in columns.items():
             if len(values) != rows or (rank is not None and len(values) != len(rank)):
                 raise ValueError(f"{stream}.{name}: {len(values)} values in a part of {rows} rows")
-        order = slice(None)
+        order: slice | NDArray[np.int64] = slice(None)
         lo, hi = 0, -1
         if rank is not None:
             rank = np.asarray(rank, dtype=np.int64)

@@ -125,22 +125,22 @@ def parse_predictions(folder: Path, width: int, height: int, nc: int, *, max_byt
         for n, line in enumerate(text.splitlines(), start=1):
             if not line.split():
                 continue
-            is_pose = len(line.split()) in pose_columns
-            values, problem = parse_line(line, len(pose.objects) if is_pose else nc,
-                                         columns=pose_columns if is_pose else (5, 6))
-            if problem:
+            layout = pose if pose is not None and len(line.split()) in pose_columns else None  # a pose line's
+            values, problem = parse_line(line, len(layout.objects) if layout else nc,
+                                         columns=pose_columns if layout else (5, 6))
+            if values is None:
                 raise DatagenError(f"{path}:{n}: not {wanted}: {problem}")
-            problem = _out_of_range(values, is_pose)
+            problem = _out_of_range(values, layout is not None)
             if problem:
                 raise DatagenError(f"{path}:{n}: {problem}")
             n_detections += 1
-            if is_pose:
-                conf = values[-1] if len(values) == pose.columns + 1 else 1.0
+            if layout is not None:
+                conf = values[-1] if len(values) == layout.columns + 1 else 1.0
                 if conf < min_conf:
                     n_below += 1
                     continue
-                points = np.asarray(values[5:5 + 3 * pose.kpt_count]).reshape(-1, 3)
-                for feature, (x, y, kconf) in zip(pose.feature_at[int(values[0])], points, strict=True):
+                points = np.asarray(values[5:5 + 3 * layout.kpt_count]).reshape(-1, 3)
+                for feature, (x, y, kconf) in zip(layout.feature_at[int(values[0])], points, strict=True):
                     if feature >= 0 and kconf >= min_conf:
                         _keep(best, int(feature), x * width, y * height, conf)
                 continue

@@ -15,6 +15,7 @@ from typing import Final
 import numpy as np
 
 from datagen.assets.noise import NUMPY, FractalField, Ops, Slant, ramp, sample_grid
+from datagen.core.transforms import vec3
 
 __all__ = [
     "CLOUD_CORE",
@@ -129,7 +130,7 @@ class CloudLight:
     def sun_normal(self) -> tuple[float, float, float]:
         """The sun's irradiance on a surface facing it."""
         sin_el = max(self.sun_direction[2], 0.05)
-        return tuple(c / sin_el for c in self.sun)
+        return vec3([c / sin_el for c in self.sun])
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,8 @@ from typing import Final, Literal
 
 import numpy as np
 
+from datagen.core.transforms import vec3
+
 __all__ = [
     "CANOPIES",
     "DARK_FABRICS",
@@ -49,7 +51,7 @@ class Fabric:
     def drawn(self, rng: np.random.Generator) -> tuple[tuple[float, float, float], float]:
         h = float(rng.uniform(*self.hue)) % 1.0
         rgb = colorsys.hsv_to_rgb(h, float(rng.uniform(*self.saturation)), float(rng.uniform(*self.value)))
-        return tuple(float(c) for c in rgb), float(rng.uniform(*self.roughness))
+        return vec3(rgb), float(rng.uniform(*self.roughness))
 
 
 #: Fabrics and paints by name (linear reflectance).

@@ -27,7 +27,15 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from datagen.assets.loader import BUILTIN_DIR, FEATURE_FORMAT, Feature, ObjectMesh, builtin_paths, parse_features
+from datagen.assets.loader import (
+    BUILTIN_DIR,
+    FEATURE_FORMAT,
+    Feature,
+    ObjectMesh,
+    builtin_paths,
+    concatenated,
+    parse_features,
+)
 from datagen.assets.models import FeatureAnchor, InternalFeature, Model, Size
 from datagen.assets.models.drogue import build_drogue
 from datagen.assets.models.receiver import build_receiver
@@ -35,6 +43,7 @@ from datagen.assets.models.tanker import build_tanker
 from datagen.atomic import write_bytes, write_text
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.features import SIZE_SCALE, STORED_VARIANTS
+from datagen.core.transforms import vec3
 
 __all__ = [
     "AXES",
@@ -98,7 +107,7 @@ def random_features(mesh: ObjectMesh, count: int, rng: np.random.Generator,
     weighted over the outer parts, kept at least two ring diameters apart where
     the surface allows, each with a ring of ``radius``."""
     outer = [m for name, m in mesh.parts.items() if "inlet" not in name and "exhaust" not in name]
-    surface = trimesh.util.concatenate(outer or list(mesh.parts.values()))
+    surface = concatenated(outer or list(mesh.parts.values()))
     areas = surface.area_faces
     candidates = 30 * count
     tri = rng.choice(len(areas), size=candidates, p=areas / areas.sum())
@@ -136,8 +145,8 @@ def ring_feature(name: str, center_m: Sequence[float], radius_m: float, axis: st
     points = np.tile(np.asarray(center_m, dtype=np.float64), (count, 1))
     points[:, u] += radius_m * np.cos(t)
     points[:, v] += radius_m * np.sin(t)
-    return InternalFeature(name, tuple(tuple(float(c) for c in p) for p in points),
-                           tuple(float(c) for c in center_m), size)
+    return InternalFeature(name, tuple(vec3(p) for p in points),
+                           vec3(center_m), size)
 
 
 def named_model(object_name: str, points: Sequence[FeatureAnchor], rings: Sequence[InternalFeature],
@@ -156,7 +165,7 @@ def model_features(model: Model, variant: str) -> list[Feature]:
     anchor's own size; small, medium and large give every anchor that size,
     co-located (same centres). Internal features keep their own point sets."""
     surface = model.combined()
-    features = []
+    features: list[Feature] = []
     for anchor in model.anchors:
         size = anchor.size if variant == "baseline" else variant
         radius = model.small_radius_m * SIZE_SCALE[size]

@@ -19,13 +19,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
 
 from datagen.assets.noise import NUMPY, FractalField, Ops, band_weight, cell_value
 from datagen.core.conventions import SEALANT_PART, texture_part_rng
+from datagen.core.transforms import vec3
 
 __all__ = [
     "DIGIT_SEGMENTS",
@@ -62,15 +63,15 @@ NUMBER_U: Final = 4.0
 class PaintPoint:
     """Where a livery is evaluated (arrays of one shape, float32)."""
 
-    s: object  # structural coordinates (metres)
-    t: object
-    x: object  # body-frame position (metres)
-    y: object
-    z: object
-    nz: object  # body-frame outward normal's z
-    footprint: object  # a pixel's width on the surface there across the view (metres)
-    along_s: object = None  # its extent along s and along t (foreshortened; None: as ``footprint``)
-    along_t: object = None
+    s: Any  # structural coordinates (metres)
+    t: Any
+    x: Any  # body-frame position (metres)
+    y: Any
+    z: Any
+    nz: Any  # body-frame outward normal's z
+    footprint: Any  # a pixel's width on the surface there across the view (metres)
+    along_s: Any = None  # its extent along s and along t (foreshortened; None: as ``footprint``)
+    along_t: Any = None
 
     def extent(self, axis: str):
         """The footprint's extent along ``s`` or ``t``."""
@@ -86,7 +87,7 @@ class PaintPoint:
 
 def _linear(srgb) -> tuple[float, float, float]:
     c = np.clip(np.asarray(srgb, dtype=np.float64), 0.0, 1.0)
-    return tuple(float(v) for v in np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4))
+    return vec3(np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4))
 
 
 def _grey(rng: np.random.Generator, lo: float, hi: float) -> tuple[float, float, float]:
@@ -370,7 +371,8 @@ class Markings:
                         ([0.75, 0.05, 0.08], [0.95, 0.95, 0.95], [0.05, 0.15, 0.45]),
                         ([0.1, 0.4, 0.75], [0.95, 0.95, 0.95], [0.05, 0.12, 0.35]),
                         ([0.05, 0.3, 0.12], [0.95, 0.85, 0.1], [0.05, 0.3, 0.12]))
-            rings = tuple(_linear(c) for c in palettes[int(rng.integers(len(palettes)))])
+            outer, middle, inner = palettes[int(rng.integers(len(palettes)))]
+            rings = (_linear(outer), _linear(middle), _linear(inner))
             ink = _linear([rng.uniform(0.02, 0.08)] * 3)
         digits = tuple(int(d) for d in rng.integers(0, 10, int(rng.integers(2, MAX_DIGITS + 1))))
         return cls(rings, ink, digits)

@@ -57,6 +57,7 @@ __all__ = [
     "Feature",
     "ObjectMesh",
     "builtin_paths",
+    "concatenated",
     "degenerate",
     "hull_distance",
     "load_features",
@@ -130,9 +131,7 @@ class ObjectMesh:
 
     @functools.cached_property
     def combined(self) -> trimesh.Trimesh:
-        import trimesh
-
-        return trimesh.util.concatenate(list(self.parts.values()))
+        return concatenated(list(self.parts.values()))
 
 
 def builtin_paths(object_name: str, root: Path = BUILTIN_DIR) -> tuple[Path, Path]:
@@ -169,6 +168,8 @@ def load_mesh(path: Path, object_name: str) -> ObjectMesh:
                              resolver=trimesh.resolvers.FilePathResolver(str(path.parent)))
     except Exception as exc:  # trimesh raises many kinds on a malformed file
         raise fail(f"cannot read mesh: {exc}") from None
+    if not isinstance(scene, trimesh.Scene):
+        raise fail(f"cannot read mesh: trimesh read a {type(scene).__name__}, not a scene")
     parts: dict[str, list[trimesh.Trimesh]] = {}
     for node in scene.graph.nodes_geometry:
         transform, geometry_name = scene.graph[node]
@@ -180,7 +181,7 @@ def load_mesh(path: Path, object_name: str) -> ObjectMesh:
         parts.setdefault(str(geometry_name), []).append(mesh)
     if not parts:
         raise fail("mesh contains no triangles")
-    merged = {name: trimesh.util.concatenate(meshes) for name, meshes in sorted(parts.items())}
+    merged = {name: concatenated(meshes) for name, meshes in sorted(parts.items())}
     for name, mesh in merged.items():
         if not np.isfinite(mesh.vertices).all():
             raise fail(f"part {name!r} has non-finite vertex coordinates")
@@ -190,6 +191,15 @@ def load_mesh(path: Path, object_name: str) -> ObjectMesh:
         "metal or dark engine inlets; name each part for its material (glass, metal, engine_inlets...: an OBJ's "
         "usemtl names, a GLB's mesh names)",)
     return ObjectMesh(object_name, path, merged, hashlib.sha256(data).hexdigest(), warnings)
+
+
+def concatenated(meshes: list[trimesh.Trimesh]) -> trimesh.Trimesh:
+    """``meshes`` as one mesh."""
+    import trimesh
+
+    out = trimesh.util.concatenate(meshes)
+    assert isinstance(out, trimesh.Trimesh)  # (of meshes: a mesh)
+    return out
 
 
 def _no_materials(path: Path, data: bytes, parts: dict[str, trimesh.Trimesh]) -> str | None:
@@ -215,11 +225,11 @@ def _no_materials(path: Path, data: bytes, parts: dict[str, trimesh.Trimesh]) ->
 def mesh_hull(mesh: ObjectMesh) -> NDArray[np.float64]:
     """The vertices of the convex hull of an object's mesh, ``(H, 3)`` in its body frame: the
     points whose projection bounds the projected mesh (:mod:`datagen.core.keypoints`)."""
-    mesh = mesh.combined
+    combined = mesh.combined
     try:
-        return np.asarray(mesh.convex_hull.vertices, dtype=np.float64)
+        return np.asarray(combined.convex_hull.vertices, dtype=np.float64)
     except Exception:
-        return np.unique(np.asarray(mesh.vertices, dtype=np.float64), axis=0)
+        return np.unique(np.asarray(combined.vertices, dtype=np.float64), axis=0)
 
 
 # --- feature files --------------------------------------------------------------------
@@ -361,6 +371,7 @@ def _coords(value: object, key: str, problem, *, rows: bool) -> NDArray[np.float
     if not good or isinstance(value, str):
         problem(key, f"must be {shape}", value, True)
         return None
+    assert arr is not None  # (good)
     if not np.isfinite(arr).all():
         problem(key, "coordinates must be finite numbers", value, True)
         return None

@@ -13,8 +13,9 @@ pixel. There is no texel anywhere: nothing to magnify into blocks.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,26 +44,26 @@ class Ops:
     kernel, so that a new value compiles no new kernel; one already on the device passes
     as it is)."""
 
-    floor: object
-    to_u32: object  # float (already floored) -> uint32, wrapping negatives
-    to_f32: object  # uint32 -> float
-    clip: object
-    f32: object
-    u32: object
-    param_f32: object
-    param_u32: object
-    sin: object
-    sqrt: object
-    exp: object = np.exp
-    log: object = np.log
-    abs: object = np.abs
-    select: object = np.where  # (condition, then, else)
+    floor: Callable[..., Any]
+    to_u32: Callable[..., Any]  # float (already floored) -> uint32, wrapping negatives
+    to_f32: Callable[..., Any]  # uint32 -> float
+    clip: Callable[..., Any]
+    f32: Callable[..., Any]
+    u32: Callable[..., Any]
+    param_f32: Callable[..., Any]
+    param_u32: Callable[..., Any]
+    sin: Callable[..., Any]
+    sqrt: Callable[..., Any]
+    exp: Callable[..., Any] = np.exp
+    log: Callable[..., Any] = np.log
+    abs: Callable[..., Any] = np.abs
+    select: Callable[..., Any] = np.where  # (condition, then, else)
     #: Sums a :func:`series` at a footprint, term by term until the rest are filtered away
     #: in every lane (None: every term, in a Python loop).
-    series_loop: object = None
+    series_loop: Callable[..., Any] | None = None
     #: ``only_where(active, initial, fn)``: the tuple ``fn()`` where ``active``, ``initial``
     #: elsewhere, ``fn`` evaluated only where needed (None: everywhere, then selected).
-    only_where: object = None
+    only_where: Callable[..., Any] | None = None
 
     def where(self, active, initial: tuple, fn) -> tuple:
         """``fn()`` (a tuple of arrays) where ``active``, ``initial`` elsewhere; a kernel
@@ -129,9 +130,9 @@ class Slant:
     factor ``sqrt(1 + s^2)`` with ``s = (sx, sy)``, the view's horizontal part over its
     vertical part (the tangent of its angle from the vertical)."""
 
-    across: object
-    sx: object
-    sy: object
+    across: Any
+    sx: Any
+    sy: Any
 
     def along(self, dx, dy, ops: Ops = NUMPY):
         """The footprint's extent along the unit direction ``(dx, dy)``."""

@@ -19,7 +19,7 @@ from typing import Final, Literal
 
 import numpy as np
 
-from datagen.core.transforms import make_transform
+from datagen.core.transforms import make_transform, vec3
 
 __all__ = [
     "HOSE_ATTACH_DROGUE_M",
@@ -82,6 +82,6 @@ MOUNTS: Final[dict[str, Mount]] = {
     "wingcam": Mount("wingcam", "receiver", (-8.6, RECEIVER_CENTRELINE_Y_M - 3.6, -0.9), _forward(2.0, 2.0)),
     "dashcam": Mount("dashcam", "receiver", (-4.3, RECEIVER_CENTRELINE_Y_M, 0.75), _forward(-1.5, -1.0),
                      "windscreen"),
-    "podcam": Mount("podcam", "tanker", tuple(float(v) for v in _PODCAM_POSITION),
-                    tuple(float(v) for v in -_PODCAM_POSITION)),
+    "podcam": Mount("podcam", "tanker", vec3(_PODCAM_POSITION),
+                    vec3(-_PODCAM_POSITION)),
 }

@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 
 from datagen.assets.noise import NUMPY, FractalField, Ops, Slant, band_weight, ramp, sample_grid, series
 from datagen.core.conventions import GRAVITY_MPS2
+from datagen.core.transforms import vec3
 
 __all__ = [
     "FOAM_ALBEDO",
@@ -81,12 +82,12 @@ class SeaSurface:
             sample = sample_grid(foam, 40.0 * FOAM_WAVELENGTH_M, 256)
             threshold = float(np.quantile(sample, 1.0 - min(whitecaps, 1.0)))
         tint_field = FractalField.drawn(rng, TINT_WAVELENGTH_M, 4, 0.5) if tint else None
-        return cls(tuple(float(c) for c in colour), float(whitecaps), foam, threshold, tint_field)
+        return cls(vec3(colour), float(whitecaps), foam, threshold, tint_field)
 
     def mean_albedo(self) -> tuple[float, float, float]:
         """The albedo a pixel far wider than a whitecap sees (the tint's mean is 1)."""
         w = self.whitecaps
-        return tuple(c * (1.0 - w) + FOAM_ALBEDO * w for c in self.colour)
+        return vec3([c * (1.0 - w) + FOAM_ALBEDO * w for c in self.colour])
 
     def albedo(self, x, y, footprint_m, ops: Ops = NUMPY):
         """The albedo ``(r, g, b)`` at ``(x, y)`` metres for a pixel of ``footprint_m`` there."""

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated, cast
 
 import typer
 
@@ -15,6 +15,9 @@ from datagen.config import load_config
 from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import DatagenError
 from datagen.core.features import FEATURE_VARIANTS, SIZE_SCALE
+
+if TYPE_CHECKING:
+    from datagen.assets.models import Size
 
 #: Where ``datagen assets preview`` writes without ``--out``: a working folder in the current
 #: one (never the repository's tracked ``assets/previews``).
@@ -76,11 +79,11 @@ def _number(flag: str, text: str, value: str) -> float:
     return number
 
 
-def _size(flag: str, text: str, values: list[str], at: int) -> str:
+def _size(flag: str, text: str, values: list[str], at: int) -> Size:
     size = values[at] if len(values) > at else "medium"
     if size not in SIZE_SCALE:
         raise DatagenError(f"{flag} {text!r}: unknown size {size!r} (choose {', '.join(SIZE_SCALE)})")
-    return size
+    return cast("Size", size)
 
 
 def _point(text: str):
@@ -166,7 +169,11 @@ def assets_features(
         raise DatagenError(f"--out: {out} is among the built-in assets (datagen assets build makes those); "
                            "write yours beside your mesh")
     if small_radius is None:
-        small_radius = float(read_feature_file(builtin_paths(name)[1])["small_radius_m"])
+        path = builtin_paths(name)[1]
+        shipped = read_feature_file(path)
+        if not isinstance(shipped, dict) or not isinstance(shipped.get("small_radius_m"), (int, float)):
+            raise DatagenError(f"{path}: small_radius_m: missing; datagen assets build writes it")
+        small_radius = float(shipped["small_radius_m"])
 
     from datagen.assets.generate import features_text, named_model, stored_features, write_features
     from datagen.assets.table import describe_features

@@ -5,7 +5,7 @@ audit, preview, evaluate, export, train, render, gallery."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, cast, get_args
 
 import typer
 
@@ -151,8 +151,9 @@ def build(
     from datagen.config import override_config
     from datagen.console import ConsoleProgress
     from datagen.pipeline.build import build_dataset
+    from datagen.pipeline.executors import ExecutorName
 
-    if executor not in ("local", "ray"):
+    if executor not in get_args(ExecutorName):
         raise DatagenError(f"--executor: unknown executor {executor!r} (choose local or ray)")
     if out is not None:
         output_path(out, "--out")
@@ -163,7 +164,7 @@ def build(
                "dataset.shard_size": shard_size, "render.exr": True if exr else None}
     cfg = override_config(cfg, {k: v for k, v in updates.items() if v is not None})
     out = out if out is not None else output_path(Path("datasets") / cfg.name, "--out")
-    report = build_dataset(cfg, out, workers=workers, executor=executor, overwrite=overwrite,
+    report = build_dataset(cfg, out, workers=workers, executor=cast(ExecutorName, executor), overwrite=overwrite,
                            render=not no_render, progress=ConsoleProgress(cfg.name), threads=threads)
     for line in report.lines():
         typer.echo(line)
@@ -202,7 +203,7 @@ def audit(
         if check.min_pass_share is not None and check.pass_share is None:
             typer.echo(f"{status}  {check.name}: nothing to check (needs {100 * check.min_pass_share:g}% to pass "
                        "where there is)")
-        elif check.min_pass_share is not None:
+        elif check.min_pass_share is not None and check.pass_share is not None:
             typer.echo(f"{status}  {check.name}: {100 * check.pass_share:.1f}% of {check.checked} pass (needs "
                        f"{100 * check.min_pass_share:g}%), {check.failures} failed")
         else:
@@ -314,9 +315,9 @@ def evaluate(
                    f"{d['missed']} missed, {d['spurious']} spurious detections; "
                    + (f"centre error median {d['error_median_px']:.2f} px, 95th percentile {d['error_p95_px']:.2f} px"
                       if d['error_median_px'] is not None else "no centre error (no feature found)"))
-    for source, result in runs:
+    for described, result in runs:
         s = summarize(result, settings)
-        what = f"noise {source['noise_px']:g} px" if source["source"] == "truth" else "predictions"
+        what = f"noise {described['noise_px']:g} px" if described["source"] == "truth" else "predictions"
         typer.echo(f"{what}: reliability {100 * (s.overall.reliability or 0):.1f}% of {len(result['frame_id'])}, "
                    f"{_mean_error(s.overall)}, {_at_contact(s.at['contact'], settings.contact_m)}, "
                    f"target {s.target}")
@@ -495,8 +496,8 @@ def _frame_list(text: str) -> list[int]:
     ranges: list[tuple[int, int]] = []
     try:
         for part in text.split(","):
-            lo, dash, hi = part.strip().partition("-")
-            ranges.append((int(lo), int(hi) if dash else int(lo)))
+            start, dash, end = part.strip().partition("-")
+            ranges.append((int(start), int(end) if dash else int(start)))
     except ValueError:
         raise DatagenError(f"--frames: {text[:60]!r} is not a list of frame indices like 0,5,9 or 0-7") from None
     for lo, hi in ranges:

@@ -202,7 +202,7 @@ def main() -> None:
     own coloured progress, of names the recipe check allows)."""
     for stream in (sys.stdout, sys.stderr):  # paths with undecodable bytes print escaped, never crash
         with contextlib.suppress(AttributeError, ValueError):
-            stream.reconfigure(errors="backslashreplace")
+            stream.reconfigure(errors="backslashreplace")  # type: ignore[union-attr]  # (a TextIOWrapper's)
     if sys.argv[1:2] != ["train"]:
         sys.stdout, sys.stderr = _Shown(sys.stdout), _Shown(sys.stderr)
     try:

@@ -120,7 +120,7 @@ def config_reference() -> str:
              "scenes (`datagen scenes`) are configs in this format; `datagen build` overrides a "
              "few keys from its flags (`--frames`, `--seed`, `--spp`, `--shard-size`).", ""]
     sections = _sections()
-    first = {}  # model -> the section its plain anchor goes to (a model may be several sections)
+    first: dict[type, str] = {}  # model -> the section its plain anchor goes to (a model may be several sections)
     for prefix, model in sections:
         first.setdefault(model, prefix)
     for prefix, model in sections:

@@ -234,12 +234,14 @@ class ObjectSpec(_Section):
 
 #: The rigid objects of the scene (the hose is procedural and needs no entry): one
 #: :class:`ObjectSpec` per object of :data:`datagen.core.conventions.RIGID_OBJECTS`.
+_OBJECT_FIELDS: dict[str, Any] = {
+    name: (ObjectSpec, Field(default_factory=ObjectSpec, description=f"The {name}'s mesh and feature file."))
+    for name in RIGID_OBJECTS}
 ObjectsConfig = create_model(
     "ObjectsConfig",
     __base__=_Section,
     __doc__="Meshes and feature files of the rigid objects; null means the built-in asset.",
-    **{name: (ObjectSpec, Field(default_factory=ObjectSpec, description=f"The {name}'s mesh and feature file."))
-       for name in RIGID_OBJECTS},
+    **_OBJECT_FIELDS,
 )
 
 

@@ -237,7 +237,7 @@ class RollingShutter:
         return bool(np.any(self.readout_s != 0.0))
 
 
-def project_rolling(x: FloatArray, y: FloatArray, z: FloatArray, rate: tuple[FloatArray, FloatArray, FloatArray],
+def project_rolling(x: FloatArray, y: FloatArray, z: FloatArray, rate: tuple[FloatArray, ...],
                     intrinsics: Intrinsics, distortion: ArrayLike | None, readout_s: ArrayLike
                     ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """:func:`project_xyz` of camera-frame points ``(x, y, z)`` (at the frame's time) moving

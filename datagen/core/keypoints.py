@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Final, Literal
 
@@ -206,7 +207,7 @@ def keypoint_flags(exclusion: ArrayLike, center_visible: ArrayLike | None = None
     return flags
 
 
-def object_table(objects: tuple[str, ...], hulls: dict[str, NDArray[np.float64]]) -> FeatureTable:
+def object_table(objects: tuple[str, ...], hulls: Mapping[str, NDArray[np.float64]]) -> FeatureTable:
     """The objects' convex-hull vertices as a :class:`FeatureTable` (one 'feature' per object,
     in the order of ``objects``), so that :func:`datagen.core.label_boxes.compute_labels` with
     ``corrected=False`` gives each object's box, size rule and exclusion."""

@@ -336,7 +336,7 @@ def compute_labels(
         u[..., :-1],
         v[..., :-1],
         center,
-        depth_in_front(z).all(axis=-1),
+        np.all(depth_in_front(z), axis=-1),
         width=intrinsics.width,
         height=intrinsics.height,
         edge_margin_px=edge_margin_px,

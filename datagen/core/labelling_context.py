@@ -12,7 +12,7 @@ import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import Final, Literal, get_args
+from typing import Any, Final, Literal, get_args
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -62,7 +62,7 @@ class LabelRules:
         """
         if not isinstance(section, Mapping):
             raise ValueError(f": expected a mapping, got {type(section).__name__}")
-        values = {}
+        values: dict[str, Any] = {}
         for f in fields(cls):
             if f.name not in section:
                 raise ValueError(f"{f.name}: missing")

@@ -173,7 +173,7 @@ class TrainView:
         pixels in): the untrained head's assigner gives the box a target that is not ~0."""
         t = self.to_train(xyxy)
         with np.errstate(invalid="ignore"):
-            return np.isfinite(t).all(axis=-1) & ~self.short_sides(xyxy).any(axis=-1)
+            return np.all(np.isfinite(t), axis=-1) & ~np.any(self.short_sides(xyxy), axis=-1)
 
     def learnable(self, xyxy: ArrayLike) -> NDArray[np.bool_]:
         """``(...)`` :meth:`reaches_loss` and :meth:`assignable`: the box can teach the detector."""

@@ -26,9 +26,19 @@ __all__ = [
     "rotation_from_ypr",
     "rotation_rows_from_rotvecs",
     "rotvec_from_rotation",
+    "vec3",
 ]
 
 FloatArray = NDArray[np.float64]
+#: Three floats: a point, direction or colour held as Python numbers.
+Vec3 = tuple[float, float, float]
+
+
+def vec3(values: ArrayLike) -> Vec3:
+    """The three values of ``values`` as Python floats (a point, direction or colour kept
+    out of numpy: hashable, and the same in a config, a dataclass and JSON)."""
+    x, y, z = np.asarray(values, dtype=np.float64).reshape(3).tolist()
+    return x, y, z
 
 
 def make_transform(rotation: ArrayLike, translation: ArrayLike) -> FloatArray:

@@ -593,7 +593,7 @@ class FeatureColumns:
 
     def exclusion_counts(self) -> dict[str, int]:
         codes, counts = np.unique(self.exclusion[self.exclusion != 0], return_counts=True)
-        return {Exclusion(int(c)).reason: int(n) for c, n in zip(codes, counts, strict=True)}
+        return {str(Exclusion(int(c)).reason): int(n) for c, n in zip(codes, counts, strict=True)}
 
 
 def feature_records(labels, class_ids, visible_fraction=None, center_visible=None) -> FeatureColumns:

@@ -97,7 +97,8 @@ class DatasetMeta(Labelled):
     def limits(self) -> ReadLimits:
         """The largest file of each per-frame kind this dataset may hold
         (:class:`~datagen.dataset.limits.ReadLimits`: from dataset.json's resolution and plan)."""
-        splits = self.doc.get("splits") if isinstance(self.doc.get("splits"), dict) else {}
+        plan = self.doc.get("splits")
+        splits: dict = plan if isinstance(plan, dict) else {}
         frames = {s: v["frames"] for s, v in splits.items() if s in SPLITS and isinstance(v, dict)
                   and isinstance(v.get("frames"), int)}
         if len(frames) != len(splits):  # a plan the readers refuse in their own words (plan_gaps)
@@ -400,8 +401,9 @@ class DatasetSource(DatasetMeta):
         def integers(c: str) -> NDArray[np.int64]:
             return np.concatenate([np.asarray(t.column(c), dtype=np.int64) for t in tables])[order]
 
+        image, label, pose_label, exr = (column(c) for c in FILE_COLUMNS)
         return DatasetIndex(self.root, self.doc, self.label_format, [names[i] for i in order], frame_ids[order],
-                            column("split"), *(column(c) for c in FILE_COLUMNS), integers("approach_index"),
+                            column("split"), image, label, pose_label, exr, integers("approach_index"),
                             integers("approach_number"), column("world_texel_px"), ranks, self.limits)
 
 
@@ -545,6 +547,7 @@ def _read_tables(root: Path) -> tuple[FeatureTable, dict[str, NDArray[np.float64
             raise DatagenError(f"{path}: unreadable ({type(exc).__name__}: "
                                f"{' '.join(str(exc).split())[:120]})") from None
     features, hulls = tables
+    assert isinstance(features, FeatureTable) and isinstance(hulls, dict)
     if tuple(hulls) != tuple(features.objects) or any(len(h) == 0 or not np.isfinite(h).all()
                                                       for h in hulls.values()):
         raise DatagenError(f"{root / 'objects.parquet'}: objects {', '.join(hulls) or 'none'} with their hull "
@@ -658,7 +661,7 @@ def _check_values(table: pa.Table, path: Path, limits: ReadLimits) -> None:
             refuse("distance_m", bad, d.tolist(), f"a distance from 0 to {MAX_DISTANCE_M:g} m")
     if "ptd_receiver_m" in names:
         v = _floats(table.column("ptd_receiver_m").combine_chunks(), (table.num_rows, 3))
-        bad = ~(np.isfinite(v) & (np.abs(v) <= MAX_DISTANCE_M)).all(axis=1)
+        bad = ~np.all(np.isfinite(v) & (np.abs(v) <= MAX_DISTANCE_M), axis=1)
         if bad.any():
             refuse("ptd_receiver_m", bad, v.tolist(), f"a vector of finite metres within {MAX_DISTANCE_M:g}")
     for column in ("cam_from_world", *(f"world_from_{o}" for o in RIGID_OBJECTS)):
@@ -702,7 +705,7 @@ def _check_values(table: pa.Table, path: Path, limits: ReadLimits) -> None:
 def _rigid(m: NDArray[np.float64]) -> NDArray[np.bool_]:
     """``(B,)`` whether each ``(4, 4)`` is a rigid transform: finite, a rotation (orthonormal
     to 1e-6, determinant 1), a translation within :data:`MAX_WORLD_M`, last row 0 0 0 1."""
-    finite = np.isfinite(m).all(axis=(1, 2)) & (np.abs(m[:, :3, :3]) <= 1.0 + 1e-6).all(axis=(1, 2))
+    finite = np.all(np.isfinite(m), axis=(1, 2)) & np.all(np.abs(m[:, :3, :3]) <= 1.0 + 1e-6, axis=(1, 2))
     m = np.where(finite[:, None, None], m, 0.0)  # a rotation's entries lie in [-1, 1]
     r = m[:, :3, :3]
     orthonormal = np.abs(r @ np.swapaxes(r, 1, 2) - np.eye(3)).max(axis=(1, 2)) <= 1e-6

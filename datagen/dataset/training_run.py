@@ -39,8 +39,9 @@ class Setting:
                 f"expected one of {', '.join(map(str, self.choices))}"
         if self.kind is bool:
             return None if isinstance(value, bool) else "expected true or false"
-        number = isinstance(value, int) if self.kind is int else isinstance(value, (int, float))
-        if not number or isinstance(value, bool) or not math.isfinite(value) or not self.lo <= value <= self.hi:
+        kinds = int if self.kind is int else (int, float)
+        if not isinstance(value, kinds) or isinstance(value, bool) or not math.isfinite(value) \
+                or not self.lo <= value <= self.hi:
             what = "a whole number" if self.kind is int else "a number"
             return f"expected {what} from {self.lo:g} to {self.hi:g}"
         return None

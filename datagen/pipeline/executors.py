@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
-from typing import Final, Literal, Protocol
+from typing import Any, Final, Literal, Protocol
 
 from datagen.core.errors import DatagenError
 from datagen.dataset.layout import Layout, ShardJob
@@ -61,7 +61,7 @@ class _Worker:
 
     writer: ShardWriter | None = None
     key: tuple | None = None
-    queue = None
+    queue: Any = None  # (a multiprocessing queue of frames done)
     args: tuple = ()
 
 
@@ -154,7 +154,9 @@ def _run_group(writer: ShardWriter, group: list[ShardJob], send: Callable[[int],
 
 
 def _pool_run(group: list[ShardJob]) -> list[ShardSummary]:
-    return _run_group(_writer(*_Worker.args), group, _Worker.queue.put)
+    queue = _Worker.queue
+    assert queue is not None  # (the pool's initializer sets it)
+    return _run_group(_writer(*_Worker.args), group, queue.put)
 
 
 @contextlib.contextmanager

@@ -147,7 +147,7 @@ def prepare_folder(layout: Layout, fingerprint: str, scene: Scene, *, render: bo
     except (DatagenError, KeyError, TypeError) as exc:
         if not overwrite:
             single = isinstance(exc, ConfigError) and len(exc.problems) == 1
-            why = exc.problems[0].message if single else type(exc).__name__
+            why = exc.problems[0].message if isinstance(exc, ConfigError) and single else type(exc).__name__
             raise DatagenError(f"{path}: unreadable dataset description ({shown(why)}); use --overwrite to replace "
                                "the dataset") from None
         existing, old_fingerprint, old_config = {}, None, {}
@@ -159,9 +159,11 @@ def prepare_folder(layout: Layout, fingerprint: str, scene: Scene, *, render: bo
             kind = "a labels-only build (--no-render)" if render else "a rendered build"
             changes.insert(0, f"render {json.dumps(existing['render'])} -> {json.dumps(render)}: the folder "
                               f"holds {kind}")
-        old_assets = existing.get("assets") if isinstance(existing.get("assets"), dict) else {}
+        assets = existing.get("assets")
+        old_assets: dict = assets if isinstance(assets, dict) else {}
         for name, files in sorted(scene.assets.items()):
-            old = old_assets.get(name) if isinstance(old_assets.get(name), dict) else {}
+            entry = old_assets.get(name)
+            old: dict = entry if isinstance(entry, dict) else {}
             changes.extend(f"{name} {kind} file {files[kind]} changed" for kind in ("mesh", "features")
                            if old.get(f"{kind}_sha256") != files[f"{kind}_sha256"])
         what = "; ".join(changes[:3]) + (f"; and {len(changes) - 3} more" if len(changes) > 3 else "")

@@ -93,8 +93,9 @@ class BuildReport:
     def never_labeled(self) -> list[int]:
         """The class ids no frame of the finished shards labels (empty where a shard's per-class
         counts are unknown, or without class names)."""
-        counts = [s.per_class for s in self.shards.values()]
-        if not self.classes or not counts or any(c is None for c in counts):
+        known = [s.per_class for s in self.shards.values()]
+        counts = [c for c in known if c is not None]
+        if not self.classes or not counts or len(counts) < len(known):
             return []
         return [c for c in range(len(self.classes)) if not any(per[c] for per in counts)]
 

@@ -162,7 +162,9 @@ class ShardWriter:
         for this shard's frames only)."""
         start = time.perf_counter()
         self._stop = stop or (lambda: False)
-        rows, excluded, labels = [], Counter(), 0
+        rows: list[dict] = []
+        excluded: Counter[str] = Counter()
+        labels = 0
         rendered, render_s, denoise_s, frame_s, blank, blank_frames, compiled = 0, 0.0, 0.0, 0.0, 0, 0, 0
         recorded = 0
         stages: Counter = Counter()  # seconds per stage of the rendered frames
@@ -183,6 +185,7 @@ class ShardWriter:
                 per_class += row["features"].labeled
                 excluded.update(row["features"].exclusion_counts())
                 if record.rendered:
+                    assert self._census is not None and self.renderer is not None  # (a rendering writer's)
                     rendered += 1
                     new = self._census.new_kernels()
                     compiled += 0 if self._first_frame else new  # the first frame compiles (or loads) them all
@@ -260,6 +263,7 @@ class ShardWriter:
         measurements live only in the manifest that run did not write, and a shard holds
         few frames."""
         renderer = self.renderer
+        assert renderer is not None  # (called where the writer renders)
         result = renderer.render(draws.state, draws.look, draws.render_seed, geometry=exr is not None)
         self._clock = StageClock()
         self._clock.seconds.update(result.stages or {})

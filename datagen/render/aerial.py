@@ -84,8 +84,8 @@ def aerial_class(variant: str):
         def __init__(self, inner) -> None:
             super().__init__(mi.Properties())
             self.inner = inner
-            self._frame: dict | None = None
-            self._paths = None
+            self._frame: dict = {}  # (set_frame)
+            self._paths: tuple | None = None
 
         def set_frame(self, *, air: Atmosphere, grid: NDArray[np.float32], intrinsics: Intrinsics,
                       cam_from_render: NDArray[np.float64], codes, opacities: tuple = ()) -> None:

@@ -107,10 +107,11 @@ class Frozen:
 def refused(error: BaseException) -> bool:
     """Whether ``error`` (or an error it was raised from) is Dr.Jit refusing to record or to
     record again a frozen function (``record(): ...``, ``replay(): ... re-recording ...``)."""
-    while error is not None:
-        if "record()" in str(error) or "re-recording" in str(error):
+    cause: BaseException | None = error
+    while cause is not None:
+        if "record()" in str(cause) or "re-recording" in str(cause):
             return True
-        error = error.__cause__
+        cause = cause.__cause__
     return False
 
 

@@ -9,6 +9,8 @@ scene holding only that object's mesh.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -26,7 +28,7 @@ class Silhouettes:
     holder took the process's scene: :func:`datagen.render.runtime.hold_scene`); :meth:`mask`
     casts a frame's pixel rays against one."""
 
-    def __init__(self, meshes: dict[str, tuple[ArrayLike, ArrayLike]], intrinsics: Intrinsics,
+    def __init__(self, meshes: Mapping[str, tuple[ArrayLike, ArrayLike]], intrinsics: Intrinsics,
                  variant: str = "auto") -> None:
         import mitsuba as mi
 

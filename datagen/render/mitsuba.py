@@ -10,6 +10,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -174,10 +176,10 @@ def visible(scene, origin: ArrayLike, points: ArrayLike, tolerance_m: float | Ar
     d /= np.maximum(dist, 1e-12)[:, None]
     max_t = np.maximum(dist - np.broadcast_to(np.asarray(tolerance_m, dtype=np.float64), dist.shape), 0.0)
     n = len(p)
-    if mi.variant().startswith("scalar"):
+    if str(mi.variant()).startswith("scalar"):
         seen = np.empty(n, dtype=bool)
         for i, (di, t) in enumerate(zip(d, max_t, strict=True)):
-            ray = mi.Ray3f(mi.Point3f(*map(float, o)), mi.Vector3f(*map(float, di)))
+            ray: Any = mi.Ray3f(mi.Point3f(*map(float, o)), mi.Vector3f(*map(float, di)))
             ray.maxt = float(t)  # (Ray3f's third positional argument is the time, not maxt)
             seen[i] = not scene.ray_test(ray)
         return seen

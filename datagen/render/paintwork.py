@@ -45,6 +45,7 @@ from datagen.assets.liveries import (
     structure_uv,
 )
 from datagen.core.conventions import luminance, texture_rng
+from datagen.core.transforms import vec3
 
 if TYPE_CHECKING:
     from datagen.config.schema import Config
@@ -95,7 +96,7 @@ class Airframe:
         for name, site in light_sites(skin, float(centre[1])).items():
             axis, sign = outward[name]
             lights[name] = site + np.eye(3)[axis] * sign * LIGHT_STANDOFF_M
-        return cls(float(hi[0] - lo[0]), float(hi[1] - lo[1]), tuple(float(c) for c in centre), float(hi[0]),
+        return cls(float(hi[0] - lo[0]), float(hi[1] - lo[1]), vec3(centre), float(hi[0]),
                    exhausts, lights)
 
 

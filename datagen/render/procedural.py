@@ -19,11 +19,12 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 
 from datagen.assets.noise import FADE_LO, NUMPY, Ops, Slant, row_params
+from datagen.core.transforms import vec3
 from datagen.render.mitsuba import jit_array, scene_array
 
 __all__ = ["body_texture_class", "drjit_ops", "evaluate", "mask_class", "only_where", "texture_class"]
@@ -263,14 +264,16 @@ def _series_loop(ops: Ops, rows: dict[str, np.ndarray], term, footprint_m, outpu
     table = {name: _table(mi.UInt32 if values.dtype == np.uint32 else mi.Float, values)
              for name, values in rows.items()}
 
-    def cond(i, *total):
+    def cond(*state):
+        i, *total = state
         last = dr.minimum(i, n - 1)
         row = {"wavelength": dr.gather(mi.Float, table["wavelength"], last)}
         if settled is not None:
             row["rest"] = dr.gather(mi.Float, table["rest"], last)
         return (i < n) & going(row, total)
 
-    def body(i, *total):
+    def body(*state):
+        i, *total = state
         row = {name: dr.gather(type(values), values, i) for name, values in table.items()}
         return i + 1, *(a + b for a, b in zip(total, term(row, footprint_m, ops), strict=True))
 
@@ -295,7 +298,7 @@ def _shaded_texture(variant: str):
 
         @camera.setter
         def camera(self, value) -> None:
-            self._camera = tuple(float(c) for c in value)
+            self._camera = vec3(value)
             self._camera_jit = _opaque_point(self._camera)
 
         @property
@@ -328,6 +331,10 @@ def _shaded_texture(variant: str):
                           "u32": tuple(dr.opaque(mi.UInt32, v) for v in u32.tolist()),
                           "tables": tuple(scene_array(cls, values) for cls, values in notes.tables)}
             self._stale = False
+
+        def _value_of(self, si):
+            """The subclass's value at ``si`` (a ``Color3f`` where ``colour``, else a ``Float``)."""
+            raise NotImplementedError
 
         def _value(self, si):
             if drjit_ops() is NUMPY:  # a scalar variant: numpy's numbers, no kernel
@@ -368,7 +375,7 @@ def _opaque_point(xyz: tuple[float, float, float]):
     import drjit as dr
     import mitsuba as mi
 
-    if mi.variant().startswith("scalar"):
+    if str(mi.variant()).startswith("scalar"):
         return None
     return mi.Point3f(*(dr.opaque(mi.Float, c) for c in xyz))
 
@@ -379,7 +386,7 @@ def _opaque_rows(matrix: np.ndarray) -> tuple | None:
     import drjit as dr
     import mitsuba as mi
 
-    if mi.variant().startswith("scalar"):
+    if str(mi.variant()).startswith("scalar"):
         return None
     return tuple(dr.opaque(mi.Float, float(v)) for v in matrix[:3].reshape(-1))
 
@@ -399,7 +406,9 @@ def texture_class(variant: str):
     import drjit as dr
     import mitsuba as mi
 
-    class FieldTexture(_shaded_texture(variant)):
+    base: Any = _shaded_texture(variant)
+
+    class FieldTexture(base):
         def __init__(self, props=None, *, pixel_rad: float = 1e-3, colour: bool = False, slant: bool = False,
                      front_only: bool = False, varying: bool = True):
             super().__init__(props if props is not None else mi.Properties())
@@ -488,20 +497,9 @@ def body_texture_class(variant: str):
 
     from datagen.assets.liveries import MIN_COSINE, PaintPoint
 
-    class BodyTexture(_shaded_texture(variant)):
-        def __init__(self, props=None, *, pixel_rad: float = 1e-3, colour: bool = False):
-            super().__init__(props if props is not None else mi.Properties())
-            self.pixel_rad = float(pixel_rad)
-            self.colour = colour
-            self.camera = (0.0, 0.0, 0.0)
-            self.body_from_render = np.eye(4)
-            # Another instance of the same shapes (datagen.scene.traffic): its registry id and
-            # its own body frame, so that it wears the paint where it is.
-            self.twin = None
-            self.twin_body_from_render = np.eye(4)
-            self.shade = None  # (PaintPoint, ops) -> value (a tuple of three when colour)
-            self._frame_values: dict = {}
+    base: Any = _shaded_texture(variant)
 
+    class BodyTexture(base):
         @property
         def frame_values(self) -> dict:
             """Numbers a ``shade`` reads that change from frame to frame (:meth:`set_value`):
@@ -510,7 +508,7 @@ def body_texture_class(variant: str):
 
         def set_value(self, name: str, value: float) -> None:
             """Set ``frame_values[name]``: an opaque device value (a scalar variant's: float32)."""
-            scalar = mi.variant().startswith("scalar")
+            scalar = str(mi.variant()).startswith("scalar")
             self._frame_values[name] = np.float32(value) if scalar else dr.opaque(mi.Float, float(value))
 
         # Each per-frame value is held as opaque device values made when it is set, so that
@@ -540,8 +538,21 @@ def body_texture_class(variant: str):
         @twin.setter
         def twin(self, value: int | None) -> None:
             self._twin = None if value is None else int(value)
-            scalar = mi.variant().startswith("scalar")
+            scalar = str(mi.variant()).startswith("scalar")
             self._twin_id = None if self._twin is None or scalar else dr.opaque(mi.UInt32, self._twin)
+
+        def __init__(self, props=None, *, pixel_rad: float = 1e-3, colour: bool = False):
+            super().__init__(props if props is not None else mi.Properties())
+            self.pixel_rad = float(pixel_rad)
+            self.colour = colour
+            self.camera = (0.0, 0.0, 0.0)
+            self.body_from_render = np.eye(4)
+            # Another instance of the same shapes (datagen.scene.traffic): its registry id and
+            # its own body frame, so that it wears the paint where it is.
+            self.twin = None
+            self.twin_body_from_render = np.eye(4)
+            self.shade = None  # (PaintPoint, ops) -> value (a tuple of three when colour)
+            self._frame_values: dict = {}
 
         def _point(self, si) -> PaintPoint:
             ops = drjit_ops()
@@ -553,20 +564,23 @@ def body_texture_class(variant: str):
                 wi = np.array([si.wi[0], si.wi[1], si.wi[2]], dtype=np.float64)
                 across = np.linalg.norm(p - np.asarray(self.camera)) * self.pixel_rad
                 along = across * np.sqrt(1.0 + np.square(wi[:2] / max(abs(wi[2]), MIN_COSINE)))
-                return PaintPoint(np.float32(si.uv.x), np.float32(si.uv.y), *(np.float32(c) for c in body),
-                                  np.float32(nz), np.float32(across), np.float32(along[0]), np.float32(along[1]))
-            c = list(self._body_jit)
+                bx, by, bz = (np.float32(c) for c in body)
+                return PaintPoint(np.float32(si.uv.x), np.float32(si.uv.y), bx, by, bz, np.float32(nz),
+                                  np.float32(across), np.float32(along[0]), np.float32(along[1]))
+            rows, twin_rows = self._body_jit, self._twin_jit
+            assert rows is not None and twin_rows is not None  # (a device variant's)
+            c = list(rows)
             if self._twin_id is not None:  # the twin's hits: its body frame (the instance a ray met)
                 on_twin = dr.reinterpret_array(mi.UInt32, si.instance) == self._twin_id
-                c = [dr.select(on_twin, t, a) for a, t in zip(c, self._twin_jit)]
+                c = [dr.select(on_twin, t, a) for a, t in zip(c, twin_rows, strict=True)]
             p = si.p
-            body = [c[4 * i] * p.x + c[4 * i + 1] * p.y + c[4 * i + 2] * p.z + c[4 * i + 3] for i in range(3)]
+            x, y, z = [c[4 * i] * p.x + c[4 * i + 1] * p.y + c[4 * i + 2] * p.z + c[4 * i + 3] for i in range(3)]
             nz = c[8] * si.n.x + c[9] * si.n.y + c[10] * si.n.z
             across = dr.norm(p - self._camera_jit) * self.pixel_rad
             inverse = 1.0 / dr.maximum(dr.abs(si.wi.z), MIN_COSINE)
             along_s = across * dr.sqrt(1.0 + dr.square(si.wi.x * inverse))
             along_t = across * dr.sqrt(1.0 + dr.square(si.wi.y * inverse))
-            return PaintPoint(si.uv.x, si.uv.y, *body, nz, across, along_s, along_t)
+            return PaintPoint(si.uv.x, si.uv.y, x, y, z, nz, across, along_s, along_t)
 
         def _value_of(self, si):
             with np.errstate(over="ignore"):

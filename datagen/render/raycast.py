@@ -9,7 +9,7 @@ and nothing is hit before it, up to :func:`visibility_tolerance_m`."""
 from __future__ import annotations
 
 import functools
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,10 +17,12 @@ from numpy.typing import NDArray
 from datagen.core.conventions import OBJECT_NAMES, OTHER_AIRCRAFT_ID, object_id, pixel_centres
 from datagen.render.mitsuba import jit_array, jit_vectors, scene_array, visible
 from datagen.render.procedural import only_where
-from datagen.render.world import CLOUD_LAYERS, SURFACES
+from datagen.render.world import CLOUD_LAYERS, SURFACES, World
 
 if TYPE_CHECKING:
+    from datagen.core.camera import Intrinsics
     from datagen.core.features import FeatureTable
+    from datagen.render.frozen import Frozen
     from datagen.scene.approach import FrameState
 
 __all__ = ["CLOUD_PASS_OPACITY", "RayCasting", "cast_kernel", "visibility_tolerance_m"]
@@ -71,6 +73,19 @@ class RayCasting:
     of its other aircraft's instances (``_traffic_ids``), its Mitsuba and Dr.Jit modules
     (``_mi``, ``_dr``), and the frozen cast (``_frozen_cast``, a :class:`~datagen.render.frozen.Frozen`
     of :func:`cast_kernel`; None: traced)."""
+
+    intrinsics: Intrinsics
+    variant: str
+    scene: Any  # mi.Scene (of the variant)
+    world: World
+    _world_from_cam: NDArray[np.float64]
+    _camera_render: NDArray[np.float64]
+    _id_table: Any
+    _background_codes: Any
+    _traffic_ids: tuple[int, ...]
+    _mi: Any
+    _dr: Any
+    _frozen_cast: Frozen | None
 
     @functools.cache  # noqa: B019 (one renderer per process; two strides at most)
     def _pixel_rays(self, stride: int = 1) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
@@ -194,7 +209,7 @@ class RayCasting:
             dr.eval(t, ids, surface)
             t, ids, surface = (np.asarray(a) for a in (t, ids, surface))
             depth = t[:n] * np.asarray(z_dev)  # float32 products, as on the device
-        out = (depth.reshape(h, w).astype(np.float32), ids[:n].reshape(h, w).astype(np.uint32),
+        out: tuple[NDArray, ...] = (depth.reshape(h, w).astype(np.float32), ids[:n].reshape(h, w).astype(np.uint32),
                surface[:n].reshape(h, w).astype(np.uint8))
         if opacity:
             layers = np.stack([np.asarray(a)[:n] for a in alpha], axis=-1)  # one per layer: a copy from the device
@@ -292,7 +307,7 @@ def cast_kernel(scene, d, start: dict, id_table, codes, textures: tuple, key: tu
     # layers a frame's rays meet, and how many passes they take.
     for _ in range(len(CLOUD_LAYERS) + 1):
         si = scene.ray_intersect(mi.Ray3f(o, d), ray_flags=mi.RayFlags.Minimal, coherent=True, active=active)
-        shape = dr.reinterpret_array(mi.UInt32, si.shape)
+        shape: Any = dr.reinterpret_array(mi.UInt32, si.shape)  # (the variant's UInt32)
         valid = active & si.is_valid()
         known = valid & (shape + 1 < dr.width(codes))
         ids = dr.gather(mi.UInt32, id_table, shape, valid & (shape < dr.width(id_table)))

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Final, Protocol
+from typing import TYPE_CHECKING, Any, Final, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -153,7 +153,7 @@ class Renderer(RayCasting):
         self.sensor = sensor if sensor.enabled else None
         self.margin_px = 0
         if self.sensor is not None and sensor.distortion:
-            self.margin_px = distortion_margin_px(self.output_intrinsics, sensor.k1, sensor.k2, sensor.tangential)
+            self.margin_px = int(distortion_margin_px(self.output_intrinsics, sensor.k1, sensor.k2, sensor.tangential))
         #: The pinhole render's grid (the output image grown by the margin).
         self.intrinsics = self.output_intrinsics.with_margin(self.margin_px)
         self.spp = spp or config.render.spp
@@ -180,18 +180,24 @@ class Renderer(RayCasting):
         self._mi, self._dr = mi, dr
         self._camera_render = np.zeros(3)
         self._sensor_to_world = np.eye(4)  # the posed camera's Mitsuba to_world (render frame)
-        self._irradiance = None  # the frame's sun and sky irradiance (where the clouds or the lights need it)
+        self._irradiance: Any = None  # the frame's sun and sky irradiance (where the clouds or the lights need it)
 
     # -- scene construction (deferred until the hose's point count is known) --------------
     def release(self) -> None:
         """Drop every Mitsuba object of the scene (:func:`datagen.render.runtime.hold_scene`);
         the next :meth:`pose` builds them again."""
-        self.scene = self.params = self.sky = self.aerial = self._sea = self._target_params = None
+        # Mitsuba's objects (their types are the variant's).
+        self.scene: Any = None
+        self.params: Any = None
+        self.sky: Any = None
+        self.aerial: Any = None
+        self._sea: Any = None
+        self._target_params: Any = None
         self._meshes: dict = {}
         self._parts: dict[str, list[tuple[str, str]]] = {}  # object -> [(param key prefix, material class)]
-        self._sky_probe_inputs = None
+        self._sky_probe_inputs: tuple[Any, Any] | None = None
         self._traffic_ids: tuple[int, ...] = ()
-        self._hose_points = None
+        self._hose_points: int | None = None  # the hose's point count
         self.world = World(self.config, pixel_rad=1.0 / self.output_intrinsics.fx)
         self.paintwork = Paintwork(self.config, pixel_rad=1.0 / self.output_intrinsics.fx)
 
@@ -282,7 +288,7 @@ class Renderer(RayCasting):
         placeholder = hose_placeholder(hose_points)
         hose = mitsuba_mesh("hose", placeholder, hose_faces(hose_points), mi.load_dict(hose_bsdf),
                             texcoords=np.zeros((len(placeholder), 2), np.float32) if banded else None)
-        self._hose_key = None
+        self._hose_key: tuple | None = None
         self.scene = mi.load_dict(dict(description, hose=hose), optimize=False)
         self.params = mi.traverse(self.scene)
         self._unsettled = True  # the frozen render's first pose settles the scene (_apply)
@@ -422,12 +428,10 @@ class Renderer(RayCasting):
         n = 16 if scalar else 64  # the scalar fallback samples one direction per call
         grid = ((np.stack(np.meshgrid(np.arange(n), np.arange(n)), -1).reshape(-1, 2) + 0.5) / n).astype(np.float32)
         if scalar:
-            weights, directions = [], []
-            for u, v in grid:
-                ds, weight = sky.sample_direction(dr.zeros(mi.Interaction3f), mi.Point2f(float(u), float(v)))
-                weights.append([weight[c] for c in range(3)])
-                directions.append([ds.d.x, ds.d.y, ds.d.z])
-            weights, directions = np.asarray(weights, np.float64), np.asarray(directions, np.float64)
+            samples = [sky.sample_direction(dr.zeros(mi.Interaction3f), mi.Point2f(float(u), float(v)))
+                       for u, v in grid]
+            weights = np.asarray([[weight[c] for c in range(3)] for _, weight in samples], np.float64)
+            directions = np.asarray([[ds.d.x, ds.d.y, ds.d.z] for ds, _ in samples], np.float64)
         else:
             if self._sky_probe_inputs is None:
                 it = dr.zeros(mi.Interaction3f, n * n)
@@ -563,7 +567,7 @@ class Renderer(RayCasting):
                 (depth, ids, surface), t, grid_ids = self.geometry_and_cast(
                     1 if geometry else 2, directions, grid=PLACEMENT_STRIDE_PX if self.target_spp else 0)
             else:
-                depth = ids = surface = grid_ids = None
+                depth = ids = surface = grid_ids = None  # type: ignore[assignment]  # (no geometry pass)
                 t = self.cast(self._camera_render, directions)[0] if len(directions) else np.zeros(0, np.float32)
             t_sun, t_lights = (None, t) if sun_world is None else (t[0], t[1:])
             texels = self.world.texel_footprint_px(depth, ids, surface, self.intrinsics.fx)
@@ -594,6 +598,7 @@ class Renderer(RayCasting):
             return RenderResult(rgb, depth, ids, render_s, denoise_s, surface, texels, stages=clock.seconds)
         from datagen.render.sensor import apply_sensor
 
+        assert sun_world is not None and t_sun is not None  # (cast where there is a sensor)
         out = apply_sensor(rgb, look, state, render=self.intrinsics, output=self.output_intrinsics,
                            margin_px=self.margin_px, depth=depth, ids=ids, surface=surface,
                            sun_cam=state.cam_from_world[:3, :3] @ sun_world,
@@ -639,7 +644,7 @@ class Renderer(RayCasting):
         look without it (a config drawn with haze off): air that dims nothing."""
         from datagen.render.aerial import airlight_grid
 
-        if look.haze_visibility_m is None:
+        if look.haze_visibility_m is None or look.haze_scale_height_m is None:
             air = Atmosphere(0.0, 1e9, 1.0)
             air.rayleigh = air.aerosol = np.zeros(3)
         else:
@@ -656,6 +661,7 @@ class Renderer(RayCasting):
         from datagen.render.aerial import airlight_grid
 
         k = self.intrinsics
+        assert look.haze_visibility_m is not None and look.haze_scale_height_m is not None  # (called with haze)
         air = Atmosphere(float(state.world_from_cam[2, 3]), look.haze_visibility_m, look.haze_scale_height_m)
         depth, _, _ = self.geometry_pass()
         grid = airlight_grid(self.sky, air, k, state.world_from_cam, step=4 * AIRLIGHT_STEP_PX)
@@ -674,9 +680,9 @@ class Renderer(RayCasting):
         device (the GPU with cuda_ad_rgb)."""
         from datagen.render.denoise import denoise_render
 
-        if beauty is not None and not self.variant.startswith("scalar"):
-            beauty = self._mi.TensorXf(np.ascontiguousarray(beauty))
-        out = denoise_render(image, guides=self.guides, quality=self.config.render.denoise_quality, beauty=beauty)
+        on_device = beauty if beauty is None or self.variant.startswith("scalar") else \
+            self._mi.TensorXf(np.ascontiguousarray(beauty))
+        out = denoise_render(image, guides=self.guides, quality=self.config.render.denoise_quality, beauty=on_device)
         return np.maximum(np.array(out, dtype=np.float32), np.float32(0.0))
 
 
@@ -702,4 +708,4 @@ def _upsampled(grid: NDArray[np.float32], width: int, height: int) -> NDArray[np
     map_x, map_y = np.broadcast_to(x, (height, width)), np.broadcast_to(y[:, None], (height, width))
     out = cv2.remap(grid, np.ascontiguousarray(map_x), np.ascontiguousarray(map_y), cv2.INTER_LINEAR,
                     borderMode=cv2.BORDER_REPLICATE)
-    return out.reshape(height, width, -1)
+    return np.asarray(out, dtype=np.float32).reshape(height, width, -1)

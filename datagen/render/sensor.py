@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -343,7 +343,7 @@ def lens_blur(rgb: NDArray[np.float32], sigma_px: float) -> NDArray[np.float32]:
 
     if sigma_px <= 0.0:
         return rgb
-    return cv2.GaussianBlur(rgb, (0, 0), sigmaX=float(sigma_px), borderType=cv2.BORDER_REFLECT)
+    return np.asarray(cv2.GaussianBlur(rgb, (0, 0), sigmaX=float(sigma_px), borderType=cv2.BORDER_REFLECT), np.float32)
 
 
 def chromatic_aberration(rgb: NDArray[np.float32], intrinsics: Intrinsics, corner_px: float) -> NDArray[np.float32]:
@@ -423,7 +423,7 @@ def sun_glare(shape: tuple[int, int], intrinsics: Intrinsics, sun_cam: NDArray, 
             light = np.asarray(tint, np.float32) * np.float32(0.04 * strength * radiance)
             glare[rows, cols] += disc[..., None] * light
     if step > 1:
-        glare = cv2.resize(glare, (cw * step, ch * step), interpolation=cv2.INTER_LINEAR)
+        glare = np.asarray(cv2.resize(glare, (cw * step, ch * step), interpolation=cv2.INTER_LINEAR), np.float32)
     return glare[pad * step:pad * step + h, pad * step:pad * step + w], inside
 
 
@@ -462,7 +462,8 @@ def sensor_noise(rgb: NDArray[np.float32], iso: float, seed: int, *, device: boo
 
     x = jit_array(mi.Float, rgb.reshape(-1))
     state = seed % 2**64
-    pcg = mi.PCG32(rgb.size, dr.opaque(mi.UInt64, state), dr.opaque(mi.UInt64, state ^ NOISE_STREAM))
+    pcg32: Any = mi.PCG32  # (a class of the variant)
+    pcg = pcg32(rgb.size, dr.opaque(mi.UInt64, state), dr.opaque(mi.UInt64, state ^ NOISE_STREAM))
     u1, u2 = pcg.next_float32(), pcg.next_float32()
     normal = dr.sqrt(-2.0 * dr.log(1.0 - u1)) * dr.cos(2.0 * dr.pi * u2)
     noisy = x + noise_sigma(dr.clip(x, 0.0, 1.0), dr.opaque(mi.Float, electrons), dr.sqrt) * normal
@@ -513,7 +514,10 @@ def jpeg_round_trip(srgb8: NDArray[np.uint8], quality: int) -> NDArray[np.uint8]
     ok, data = cv2.imencode(".jpg", np.ascontiguousarray(srgb8[..., ::-1]), [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
     if not ok:
         raise RuntimeError("OpenCV could not encode a JPEG")
-    return cv2.imdecode(data, cv2.IMREAD_COLOR)[..., ::-1]
+    decoded = cv2.imdecode(data, cv2.IMREAD_COLOR)
+    if decoded is None:
+        raise RuntimeError("OpenCV could not decode its own JPEG")
+    return np.asarray(decoded, np.uint8)[..., ::-1]
 
 
 def video_round_trip(srgb8: NDArray[np.uint8], crf: int) -> NDArray[np.uint8]:
@@ -600,7 +604,7 @@ def apply_sensor(rgb: NDArray[np.float32], look: FrameLook, state: FrameState, *
         measured["auto_exposure_ev"] = math.log2(scale / fixed) if auto_exposure else None
         rgb = rgb * np.float32(scale * 2.0**look.exposure_ev)
     with clock.stage("sensor noise"):
-        if look.sensor_iso is not None:
+        if look.sensor_iso is not None and look.sensor_seed is not None:  # (drawn together)
             rgb = sensor_noise(rgb, look.sensor_iso, look.sensor_seed, device=device)
         rgb = np.maximum(rgb, np.float32(0.0)).astype(np.float32)
     if look.sensor_white_balance_k is not None:  # the tone curve: in the sRGB encoding's table (to_srgb8)

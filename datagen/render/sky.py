@@ -28,6 +28,8 @@ from typing import Final
 import numpy as np
 from numpy.typing import ArrayLike
 
+from datagen.core.transforms import vec3
+
 __all__ = ["SUN_APERTURE_DEG", "sky_class"]
 
 #: The sun's angular diameter, degrees (``sunsky``'s default, passed to it explicitly).
@@ -78,8 +80,7 @@ def sky_class(variant: str):
             """The frame's sky: the unit vector towards the sun (world frame), the
             atmosphere's turbidity and the two scales."""
             d = np.asarray(sun_direction, dtype=np.float64)
-            d = [float(c) for c in d / np.linalg.norm(d)]
-            self._params["sun_direction"] = mi.Vector3f(*d)
+            self._params["sun_direction"] = mi.Vector3f(*vec3(d / np.linalg.norm(d)))
             self._params["turbidity"] = float(turbidity)
             self._params.update()
             self.sun = mi.Vector3f(*(opaque(c) for c in d))

@@ -87,6 +87,6 @@ def render_views(mesh: ObjectMesh, poses: Sequence[NDArray], intrinsics: Intrins
     for world_from_cam in poses:
         params["sensor.to_world"] = mi.Transform4f(world_from_micam(world_from_cam).tolist())
         params.update()
-        image = np.asarray(mi.util.convert_to_bitmap(mi.render(scene, seed=0)))[..., ::-1].copy()
+        image = np.asarray(mi.util.convert_to_bitmap(mi.render(scene, seed=mi.UInt32(0))))[..., ::-1].copy()
         out.append((image, visible(scene, world_from_cam[:3, 3], points, tolerance_m=0.01)))
     return out

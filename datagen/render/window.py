@@ -18,7 +18,7 @@ droplet is still where it projects.
 from __future__ import annotations
 
 import functools
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -72,7 +72,7 @@ def _veil(rgb: NDArray[np.float32]) -> NDArray[np.float32]:
     h, w = rgb.shape[:2]
     small = cv2.resize(rgb, (max(1, w // VEIL_STEP), max(1, h // VEIL_STEP)), interpolation=cv2.INTER_AREA)
     small = cv2.GaussianBlur(small, (0, 0), sigmaX=VEIL_SIGMA * w / VEIL_STEP, borderType=cv2.BORDER_REFLECT)
-    return cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
+    return np.asarray(cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR), np.float32)
 
 
 @functools.lru_cache(maxsize=2)
@@ -91,7 +91,7 @@ def dirty(rgb: NDArray[np.float32], strength: float, seed: int) -> NDArray[np.fl
         return rgb
     h, w = rgb.shape[:2]
     passed, scattered = _dirt_weights(seed, w, h, float(strength))
-    return cv2.add(cv2.multiply(rgb, passed), cv2.multiply(_veil(rgb), scattered))
+    return np.asarray(cv2.add(cv2.multiply(rgb, passed), cv2.multiply(_veil(rgb), scattered)), np.float32)
 
 
 def droplets(rgb: NDArray[np.float32], count: int, seed: int) -> NDArray[np.float32]:
@@ -187,4 +187,5 @@ def reflection(rgb: NDArray[np.float32], strength: float, seed: int) -> NDArray[
         return rgb
     h, w = rgb.shape[:2]
     mean = float(luminance(rgb).mean(dtype=np.float64))
-    return cv2.add(rgb, cv2.multiply(_reflection_weights(seed, w, h, float(strength)), (mean, mean, mean, 0.0)))
+    scale: Any = (mean, mean, mean, 0.0)  # a scalar per channel (OpenCV's stubs allow only an array)
+    return np.asarray(cv2.add(rgb, cv2.multiply(_reflection_weights(seed, w, h, float(strength)), scale)), np.float32)

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,6 +38,7 @@ from datagen.assets.clouds import CLOUD_FORMS, CloudLayer, CloudLight
 from datagen.assets.ground import GROUND_TYPES, LAND_ROUGHNESS, NO_SHORE, Ground
 from datagen.assets.sea import SeaSurface, SeaWaves
 from datagen.core.conventions import EARTH_RADIUS_M, texture_rng
+from datagen.core.transforms import vec3
 from datagen.scene.look import FrameLook
 
 if TYPE_CHECKING:
@@ -124,7 +125,7 @@ def earth_cap() -> tuple[NDArray[np.float32], NDArray[np.uint32], NDArray[np.flo
         chord = 2.0 * math.pi * 1.05 * r / EARTH_CAP_AZIMUTHS
         radii.append(r + min(r * (EARTH_CAP_GROWTH - 1.0),
                              math.sqrt(8.0 * EARTH_RADIUS_M * EARTH_CAP_SAG * r - chord * chord)))
-    radii = np.asarray(radii)
+    ring = np.asarray(radii)
     step = 2.0 * np.pi / EARTH_CAP_AZIMUTHS
     phi = np.arange(EARTH_CAP_AZIMUTHS) * step
     # The rings' centre lies off the top, in a direction between two spokes: no spoke's
@@ -132,13 +133,13 @@ def earth_cap() -> tuple[NDArray[np.float32], NDArray[np.uint32], NDArray[np.flo
     # (Embree's triangle test is not watertight there: one pixel of a podcam frame saw the
     # sky through the sea where every spoke passed under the camera).
     centre = EARTH_CAP_FIRST_M * np.array([np.cos(22.5 * step), np.sin(22.5 * step)])
-    ring_r = radii[1:, None]
+    ring_r = ring[1:, None]
     x, y = centre[0] + ring_r * np.cos(phi), centre[1] + ring_r * np.sin(phi)
     xy = np.concatenate([centre[None], np.stack([x, y], -1).reshape(-1, 2)])
     verts = np.concatenate([xy, -sphere_drop(np.hypot(xy[:, 0], xy[:, 1]))[:, None]], axis=1)
     normals = verts + np.array([0.0, 0.0, EARTH_RADIUS_M])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    n, rings = EARTH_CAP_AZIMUTHS, len(radii) - 1
+    n, rings = EARTH_CAP_AZIMUTHS, len(ring) - 1
     j = np.arange(n)
     fan = np.stack([np.zeros(n, int), 1 + j, 1 + (j + 1) % n], -1)
     k = np.arange(rings - 1)[:, None]
@@ -173,8 +174,8 @@ class World:
         self._cloudy: dict[str, NDArray[np.bool_]] = {}
         self._cloud_key: tuple | None = None
         self._sea_key: tuple | None = None
-        self._sea_texture = None  # the sea's procedural albedo (whitecaps, colour), where either is on
-        self._wave_textures = None  # the sea's procedural (normals, roughness), where waves are on
+        self._sea_texture: Any = None  # the sea's procedural albedo (whitecaps, colour), where either is on
+        self._wave_textures: tuple[Any, Any] | None = None  # the sea's (normals, roughness), where waves are on
         self._waves: SeaWaves | None = None
         self.cloud_meshes: dict = {}
         self._cloud_down: dict[str, bool] = {}
@@ -290,10 +291,10 @@ class World:
                    look.cloud_opacity, look.cloud_deck_thickness_m, look.cloud_layer_thickness_m)
             fresh = self._cloud_key != key
             drawn = look.cloud_seed is not None  # a look without cloud draws: clear sky
-            rng = texture_rng(look.cloud_seed)
+            rng = texture_rng(look.cloud_seed or 0)  # (no seed: clear sky, nothing drawn from it)
             sun, sky = irradiance if irradiance is not None else (np.zeros(3), np.zeros(3))
-            light = CloudLight(tuple(float(c) for c in sun), tuple(float(c) for c in sky),
-                               tuple(float(c) for c in sun_direction), look.cloud_albedo if drawn else 0.0)
+            light = CloudLight(vec3(sun), vec3(sky),
+                               vec3(sun_direction), look.cloud_albedo or 0.0)
             for name, (coverage_key, altitude_key, thickness_key) in CLOUD_LAYERS.items():
                 if fresh:  # an approach's weather, drawn once
                     coverage = getattr(look, coverage_key) if drawn else 0.0
@@ -307,7 +308,7 @@ class World:
                 above = height > 0.0  # seen from below: a base, which lets through what its thickness does
                 opacity, radiance = self._cloud_textures[name]
                 for texture in (opacity, radiance):
-                    texture.camera = tuple(float(c) for c in camera_render)
+                    texture.camera = vec3(camera_render)
                 opacity.shade = layer  # CloudLayer(x, y, footprint_m, ops): the opacity
                 radiance.shade = functools.partial(_layer_radiance, layer, light, above)
                 if fresh or self._cloud_height.get(name) != height:  # the mesh moves only when it must
@@ -320,16 +321,16 @@ class World:
             self._cloud_key = key
         sea_textures = [t for t in (self._sea_texture, *(self._wave_textures or ())) if t is not None]
         for texture in sea_textures:
-            texture.camera = tuple(float(c) for c in camera_render)
+            texture.camera = vec3(camera_render)
         if self._wave_textures is None:
             params[f"{SEA_KEY}.bsdf.roughness.value"] = look.sea_roughness
         if not self.earth:
             return
-        key = (look.sea_seed, look.sea_wind_speed_mps, look.sea_wind_direction_deg, look.sea_whitecap_fraction,
+        sea_key = (look.sea_seed, look.sea_wind_speed_mps, look.sea_wind_direction_deg, look.sea_whitecap_fraction,
                look.sea_colour, look.ground_type, look.ground_seed)
-        if key != self._sea_key:  # an approach's sea and ground, made once
-            self._sea_key = key
-            rng = texture_rng(look.sea_seed)
+        if sea_key != self._sea_key:  # an approach's sea and ground, made once
+            self._sea_key = sea_key
+            rng = texture_rng(look.sea_seed or 0)  # (no seed: no wave, whitecap or colour drawn from it)
             wind = look.sea_wind_speed_mps if look.sea_wind_speed_mps is not None else 7.0
             if self.waves:
                 self._waves = SeaWaves.drawn(rng, wind, look.sea_wind_direction_deg or 0.0)
@@ -339,7 +340,7 @@ class World:
                                        look.sea_whitecap_fraction or 0.0, look.sea_wind_direction_deg or 0.0,
                                        tint=self.sea_colour)
             if self.ground:
-                self._ground = Ground.drawn(texture_rng(look.ground_seed), GROUND_TYPES[look.ground_type or "sea"])
+                self._ground = Ground.drawn(texture_rng(look.ground_seed or 0), GROUND_TYPES[look.ground_type or "sea"])
             if self._sea_texture is not None:
                 self._sea_texture.shade = functools.partial(_earth_albedo, sea, self._ground)
             if self._wave_textures is not None:
@@ -557,7 +558,7 @@ def _cull_slack(field, spacing_m: float) -> float:
 
 
 def _cell_maxima(field, x0: NDArray[np.float64], y0: NDArray[np.float64],
-                 offsets: NDArray[np.float64]) -> NDArray[np.float32]:
+                 offsets: NDArray[np.floating]) -> NDArray[np.float32]:
     """Per cell (lower-left corners ``x0``, ``y0``), the largest value of ``field``'s first
     :data:`CULL_OCTAVES` octaves at the points ``offsets`` x ``offsets`` from its corner
     (each point's float32 coordinates rounded once from the float64 sum). Under a vectorized
@@ -584,9 +585,9 @@ def _cell_maxima(field, x0: NDArray[np.float64], y0: NDArray[np.float64],
     side, count = dr.opaque(mi.UInt32, len(offsets)), dr.opaque(mi.UInt32, per)
     cell, j = i // count, i % count
     corner_x, corner_y, steps = (mi.Float64(aligned(a, np.float64)) for a in (x0, y0, offsets))
-    x = mi.Float(dr.gather(mi.Float64, corner_x, cell) + dr.gather(mi.Float64, steps, j % side))
-    y = mi.Float(dr.gather(mi.Float64, corner_y, cell) + dr.gather(mi.Float64, steps, j // side))
-    maxima = dr.block_reduce(dr.ReduceOp.Max, octaves(x, y, ops=drjit_ops()), per)
+    x_dev = mi.Float(dr.gather(mi.Float64, corner_x, cell) + dr.gather(mi.Float64, steps, j % side))
+    y_dev = mi.Float(dr.gather(mi.Float64, corner_y, cell) + dr.gather(mi.Float64, steps, j // side))
+    maxima = dr.block_reduce(dr.ReduceOp.Max, octaves(x_dev, y_dev, ops=drjit_ops()), per)
     return np.asarray(maxima, dtype=np.float32)[:cells]
 
 

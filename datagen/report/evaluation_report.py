@@ -70,10 +70,11 @@ def write_evaluation(view: FrameOrder, runs: list[tuple[dict, dict]], out: Path,
     plots = plot_evaluation(runs, summaries, out / "plots", name=str(view.doc.get("name", "")))
     files = ["results.parquet"]
     if detector is not None:
-        doc["detector"] = summarize_detections(detector, DISTANCE_EDGES)
+        scores = summarize_detections(detector, DISTANCE_EDGES)
+        doc["detector"] = scores
         write_parquet(out / "detections.parquet", _detections_table(detector), compression="zstd")
         files.append("detections.parquet")
-        plots.update(plot_detector(doc["detector"], out / "plots", name=str(view.doc.get("name", ""))))
+        plots.update(plot_detector(scores, out / "plots", name=str(view.doc.get("name", ""))))
     # evaluation.json last: the record of every file the evaluation wrote (``files``, relative to
     # its folder), which --overwrite removes and nothing else.
     doc["files"] = [*files, *(str(p.relative_to(out)) for p in plots.values())]

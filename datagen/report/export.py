@@ -76,8 +76,8 @@ def export_dataset(view: DatasetView, out: Path, fmt: str, progress: Callable[[i
     for rel in view.image_path:  # nothing outside the dataset, nothing but the dataset's images
         _check_image(view, rel)
     for rel in view.exr_path if fmt == "bop" else []:
-        if not regular_file(view.folder.file(rel)):
-            raise DatagenError(f"{view.root / rel}: missing or not a regular file")
+        if not rel or not regular_file(view.folder.file(rel)):
+            raise DatagenError(f"{view.root / (rel or '')}: missing or not a regular file")
     out = Path(os.path.abspath(out))
     if out.is_symlink():
         raise DatagenError(f"--out: {out}: a symbolic link; an export is written only into a new real folder")
@@ -116,13 +116,15 @@ def export_dataset(view: DatasetView, out: Path, fmt: str, progress: Callable[[i
     return out
 
 
-def _check_image(view: DatasetView, rel: str) -> Path:
+def _check_image(view: DatasetView, rel: str | None) -> Path:
     """The dataset's image ``rel``, once it is a regular file inside the dataset of at most
     :attr:`~datagen.dataset.limits.ReadLimits.image_bytes`, whose header says it is a PNG or
     JPEG (as its suffix says) of the dataset's size: an export links only the dataset's own
     frames beside annotations that state their size."""
     from datagen.analysis.audit.dataset_files import HEADER_BYTES, image_header_problem
 
+    if not rel:
+        raise DatagenError(f"{view.root}: a frame without an image (a --no-render build)")
     path = view.folder.file(rel)
     head = read_bytes(path, "an image", view.limits.image_bytes, head=HEADER_BYTES)
     problem = image_header_problem(head, path, view.limits)
@@ -154,7 +156,8 @@ def coco_document(view: DatasetView, rows: list[int], objects: FrameLabels) -> d
     names = layout.names(view.features)
     categories = [{"id": c + 1, "name": name, "supercategory": "aircraft", "keypoints": names[c], "skeleton": []}
                   for c, name in enumerate(layout.objects)]
-    images, annotations = [], []
+    images: list[dict] = []
+    annotations: list[dict] = []
     for b in rows:
         image_id = int(view.frame_id[b])
         images.append({"id": image_id, "file_name": view.image_path[b], "width": k.width, "height": k.height})
@@ -184,7 +187,8 @@ def export_coco(view: DatasetView, out: Path, progress: Callable[[int], None]) -
         if not rows:
             continue
         for b in rows:
-            link_or_copy(_check_image(view, view.image_path[b]), out / view.image_path[b])
+            rel = view.image_path[b] or ""
+            link_or_copy(_check_image(view, rel), out / rel)
             progress(1)
         doc = coco_document(view, rows, objects)
         write_text(out / "annotations" / f"{split}.json", _json(doc))
@@ -248,11 +252,11 @@ def _recorded_mesh(view: DatasetView, name: str) -> Path:
         with open(path, "rb") as f:
             for block in iter(lambda: f.read(1 << 20), b""):
                 digest.update(block)
-        digest = digest.hexdigest()
+        sha256 = digest.hexdigest()
     except OSError as exc:
         raise DatagenError(f"{where}.mesh: {path}: {exc.strerror or 'unreadable'} (the BOP export writes the "
                            "object's model from the mesh the dataset was built with)") from None
-    if digest != record["mesh_sha256"]:
+    if sha256 != record["mesh_sha256"]:
         raise DatagenError(f"{where}.mesh: {path}: its bytes are not those the dataset was built with "
                            "(mesh_sha256 differs): the mesh was changed or swapped")
     return path
@@ -319,12 +323,14 @@ def export_bop(view: DatasetView, out: Path, progress: Callable[[int], None]) ->
         scenes.setdefault((view.split[b], shard), []).append(b)
     for (split, shard), rows in scenes.items():
         folder = out / split / f"{shard:06d}"
-        camera, gt, gt_info = {}, {}, {}
+        camera: dict[str, dict] = {}
+        gt: dict[str, list] = {}
+        gt_info: dict[str, list] = {}
         for b in rows:
             im = int(view.frame_id[b])
             source = _check_image(view, view.image_path[b])
             link_or_copy(source, folder / "rgb" / f"{im:06d}{source.suffix}")
-            ids = read_object_ids(view.folder.file(view.exr_path[b]), view.limits)
+            ids = read_object_ids(view.folder.file(view.exr_path[b] or ""), view.limits)
             camera[str(im)] = {"cam_K": cam_k, "depth_scale": 1.0}
             gt[str(im)], gt_info[str(im)] = [], []
             for o, name in enumerate(view.features.objects):

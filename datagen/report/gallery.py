@@ -160,6 +160,7 @@ def write_closeups(out: Path, *, before: Path | None = None, spp: int | None = N
                               interpolation=cv2.INTER_AREA)
         overview = np.pad(overview, ((0, max(CLOSEUP[1] - overview.shape[0], 0)), (0, 0), (0, 0)))[:CLOSEUP[1]]
         tiles = [_caption(overview, f"{name} #{i}")]
+        assert result.surface is not None  # (rendered with its geometry pass)
         for what, (x, y) in _windows(result.surface, CLOSEUP).items():
             box = (slice(y, y + CLOSEUP[1]), slice(x, x + CLOSEUP[0]))
             if earlier is not None:

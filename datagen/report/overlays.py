@@ -201,7 +201,8 @@ def _magnified(image: NDArray[np.uint8], panel: Panel) -> NDArray[np.uint8]:
     # OpenCV samples source index coordinates (pixel centres at integers): continuous - 0.5.
     m = np.array([[1 / s, 0, panel.crop[0] + 0.5 / s - 0.5], [0, 1 / s, panel.crop[1] + 0.5 / s - 0.5]])
     flags = (cv2.INTER_NEAREST if s >= 3 else cv2.INTER_LINEAR) | cv2.WARP_INVERSE_MAP
-    return cv2.warpAffine(image, m, panel.size, flags=flags, borderMode=cv2.BORDER_CONSTANT, borderValue=PAPER)
+    return np.asarray(cv2.warpAffine(image, m, panel.size, flags=flags, borderMode=cv2.BORDER_CONSTANT,
+                                     borderValue=PAPER), np.uint8)
 
 
 def _columns(n: int) -> int:
@@ -379,8 +380,11 @@ def _place_titles(regions: list[tuple[float, float, float, float]], titles: list
                   if x >= x0b + 2 and y >= y0b + 2 and x + w <= x1b - 2 and y + h <= y1b - 2]
         inside = inside or [(min(max(x0b + 4, a0), x1b - w - 4), max(y0b + 4, min(b0 + 6, y1b - h - 4)))]
         # The first free place, or the least crowded one (another title weighs more than an outline).
-        x, y = min(inside, key=lambda xy, w=w, h=h: 10 * sum(_overlap((*xy, xy[0] + w, xy[1] + h), t) for t in taken)
-                   + sum(_overlap((*xy, xy[0] + w, xy[1] + h), e) for e in edges))
+        def crowding(xy: tuple[float, float], w: float = w, h: float = h) -> float:
+            box = (*xy, xy[0] + w, xy[1] + h)
+            return 10 * sum(_overlap(box, t) for t in taken) + sum(_overlap(box, e) for e in edges)
+
+        x, y = min(inside, key=crowding)
         taken.append((x - 2, y - 2, x + w + 2, y + h + 2))
         out.append((x, y, x + w, y + h))
     return out
@@ -529,14 +533,15 @@ def write_previews(view: DatasetView, frames: list[int] | None, out: Path, label
         raise DatagenError(f"--frames: frame {missing[0]} is not in {view.root} "
                            f"(frames {int(view.frame_id.min())}-{int(view.frame_id.max())})")
     for f in wanted:  # a sheet shows nothing from outside the dataset
-        if view.image_path[index[f]]:
-            view.folder.file(view.image_path[index[f]])
+        rel = view.image_path[index[f]]
+        if rel:
+            view.folder.file(rel)
     out = claim_report_folder(REPORTS["preview"], out, view.root)
     written = []
     for f in wanted:
         sheet = draw_sheet(view, index[f], labels)
         if sheet.problem and warn is not None:
-            warn(f"{view.root / view.image_path[index[f]]}: {sheet.problem}; frame {f} drawn without its image")
+            warn(f"{view.root / (view.image_path[index[f]] or '')}: {sheet.problem}; frame {f} drawn without its image")
         written.append(write_image(out / f"{f:08d}.jpg", sheet.image, jpeg_quality=92))
     # preview.json: the record of every sheet written here (``files``, relative to the folder),
     # which --overwrite removes and nothing else.

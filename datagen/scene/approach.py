@@ -239,9 +239,10 @@ class FrameStates:
         if a not in self._chains or j >= len(self._chains[a]):  # not held, or held only up to an earlier frame
             self._add(a, simulate_chain(self.config, self.seed, a))
         chain = self._chains[a]
-        if isinstance(chain[j], ChainSnapshot):
-            chain[j] = _state(self.config, self.seed, frame_index, a, chain[j])
-        return chain[j]
+        held = chain[j]
+        if isinstance(held, ChainSnapshot):
+            held = chain[j] = _state(self.config, self.seed, frame_index, a, held)
+        return held
 
 
 def frame_state(config: Config, frame_index: int, seed: int | None = None) -> FrameState:

@@ -368,9 +368,11 @@ def simulate_chains(config: Config, seed: int, approach_indices,
                 c = active[row]
                 chain = chains[c]
                 if a.sampling == "distance":
-                    while len(snapshots[c]) < k and (contact[row] or targets[c][len(snapshots[c])] >= distance[row]):
+                    due_at = targets[c]
+                    assert due_at is not None  # (drawn where frames are sampled by distance)
+                    while len(snapshots[c]) < k and (contact[row] or due_at[len(snapshots[c])] >= distance[row]):
                         snapshots[c].append(chain.snap())
-                    next_target[c] = targets[c][len(snapshots[c])] if len(snapshots[c]) < k else inf
+                    next_target[c] = due_at[len(snapshots[c])] if len(snapshots[c]) < k else inf
                 else:
                     if step % a.stride_steps == 0:
                         snapshots[c].append(chain.snap())
@@ -394,6 +396,7 @@ def trace_approach(config: Config, seed: int, approach_index: int, every: int = 
     steps: ``time_s``, ``distance_m``, ``ptd_receiver_m`` (T, 3) and ``probe_drogue_m``
     (T, 3), the probe tip in the drogue-centred local frame (paper Fig. 7)."""
     a = config.approach
+    chain: _Chain | _FastChain
     if a.model == 2:  # a batch of one; its chain's arrays are brought up to date before they are read
         batch = _Chains(config, seed, [approach_index])
         chain, state = batch.chains[0], batch.load([0])

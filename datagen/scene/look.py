@@ -12,8 +12,9 @@ from __future__ import annotations
 import colorsys
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING, Any, Final, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,6 +22,7 @@ from numpy.typing import NDArray
 from datagen.assets.models import MATERIAL_CLASSES
 from datagen.assets.sea import cox_munk_roughness
 from datagen.core.conventions import OBJECT_NAMES
+from datagen.core.transforms import vec3
 
 if TYPE_CHECKING:
     from datagen.config.schema import Config
@@ -144,7 +146,7 @@ def _scales(rng: np.random.Generator, sun_bounds, sky_bounds) -> tuple[float, fl
 
 def _hsv(rng: np.random.Generator | _Uniforms, saturation, value) -> tuple[float, float, float]:
     h = float(rng.uniform(0.0, 1.0))
-    return tuple(float(c) for c in colorsys.hsv_to_rgb(h, _uniform(rng, saturation), _uniform(rng, value)))
+    return vec3(colorsys.hsv_to_rgb(h, _uniform(rng, saturation), _uniform(rng, value)))
 
 
 #: Uniform draws of one object's materials in :func:`draw_look`: seven parts, each a hue,
@@ -156,7 +158,7 @@ def draw_look(config: Config, rng: np.random.Generator) -> FrameLook:
     """Draw a frame's sky, sun, exposure and per-part materials, in a fixed order."""
     r = config.randomization
     sky, mat = r.sky, r.materials
-    look = dict(
+    look: dict[str, Any] = dict(
         sun_elevation_deg=_uniform(rng, sky.sun_elevation_deg),
         sun_azimuth_deg=_uniform(rng, sky.sun_azimuth_deg),
         turbidity=_uniform(rng, sky.turbidity),
@@ -170,16 +172,16 @@ def draw_look(config: Config, rng: np.random.Generator) -> FrameLook:
     else:
         look.update(sea_roughness=_uniform(rng, r.sea.roughness), sea_wind_speed_mps=None)
     materials: dict[str, dict[str, Material]] = {}
-    rng = _Uniforms(rng, MATERIAL_DRAWS * len(OBJECT_NAMES))  # the materials' draws in one call
+    draws = _Uniforms(rng, MATERIAL_DRAWS * len(OBJECT_NAMES))  # the materials' draws in one call
     for obj in OBJECT_NAMES:
         materials[obj] = {
-            "paint": Material(_hsv(rng, mat.paint_saturation, mat.paint_value), _uniform(rng, mat.paint_roughness)),
-            "metal": Material(_hsv(rng, (0.0, 0.05), (0.6, 0.9)), _uniform(rng, mat.metal_roughness), 1.0),
-            "glass": Material(_hsv(rng, (0.0, 0.3), (0.01, 0.06)), _uniform(rng, (0.02, 0.08)), 0.0, 1.0),
-            "markings": Material(_hsv(rng, (0.0, 0.8), (0.05, 0.6)), _uniform(rng, mat.paint_roughness)),
-            "dark": Material(_hsv(rng, (0.0, 0.1), (0.005, 0.03)), _uniform(rng, (0.4, 0.8))),
-            "fabric": Material(_hsv(rng, (0.0, 0.2), (0.55, 0.9)), _uniform(rng, (0.6, 0.9))),
-            "rubber": Material(_hsv(rng, (0.0, 0.1), (0.02, 0.06)), _uniform(rng, (0.5, 0.8))),
+            "paint": Material(_hsv(draws, mat.paint_saturation, mat.paint_value), _uniform(draws, mat.paint_roughness)),
+            "metal": Material(_hsv(draws, (0.0, 0.05), (0.6, 0.9)), _uniform(draws, mat.metal_roughness), 1.0),
+            "glass": Material(_hsv(draws, (0.0, 0.3), (0.01, 0.06)), _uniform(draws, (0.02, 0.08)), 0.0, 1.0),
+            "markings": Material(_hsv(draws, (0.0, 0.8), (0.05, 0.6)), _uniform(draws, mat.paint_roughness)),
+            "dark": Material(_hsv(draws, (0.0, 0.1), (0.005, 0.03)), _uniform(draws, (0.4, 0.8))),
+            "fabric": Material(_hsv(draws, (0.0, 0.2), (0.55, 0.9)), _uniform(draws, (0.6, 0.9))),
+            "rubber": Material(_hsv(draws, (0.0, 0.1), (0.02, 0.06)), _uniform(draws, (0.5, 0.8))),
         }
         # The drogue's finer parts without a drogue draw (draw_world): as the fabric and metal were.
         fabric = materials[obj]["fabric"]
@@ -192,7 +194,10 @@ def _log_uniform(rng: np.random.Generator, bounds) -> float:
     return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
 
 
-def _share(rng: np.random.Generator, shares: dict[str, float]) -> str:
+_Name = TypeVar("_Name", bound=str)
+
+
+def _share(rng: np.random.Generator, shares: Mapping[_Name, float]) -> _Name:
     """One of ``shares``' names, each drawn with its share of their sum (one uniform draw)."""
     names = list(shares)
     weights = np.asarray([shares[n] for n in names], dtype=np.float64)
@@ -383,10 +388,10 @@ def _approach_world(config: Config, seed: int, approach_index: int, base: float)
         from datagen.assets.drogues import draw_drogue
 
         rng = world_rng(seed, approach_index, "drogue")
-        drawn = draw_drogue(rng, _share(rng, d.canopies), d.hose_bands)
-        world.update(drogue_canopy=drawn.canopy, drogue_tape=drawn.tape, hose_band_colour=drawn.band_colour,
-                     hose_band_spacing_m=drawn.band_spacing_m, hose_band_width_m=drawn.band_width_m,
-                     drogue_draw=drawn)
+        drogue = draw_drogue(rng, _share(rng, d.canopies), d.hose_bands)
+        world.update(drogue_canopy=drogue.canopy, drogue_tape=drogue.tape, hose_band_colour=drogue.band_colour,
+                     hose_band_spacing_m=drogue.band_spacing_m, hose_band_width_m=drogue.band_width_m,
+                     drogue_draw=drogue)
     if r.traffic.enabled:
         from datagen.scene.traffic import draw_traffic
 

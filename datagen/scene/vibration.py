@@ -99,7 +99,8 @@ def _drawn(mount: str, scale: float, seed: int, approach_index: int) -> Vibratio
     band = MOUNT_VIBRATION[mount]
     rng = world_rng(seed, approach_index, "vibration")
     rms = math.radians(math.exp(rng.uniform(*np.log(band.rms_deg)))) * scale
-    frequency = np.exp(rng.uniform(*np.log(band.frequency_hz), size=(COMPONENTS, 3)))
+    low, high = np.log(band.frequency_hz)
+    frequency = np.exp(rng.uniform(low, high, size=(COMPONENTS, 3)))
     phase = rng.uniform(0.0, 2.0 * math.pi, size=(COMPONENTS, 3))
     weight = rng.uniform(0.5, 1.0, size=(COMPONENTS, 3)) / frequency  # more power at the low end
     weight[:, 2] *= band.roll_share * np.sqrt((weight[:, :2] ** 2).sum() / (weight[:, 2] ** 2).sum())

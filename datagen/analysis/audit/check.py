@@ -67,7 +67,8 @@ class Check:
     def passed(self) -> bool:
         if self.min_pass_share is None:
             return self.failures == 0
-        return self.checked == 0 or self.pass_share >= self.min_pass_share
+        share = self.pass_share
+        return share is None or share >= self.min_pass_share
 
     def fail(self, where: str, what: str, score: float = math.inf, row: int | None = None,
              seq: int | None = None) -> None:

@@ -109,9 +109,9 @@ def image_list_problems(index: FrameOrder) -> list[tuple[str, str]]:
             continue
         for line in have:
             rel = line.removeprefix("./")
-            why = folder.problem(rel) or (None if regular_file(root / rel) else "missing or not a regular file")
-            if why:
-                problems.append((name, f"{shown(line[:120])}: {why}"))
+            wrong = folder.problem(rel) or (None if regular_file(root / rel) else "missing or not a regular file")
+            if wrong:
+                problems.append((name, f"{shown(line[:120])}: {wrong}"))
                 break
     return problems
 
@@ -128,7 +128,7 @@ def check_recipe(meta: DatasetMeta) -> Check:
                   "nothing that writes without bound (what Ultralytics reads and runs when it trains)")
     sets = ["", "pose/"] if meta.label_format == "both" else [""]
     for prefix in sets:
-        data = meta.pose_yaml if prefix else meta.data_yaml
+        data = (meta.pose_yaml if prefix else meta.data_yaml) or {}
         name = f"{prefix}data.yaml"
         check.checked += 1
         for key in sorted(set(map(str, data)) - set(DATA_YAML_KEYS)):

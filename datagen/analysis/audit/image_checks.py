@@ -30,10 +30,11 @@ def check_images(view: DatasetView) -> list[Check]:
                    "(not saturated, black or flat)")
     content = Check("label_content", "the image shows something inside each label box (not saturated, black or "
                     f"flat) for at least {100 * MIN_SHOWING_SHARE:g}% of the boxes", min_pass_share=MIN_SHOWING_SHARE)
-    rows = [b for b, rel in enumerate(view.image_path) if rel and not view.folder.problem(rel)]
+    paths = {b: rel for b, rel in enumerate(view.image_path) if rel and not view.folder.problem(rel)}
+    rows = list(paths)
 
     def one(b: int) -> tuple[str | None, np.ndarray | None]:
-        image, problem = decode_image(view.root / view.image_path[b], view.limits)
+        image, problem = decode_image(view.root / paths[b], view.limits)
         if image is None:
             return problem, None
         return None, blank_boxes(image, view.label_xyxy[b][view.labeled[b]])  # only the codes come back
@@ -42,7 +43,7 @@ def check_images(view: DatasetView) -> list[Check]:
         for b, (problem, codes) in zip(rows, pool.map(one, rows), strict=True):
             images.checked += 1
             if problem:
-                images.fail(view.image_path[b], problem, row=b)
+                images.fail(paths[b], problem, row=b)
             if codes is None:
                 continue
             where = f"{view.manifest_file[b]} frame {view.frame_id[b]}"
@@ -53,7 +54,7 @@ def check_images(view: DatasetView) -> list[Check]:
             if len(codes):
                 frames.checked += 1
                 if codes.all():
-                    reasons = sorted({BLANK_REASONS[c] for c in codes})
+                    reasons = sorted({str(BLANK_REASONS[c]) for c in codes})
                     frames.fail(where, f"none of its {len(codes)} label boxes shows anything ({', '.join(reasons)})",
                                 row=b)
     frames.applicable = content.applicable = bool(rows)

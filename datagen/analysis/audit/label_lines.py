@@ -262,7 +262,7 @@ def learnable_part(view: DatasetView, lines: NDArray[np.float64]) -> dict[str, N
     short = train.short_sides(xyxy)
     border = short.any(axis=1) & ~(short & ~(on[:, :2] | on[:, 2:])).any(axis=1)  # every short side on it
     return {"cls": cls.astype(np.int16), "distance": view.distance_m[b], "survives": train.survives(xyxy),
-            "anchored": train.has_anchor(xyxy), "assignable": ~short.any(axis=1), "border": border,
+            "anchored": train.has_anchor(xyxy), "assignable": ~np.any(short, axis=1), "border": border,
             "train_w": np.minimum(bw * train.scale[0], bh * train.scale[1])}
 
 

@@ -26,7 +26,7 @@ def check_manifest(view: DatasetView, labels: FrameLabels) -> Check:
     reasons = REASONS[labels.exclusion.astype(np.int64)]
     bad = good[:, None] & ((err > MANIFEST_TOLERANCE_PX) | (reasons != view.exclusion)
                            | (view.labeled != labels.labeled))
-    for b in np.flatnonzero(~good | bad.any(axis=1)):
+    for b in np.flatnonzero(~good | bad.any(axis=1)).tolist():
         where = f"{view.manifest_file[b]} frame {view.frame_id[b]}"
         if not k_ok[b]:
             check.fail(where, f"intrinsics {view.row_intrinsics[b].tolist()} differ from dataset.json's", row=b)

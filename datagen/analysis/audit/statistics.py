@@ -9,7 +9,7 @@ import itertools
 import math
 from collections import Counter
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -177,7 +177,7 @@ def _drift_statistics(spill: Spill, distance_edges: NDArray, size_of_class: NDAr
                 yield groups, part["drift"]
 
     found = order_statistics(chunks, wanted)
-    out = {}
+    out: dict[int, dict[str, Any]] = {}
     for g, n in count.items():
         def stat(k: int, g: int = g) -> float:
             return found[(g, k)]
@@ -257,12 +257,14 @@ def statistics(meta: DatasetMeta, spill: Spill, totals: Totals) -> Statistics:
     for obj, counts in zip(features.objects, labeled, strict=True):
         cum = np.cumsum(counts)
         below = int(counts[:PNP_MIN_FEATURES].sum())
+        def labeled_at(k: int, cum: NDArray[np.int64] = cum) -> float:
+            return float(np.searchsorted(cum, k, side="right"))
+
         pnp[obj] = {"frames_below_3": below, "share_below_3": below / frames if frames else 0.0,
-                    "median_labeled": median(frames, lambda k, cum=cum: float(np.searchsorted(cum, k, side="right")))
-                    if frames else 0.0}
+                    "median_labeled": median(frames, labeled_at) if frames else 0.0}
     per_class, exclusions = totals.per_class, totals.exclusions
     whole = summary(_ALL)
-    summary = {
+    stats = {
         "tight_drift_px": {
             "features": whole["count"],
             "mean": whole.get("mean"),
@@ -287,7 +289,7 @@ def statistics(meta: DatasetMeta, spill: Spill, totals: Totals) -> Statistics:
     }
     boxes = [((tag or "untagged"), groups[_BY_SIZE + i]["box"]) for i, tag in enumerate(tags)
              if "box" in groups.get(_BY_SIZE + i, {})]
-    return Statistics(summary, DriftPlot(drift["scatter"], boxes), top)
+    return Statistics(stats, DriftPlot(drift["scatter"], boxes), top)
 
 
 #: Bins of the appearance section's histograms.

@@ -11,10 +11,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final, Literal
 
-import numpy as np
+from datagen.core.transforms import vec3
 
 if TYPE_CHECKING:  # trimesh takes most of a second to import: only where meshes are made
     import trimesh
+    from numpy.typing import ArrayLike
 
 __all__ = [
     "MATERIAL_CLASSES",
@@ -76,10 +77,10 @@ class FeatureAnchor:
 
     @staticmethod
     def at(name: str, point, size: Size = "small") -> FeatureAnchor:
-        return FeatureAnchor(name, tuple(float(v) for v in np.asarray(point, dtype=np.float64)), size)
+        return FeatureAnchor(name, vec3(point), size)
 
     @staticmethod
-    def on_both_sides(right: dict[str, object], y0: float = 0.0,
+    def on_both_sides(right: dict[str, ArrayLike], y0: float = 0.0,
                       sizes: dict[str, Size] | None = None) -> list[FeatureAnchor]:
         """Anchors given by their points on the right of the centre plane y = ``y0``, and the
         same mirrored to the left (:func:`datagen.assets.models.loft.on_side`): every right
@@ -115,6 +116,6 @@ class Model:
 
     def combined(self) -> trimesh.Trimesh:
         """All parts as one mesh."""
-        import trimesh
+        from datagen.assets.loader import concatenated
 
-        return trimesh.util.concatenate(list(self.parts.values()))
+        return concatenated(list(self.parts.values()))

@@ -25,6 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from datagen.assets.models import FeatureAnchor, InternalFeature, Model
 from datagen.assets.models.loft import Parts, box, loft, tube, tube_rings
 from datagen.assets.rig import HOSE_ATTACH_DROGUE_M
+from datagen.core.transforms import vec3
 
 __all__ = [
     "HOSE_RADIUS_M", "HOSE_SIDES", "build_drogue", "hose_faces", "hose_mesh", "hose_placeholder", "hose_texcoords",
@@ -48,7 +49,7 @@ def _rib_angles() -> NDArray[np.float64]:
     return np.linspace(0.0, 2 * np.pi, N_RIBS, endpoint=False)
 
 
-def _on_axis(x: float, radius: float, angle: ArrayLike) -> NDArray[np.float64]:
+def _on_axis(x: float, radius: float | NDArray[np.float64], angle: ArrayLike) -> NDArray[np.float64]:
     a = np.asarray(angle, dtype=np.float64)
     return np.stack([np.full_like(a, x), radius * np.cos(a), radius * np.sin(a)], axis=-1)
 
@@ -97,10 +98,11 @@ def build_drogue() -> Model:
     marked |= (polar > 0) & (polar < 2 * np.pi / N_RIBS)  # and the panel above the left rib
     marked &= ~in_band
     body = ~marked & ~in_band
-    parts.add("fabric", canopy.submesh([panels[body & (gore % 2 == 0)]], append=True))
-    parts.add("fabric_alt", canopy.submesh([panels[body & (gore % 2 == 1)]], append=True))
-    parts.add("fabric_band", canopy.submesh([panels[in_band]], append=True))
-    parts.add("markings", canopy.submesh([panels[marked]], append=True))
+    for part, faces in (("fabric", body & (gore % 2 == 0)), ("fabric_alt", body & (gore % 2 == 1)),
+                        ("fabric_band", in_band), ("markings", marked)):
+        piece = canopy.submesh([panels[faces]], append=True)
+        assert isinstance(piece, trimesh.Trimesh)  # (appended: one mesh)
+        parts.add(part, piece)
 
     # Ribs (struts) from the throat to the rim, and the rim's band (reflective tape on many drogues).
     rib_angles = _rib_angles()
@@ -124,7 +126,7 @@ def build_drogue() -> Model:
     throat_points = _on_axis(THROAT_X, THROAT_RADIUS + 0.018, rib_angles[::4])
     basket = InternalFeature(
         "basket_centre",
-        tuple(tuple(float(v) for v in p) for p in np.concatenate([rim_points, throat_points])),
+        tuple(vec3(p) for p in np.concatenate([rim_points, throat_points])),
         (0.0, 0.0, 0.0),
         "large",
     )

@@ -18,6 +18,8 @@ import numpy as np
 import trimesh
 from numpy.typing import ArrayLike, NDArray
 
+from datagen.assets.loader import concatenated
+
 __all__ = [
     "Parts",
     "airfoil_ring",
@@ -44,7 +46,7 @@ def _mesh(vertices: ArrayLike, faces: ArrayLike) -> trimesh.Trimesh:
     return mesh
 
 
-def loft(rings: Sequence[ArrayLike], *, cap_start: bool = True, cap_end: bool = True,
+def loft(rings: Sequence[ArrayLike] | NDArray[np.float64], *, cap_start: bool = True, cap_end: bool = True,
          closed: bool = False) -> trimesh.Trimesh:
     """Skin consecutive rings of ``N`` points each (``(S, N, 3)``) into a surface.
 
@@ -149,7 +151,7 @@ def wing(root_le: ArrayLike, root_chord: float, tip_le: ArrayLike, tip_chord: fl
     Chords run aft (-x) from the leading-edge points. Horizontal panels are thick
     along z; ``vertical`` panels (fins, pylons) along y.
     """
-    t_root, t_tip = (thickness, thickness) if np.isscalar(thickness) else thickness
+    t_root, t_tip = (thickness, thickness) if isinstance(thickness, (int, float)) else thickness
     rings = []
     for le, chord, t in ((root_le, root_chord, t_root), (tip_le, tip_chord, t_tip)):
         uv = airfoil_ring(n, t) * chord
@@ -219,7 +221,7 @@ class Parts:
         parts in name order."""
         out = {}
         for name in sorted(self._meshes):
-            mesh = trimesh.util.concatenate(self._meshes[name])
+            mesh = concatenated(self._meshes[name])
             mesh = trimesh.Trimesh(np.round(mesh.vertices, VERTEX_DECIMALS), mesh.faces, process=False)
             out[name] = mesh
         return out

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Final
 
 import numpy as np
 
+from datagen.assets.loader import concatenated
 from datagen.assets.models.loft import tube
 
 if TYPE_CHECKING:
@@ -35,8 +36,6 @@ BOW_MIDDLE: Final = (0.0, -0.215, 0.52)
 
 def windscreen_frame(mount: Mount) -> trimesh.Trimesh:
     """The frame's mesh in ``mount``'s body frame."""
-    import trimesh
-
     def mirrored(p):
         return (-p[0], p[1], p[2])
 
@@ -47,4 +46,4 @@ def windscreen_frame(mount: Mount) -> trimesh.Trimesh:
     for path in paths:
         cam = np.asarray(path, dtype=np.float64)
         parts.append(tube(cam @ body_from_cam[:3, :3].T + body_from_cam[:3, 3], FRAME_RADIUS_M, n=12))
-    return trimesh.util.concatenate(parts)
+    return concatenated(parts)
