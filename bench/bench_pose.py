@@ -98,7 +98,8 @@ def main() -> None:
                                                                        "labels.truncated_objects": truncated})
                 view = load_dataset(root)
                 in_instance = view.labeled & np.equal(view.object_exclusion[:, view.features.object_index], None)
-                stats = audit(view).stats["learnable_pose"]
+                stats = audit(view).stats.learnable_pose
+                assert stats is not None
                 loader = "-"
                 if have_ultralytics:
                     small = tmp / f"{scene}-{truncated}-loader"
@@ -108,8 +109,8 @@ def main() -> None:
                     shares = dataloader_shares(small / "pose")
                     loader = (f"{shares['images_kept']} images kept, {shares['instances_out']} instances out of "
                               f"{shares['lines']} lines, {100 * (shares['anchored_share'] or 0):.1f}% anchored")
-                share = "-" if stats["share"] is None else f"{100 * stats['share']:.1f}%"
-                print(f"| {scene} | {truncated} | {stats['instances'] / len(view):.2f} | "
+                share = "-" if stats.share is None else f"{100 * stats.share:.1f}%"
+                print(f"| {scene} | {truncated} | {stats.instances / len(view):.2f} | "
                       f"{in_instance.sum():,} / {view.labeled.sum():,} "
                       f"({100 * in_instance.sum() / view.labeled.sum():.1f}%) | "
                       f"{share} | {both_s:.1f} / {detect_s:.1f} | {loader} |")

@@ -128,7 +128,9 @@ def sweep(args) -> None:
             config = config_for(args.seed, args.sweep_frames, **{"labels.min_box_px": size})
             report = build_dataset(config, Path(tmp) / "ds", render=False)
             view = load_dataset(Path(tmp) / "ds")
-            share = audit(view).stats["learnable"]["share"]
+            found = audit(view).stats.learnable
+            assert found is not None and found.share is not None
+            share = found.share
             learnable, shared = contested(view)
             blank_images(Path(tmp) / "ds", config)
             cells = []
@@ -219,9 +221,10 @@ def end_to_end(args) -> None:
     build_dataset(config_for(args.seed, args.frames, **{"render.spp": args.spp}), root, overwrite=True)
     print(f"build: {args.frames} frames at {args.spp} spp in {time.perf_counter() - start:.1f} s -> {root}")
     view = load_dataset(root)
-    learn = audit(view).stats["learnable"]
-    print(f"datagen audit: {learn['lines']} label lines, learnable {100 * learn['share']:.1f}% "
-          f"(min side at imgsz {learn['train_imgsz']}: {learn['min_side_train_px']['min']:.2f} px)")
+    learn = audit(view).stats.learnable
+    assert learn is not None and learn.share is not None and learn.min_side_train_px is not None
+    print(f"datagen audit: {learn.lines} label lines, learnable {100 * learn.share:.1f}% "
+          f"(min side at imgsz {learn.train_imgsz}: {learn.min_side_train_px:.2f} px)")
     for split in ("train", "val"):
         seen = dataloader_learnability(root, split)
         n = max(1, seen["lines"])

@@ -73,11 +73,11 @@ def test_a_built_dataset_passes_every_check(dataset) -> None:
     assert by_name["label_lines"].checked > 100
     assert by_name["centre_drift"].worst < 1e-3  # seven decimals: under 1.2e-4 px at most
     stats = result.stats
-    assert stats["tight_drift_px"]["features"] > 0 and stats["tight_drift_px"]["max"] > 0
-    assert sum(stats["exclusions"].values()) == 8 * 80
-    assert stats["exclusions"]["labeled"] == sum(stats["labels_per_class"].values())
-    assert sum(stats["distance_coverage"]["frames"]) == 8
-    assert set(stats["pnp_below_3_features"]) == {"receiver", "tanker"}
+    assert stats.drift.overall.count > 0 and (stats.drift.overall.max or 0.0) > 0
+    assert sum(stats.exclusions.values()) == 8 * 80
+    assert stats.exclusions["labeled"] == sum(stats.labels_per_class.values())
+    assert sum(stats.coverage.frames) == 8
+    assert set(stats.pnp) == {"receiver", "tanker"}
 
 
 @pytest.mark.render
@@ -331,20 +331,20 @@ def test_audit_fails_unlearnable_labels_and_names_the_worst_classes(tmp_path: Pa
     worst = learnable.offenders[0]
     assert worst.startswith("class ") and worst.split(":")[0].split(" ", 2)[2] in names
     assert "lines learnable" in worst
-    stats = result.stats["learnable"]
-    assert stats["share"] == pytest.approx(learnable.pass_share)
-    assert stats["worst_classes"][0]["share"] == min(v["share"] for v in stats["by_class"].values())
-    assert {b["lo"] for b in stats["by_distance_m"]} >= {0.0, 110.0} and set(stats["by_size"]) == {"small", "medium"}
+    stats = result.stats.learnable
+    assert stats is not None and stats.share == pytest.approx(learnable.pass_share)
+    assert stats.worst_classes[0][1].share == min(v.share for v in stats.by_class.values())
+    assert {b.lo for b in stats.by_distance_m} >= {0.0, 110.0} and set(stats.by_size) == {"small", "medium"}
     # The same frames with the default minimum are learnable throughout: the boxes short of the
     # assigner's size are those that could not grow past the edge margin, and the audit knows them.
     view = load_dataset(wingcam_labels(tmp_path / "default"))
     default = audit(view)
     check = {c.name: c for c in default.checks}["learnable"]
-    assert check.passed and check.failures == 0 and default.stats["learnable"]["share"] == 1.0
+    assert check.passed and check.failures == 0 and default.stats.learnable and default.stats.learnable.share == 1.0
     boxes = view.label_xyxy[view.labeled]
     short = ~view.train_view.learnable(boxes)
     assert short.any() and margin_bound(view, boxes)[short].any(axis=1).all()
-    assert default.stats["learnable"]["share_at_edge_margin"] == pytest.approx(short.mean())
+    assert default.stats.learnable.share_at_edge_margin == pytest.approx(short.mean())
 
 
 def test_audit_command_reports_learnability_and_its_threshold(tmp_path: Path) -> None:

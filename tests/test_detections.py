@@ -49,8 +49,8 @@ def test_detections_on_the_true_centres_are_all_matched_with_zero_error(wingcam)
     assert s.labeled.sum() == total and s.matched.sum() == total
     assert s.missed.sum() == s.mislocated.sum() == s.spurious.sum() == 0
     assert np.nanmax(s.error_px) == 0.0
-    overall = summarize_detections(s, DISTANCE_EDGES)["overall"]
-    assert overall["recall"] == 1.0 and overall["precision"] == 1.0 and overall["error_p95_px"] == 0.0
+    overall = summarize_detections(s, DISTANCE_EDGES).overall
+    assert overall.recall == 1.0 and overall.precision == 1.0 and overall.error_p95_px == 0.0
 
 
 def test_detections_at_the_tight_box_centres_are_biased_by_the_whole_parallax_offset(wingcam) -> None:
@@ -62,8 +62,8 @@ def test_detections_at_the_tight_box_centres_are_biased_by_the_whole_parallax_of
     assert has.sum() > 0.9 * s.labeled.sum()
     np.testing.assert_allclose(along[has], s.parallax_px[has], rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(s.error_px[has], s.parallax_px[has], rtol=1e-9, atol=1e-9)
-    overall = summarize_detections(s, DISTANCE_EDGES)["overall"]
-    assert overall["along_parallax_mean_px"] == pytest.approx(overall["parallax_offset_mean_px"], rel=1e-9)
+    overall = summarize_detections(s, DISTANCE_EDGES).overall
+    assert overall.along_parallax_mean_px == pytest.approx(overall.parallax_offset_mean_px, rel=1e-9)
     # A match is decided by the radius: only features whose offset is within it match.
     assert s.matched.sum() == int((s.parallax_px[s.labeled] <= MATCH_PX).sum())
 
@@ -84,10 +84,10 @@ def test_missed_mislocated_and_spurious_are_counted_per_feature(wingcam) -> None
     assert s.matched.sum() == (labeled & reported & ~far).sum()
     assert s.spurious.sum() == (~labeled & reported).sum()
     summary = summarize_detections(s, DISTANCE_EDGES)
-    by_class = summary["by_class"]
+    by_class = summary.by_class
     for c, name in enumerate(wingcam.features.name):
-        assert by_class[name]["missed"] == (labeled[:, c] & ~reported[:, c]).sum()
-    assert sum(b["labeled"] for b in summary["by_distance"]) == labeled.sum()
+        assert by_class[name].missed == (labeled[:, c] & ~reported[:, c]).sum()
+    assert sum(b.counts.labeled for b in summary.by_distance) == labeled.sum()
 
 
 def test_a_frame_without_a_prediction_file_misses_every_labeled_feature(wingcam) -> None:

@@ -273,11 +273,11 @@ def test_the_tutorials_audit_figures_are_the_readme_builds(readme_build) -> None
     root, _ = readme_build
     result = audit(load_dataset(root))
     drift = {c.name: c for c in result.checks}["centre_drift"].worst
-    tight = result.stats["tight_drift_px"]
+    tight = result.stats.drift.overall
     page = " ".join((ROOT / "docs" / "tutorials" / "first-dataset.md").read_text().split())
     assert result.passed
     assert (f"every check passes (worst label-centre drift {drift:.2e} px); tight-box drift median "
-            f"{tight['median']:.2f} px, 95th percentile {tight['p95']:.2f} px, max {tight['max']:.2f} px") in page
+            f"{tight.median:.2f} px, 95th percentile {tight.p95:.2f} px, max {tight.max:.2f} px") in page
 
 
 def test_the_readme_and_the_site_cite_the_paper_alike() -> None:

@@ -145,7 +145,7 @@ def test_the_hoses_texture_coordinates_are_its_length_from_the_drogue_end() -> N
 def test_a_vibrations_pointing_rms_is_its_drawn_rms_within_the_mounts_band(seed, approach, mount, scale) -> None:
     config = load_config({"wingcam": "wingcam55", "dashcam": "dashcam75", "podcam": "podcam15"}[mount])
     config = override_config(config, {"camera.vibration.scale": scale})
-    shake = vibration(config, seed, approach)
+    shake = vibration(config.camera, seed, approach)
     band = MOUNT_VIBRATION[mount]
     assert band.rms_deg[0] * scale * (1 - 1e-9) <= shake.rms_deg <= band.rms_deg[1] * scale * (1 + 1e-9)
     assert np.all((shake.frequency_hz >= band.frequency_hz[0]) & (shake.frequency_hz <= band.frequency_hz[1]))
@@ -166,7 +166,7 @@ def test_a_vibrations_pointing_rms_is_its_drawn_rms_within_the_mounts_band(seed,
 def test_vibration_turns_the_frames_camera_by_its_rotation_at_the_frames_time_and_earlier() -> None:
     config = load_config("podcam15")
     still = override_config(config, world_off("vibration"))
-    shake = vibration(config, config.dataset.seed, 0)
+    shake = vibration(config.camera, config.dataset.seed, 0)
     for i in (0, 5):
         a, b = FrameStates(config)(i), FrameStates(still)(i)
         assert a.approach_index == 0
@@ -175,7 +175,7 @@ def test_vibration_turns_the_frames_camera_by_its_rotation_at_the_frames_time_an
         np.testing.assert_array_equal(a.world_from_cam[:3, 3], b.world_from_cam[:3, 3])
         earlier = b.earlier.world_from_cam[:3, :3].T @ a.earlier.world_from_cam[:3, :3]
         np.testing.assert_allclose(rotvec_from_rotation(earlier), shake.rotvec(a.earlier.time_s), atol=1e-12)
-    assert vibration(still, config.dataset.seed, 0) is None
+    assert vibration(still.camera, config.dataset.seed, 0) is None
 
 
 # --- the lens and the camera's processing -------------------------------------------

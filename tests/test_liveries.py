@@ -393,7 +393,7 @@ def test_beacons_flash_a_fifth_of_the_time_and_the_steady_lights_always_shine() 
     from datagen.config import load_config
     from datagen.render.paintwork import BEACON_HZ, BEACON_ON, Airframe, Paintwork
 
-    paintwork = Paintwork(load_config("wingcam55"), pixel_rad=1e-3)
+    paintwork = Paintwork(load_config("wingcam55").randomization.livery, pixel_rad=1e-3)
     box = np.array([[-10.0, -8.0, -1.0], [10.0, 8.0, 2.0]])
     mesh = SimpleNamespace(parts={"paint": SimpleNamespace(vertices=box, faces=np.zeros((0, 3), int))})
     paintwork._airframes = {"receiver": Airframe.of(mesh)}

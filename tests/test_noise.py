@@ -431,7 +431,7 @@ def test_the_sea_clouds_and_liveries_report_no_texel_where_they_are_seen_and_non
     from datagen.core.conventions import object_id
     from datagen.render.world import SURFACES, World
 
-    world = World(load_config("wingcam55"), pixel_rad=1e-3)
+    world = World(load_config("wingcam55").randomization, pixel_rad=1e-3)
     depth = np.array([[5000.0, 4200.0], [80.0, np.inf]])
     ids = np.array([[0, 0], [object_id("tanker"), 0]], dtype=np.uint32)
     surface = np.array([[1, 1], [3, 0]], dtype=np.uint8)

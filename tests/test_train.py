@@ -88,7 +88,9 @@ def test_datagen_learnable_rule_equals_ultralytics_line_by_line(tmp_path: Path) 
         anchored = set(seen["classes"][mine & seen["anchored_mask"]])
         assert set(classes[view.train_view.reaches_loss(boxes)]) == anchored, image
         assert set(classes[view.train_view.learnable(boxes)]) <= anchored  # and large enough for a target
-    share = audit(view).stats["learnable"]["share"]
+    learnable = audit(view).stats.learnable
+    assert learnable is not None
+    share = learnable.share
     assert share < 0.95
     assert not {c.name: c for c in audit(view).checks}["learnable"].passed
 

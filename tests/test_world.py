@@ -133,20 +133,20 @@ def test_every_world_draw_is_in_the_manifest_and_the_audit_appearance_section(di
         assert all(row[c] is None for c in MEASURED_COLUMNS)  # nothing rendered, nothing measured
     result = audit(load_dataset(distorted))
     assert result.passed, [c for c in result.checks if not c.passed]
-    section = result.stats["appearance"]
+    section = result.stats.appearance
     assert set(section) == set(APPEARANCE)
-    assert section["clouds"]["cloud_deck_coverage"]["frames"] == len(rows)
-    assert sum(section["sensor"]["sensor_iso"]["histogram"]) == len(rows)
-    assert sum(section["livery"]["tanker_livery"]["values"].values()) == len(rows)
-    assert section["image"]["share_cloud"]["frames"] == 0  # labels only: no image statistics
+    assert section["clouds"]["cloud_deck_coverage"].frames == len(rows)
+    assert sum(section["sensor"]["sensor_iso"].histogram or []) == len(rows)
+    assert sum((section["livery"]["tanker_livery"].values or {}).values()) == len(rows)
+    assert section["image"]["share_cloud"].frames == 0  # labels only: no image statistics
 
 
 def test_a_switched_off_randomizer_shows_as_not_drawn_in_the_audit(tmp_path: Path) -> None:
     config = override_config(load_config("wingcam55"), {"dataset.frames": 20, **world_off("clouds", "livery")})
     build_dataset(config, tmp_path / "ds", render=False)
-    section = audit(load_dataset(tmp_path / "ds")).stats["appearance"]
-    assert all(entry["frames"] == 0 for entry in section["clouds"].values())
-    assert section["livery"]["receiver_livery"]["frames"] == 0 and section["sensor"]["sensor_iso"]["frames"] == 20
+    section = audit(load_dataset(tmp_path / "ds")).stats.appearance
+    assert all(entry.frames == 0 for entry in section["clouds"].values())
+    assert section["livery"]["receiver_livery"].frames == 0 and section["sensor"]["sensor_iso"].frames == 20
 
 
 def test_distorted_labels_differ_from_pinhole_ones_and_the_audit_recomputes_them(distorted: Path, tmp_path) -> None:

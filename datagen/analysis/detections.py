@@ -22,10 +22,11 @@ offset the manifests record.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,7 +34,8 @@ from numpy.typing import NDArray
 from datagen.core.training import MATCH_PX
 from datagen.dataset.reader import DatasetMeta, DatasetView
 
-__all__ = ["DetectionScores", "score_detections", "summarize_detections"]
+__all__ = ["DetectionScores", "DetectorBin", "DetectorCounts", "DetectorSummary", "score_detections",
+           "summarize_detections"]
 
 #: A parallax offset shorter than this (px) has no direction; such features have no signed error.
 _MIN_PARALLAX_PX: Final = 1e-6
@@ -162,7 +164,64 @@ def _quantile(values: NDArray[np.float64], q: float) -> float | None:
     return float(np.percentile(values, q)) if values.size else None
 
 
-def _counts(s: DetectionScores, sel: NDArray[np.bool_]) -> dict:
+@dataclass(frozen=True)
+class DetectorCounts:
+    """A detector's labeled features, those it found within the match radius (``matched``),
+    further away (``mislocated``) or not at all (``missed``), its detections of no labeled
+    feature (``spurious``), its recall (matched / labeled) and precision (matched /
+    detections), the centre error's median and 95th percentile (px, every detected labeled
+    feature), and the mean and spread of the error along the parallax direction beside the
+    mean tight-box offset (None: nothing to measure)."""
+
+    labeled: int
+    matched: int
+    mislocated: int
+    missed: int
+    spurious: int
+    recall: float | None
+    precision: float | None
+    error_median_px: float | None
+    error_p95_px: float | None
+    along_parallax_mean_px: float | None
+    along_parallax_std_px: float | None
+    parallax_offset_mean_px: float | None
+
+    def to_json(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class DetectorBin:
+    """The detector's counts over the features whose frame's distance (m) lies in ``[lo_m, hi_m)``."""
+
+    lo_m: float
+    hi_m: float
+    counts: DetectorCounts
+
+    def to_json(self) -> dict[str, Any]:
+        return {"lo_m": self.lo_m, "hi_m": self.hi_m, **self.counts.to_json()}
+
+
+@dataclass(frozen=True)
+class DetectorSummary:
+    """A detector scored against the true centres (:func:`summarize_detections`): the match
+    radius, the frames scored and those without a prediction file, and its counts overall,
+    per class and per distance bin; ``evaluation.json``'s ``detector`` is :meth:`to_json`."""
+
+    match_px: float
+    frames: int
+    frames_without_file: int
+    overall: DetectorCounts
+    by_class: dict[str, DetectorCounts]
+    by_distance: tuple[DetectorBin, ...]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"match_px": self.match_px, "frames": self.frames, "frames_without_file": self.frames_without_file,
+                "overall": self.overall.to_json(), "by_class": {k: v.to_json() for k, v in self.by_class.items()},
+                "by_distance": [b.to_json() for b in self.by_distance]}
+
+
+def _counts(s: DetectionScores, sel: NDArray[np.bool_]) -> DetectorCounts:
     """Counts, recall and centre-error statistics of the rows ``sel``."""
     labeled = int((s.labeled & sel).sum())
     matched = int((s.matched & sel).sum())
@@ -172,30 +231,29 @@ def _counts(s: DetectionScores, sel: NDArray[np.bool_]) -> dict:
     along = along[np.isfinite(along)]
     offset = s.parallax_px[detected_labeled & np.isfinite(s.along_parallax_px)]
     detections = int((s.detected & sel).sum())
-    return {
-        "labeled": labeled,
-        "matched": matched,
-        "mislocated": int((s.mislocated & sel).sum()),
-        "missed": int((s.missed & sel).sum()),
-        "spurious": int((s.spurious & sel).sum()),
-        "recall": matched / labeled if labeled else None,
-        "precision": matched / detections if detections else None,
-        "error_median_px": _quantile(error, 50),
-        "error_p95_px": _quantile(error, 95),
-        "along_parallax_mean_px": float(along.mean()) if along.size else None,
-        "along_parallax_std_px": float(along.std()) if along.size else None,
-        "parallax_offset_mean_px": float(offset.mean()) if offset.size else None,
-    }
+    return DetectorCounts(
+        labeled=labeled,
+        matched=matched,
+        mislocated=int((s.mislocated & sel).sum()),
+        missed=int((s.missed & sel).sum()),
+        spurious=int((s.spurious & sel).sum()),
+        recall=matched / labeled if labeled else None,
+        precision=matched / detections if detections else None,
+        error_median_px=_quantile(error, 50),
+        error_p95_px=_quantile(error, 95),
+        along_parallax_mean_px=float(along.mean()) if along.size else None,
+        along_parallax_std_px=float(along.std()) if along.size else None,
+        parallax_offset_mean_px=float(offset.mean()) if offset.size else None,
+    )
 
 
-def summarize_detections(s: DetectionScores, distance_edges: NDArray[np.float64]) -> dict:
+def summarize_detections(s: DetectionScores, distance_edges: NDArray[np.float64]) -> DetectorSummary:
     """Overall, per class and per distance bin: matched, mislocated, missed and spurious
     counts, recall (matched / labeled), precision (matched / detections), the centre
     error's median and 95th percentile (px, every detected labeled feature), and the mean
     and spread of the error along the parallax direction beside the mean tight-box offset."""
     everything = np.ones(len(s.frame_id), dtype=bool)
     by_class = {s.names[c]: _counts(s, s.class_id == c) for c in range(len(s.names))}
-    by_distance = [{"lo_m": float(lo), "hi_m": float(hi), **_counts(s, (s.distance_m >= lo) & (s.distance_m < hi))}
-                   for lo, hi in itertools.pairwise(distance_edges)]
-    return {"match_px": s.match_px, "frames": s.frames, "frames_without_file": s.frames_without_file,
-            "overall": _counts(s, everything), "by_class": by_class, "by_distance": by_distance}
+    by_distance = tuple(DetectorBin(float(lo), float(hi), _counts(s, (s.distance_m >= lo) & (s.distance_m < hi)))
+                        for lo, hi in itertools.pairwise(distance_edges))
+    return DetectorSummary(s.match_px, s.frames, s.frames_without_file, _counts(s, everything), by_class, by_distance)

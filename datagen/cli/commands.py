@@ -211,10 +211,10 @@ def audit(
             typer.echo(f"{status}  {check.name}: {check.checked} checked, {check.failures} failed{worst}")
         for offender in check.offenders[:5]:
             typer.echo(f"        {offender}")
-    drift = result.stats["tight_drift_px"]
-    if drift["features"]:
-        typer.echo(f"tight-box centre drift from the true centre: median {drift['median']:.3f} px, "
-                   f"p95 {drift['p95']:.3f} px, max {drift['max']:.3f} px over {drift['features']} features")
+    drift = result.stats.drift.overall
+    if drift.count:
+        typer.echo(f"tight-box centre drift from the true centre: median {drift.median:.3f} px, "
+                   f"p95 {drift.p95:.3f} px, max {drift.max:.3f} px over {drift.count} features")
     typer.echo(f"{'PASSED' if result.passed else 'FAILED'}: {written['html']}")
     if not result.passed:
         raise typer.Exit(1)
@@ -309,12 +309,12 @@ def evaluate(
         detector = score_detections(source, plan.predictions, split=plan.split, match_px=match_px)
     written = write_evaluation(index, runs, folder, settings=settings, detector=detector)
     if detector is not None:
-        d = summarize_detections(detector, DISTANCE_EDGES)["overall"]
-        typer.echo(f"detector: {d['matched']} of {d['labeled']} labeled features found within {match_px:g} px "
-                   f"of the true centre ({100 * (d['recall'] or 0):.1f}%), {d['mislocated']} further away, "
-                   f"{d['missed']} missed, {d['spurious']} spurious detections; "
-                   + (f"centre error median {d['error_median_px']:.2f} px, 95th percentile {d['error_p95_px']:.2f} px"
-                      if d['error_median_px'] is not None else "no centre error (no feature found)"))
+        d = summarize_detections(detector, DISTANCE_EDGES).overall
+        typer.echo(f"detector: {d.matched} of {d.labeled} labeled features found within {match_px:g} px "
+                   f"of the true centre ({100 * (d.recall or 0):.1f}%), {d.mislocated} further away, "
+                   f"{d.missed} missed, {d.spurious} spurious detections; "
+                   + (f"centre error median {d.error_median_px:.2f} px, 95th percentile {d.error_p95_px:.2f} px"
+                      if d.error_median_px is not None else "no centre error (no feature found)"))
     for described, result in runs:
         s = summarize(result, settings)
         what = f"noise {described['noise_px']:g} px" if described["source"] == "truth" else "predictions"

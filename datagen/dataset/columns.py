@@ -16,13 +16,14 @@ the page holds that table as derived.
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Final
+from typing import Any, Final, Generic, TypeVar, overload
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
@@ -36,6 +37,7 @@ from datagen.paths import read_bytes
 
 __all__ = [
     "APPEARANCE",
+    "COLUMNS",
     "COLUMNS_SINCE",
     "IMAGE_STATISTICS",
     "MANIFEST_VERSION",
@@ -45,8 +47,12 @@ __all__ = [
     "RUN_COLUMNS",
     "TEXEL_COLUMNS",
     "FeatureColumns",
+    "ManifestColumn",
+    "ManifestColumns",
+    "column_values",
     "feature_records",
     "features_schema",
+    "manifest_record",
     "manifest_schema",
     "matrix_field",
     "object_records",
@@ -119,7 +125,7 @@ class Column:
     is never null (``required``: the schema says so), or is nullable in the schema but always
     written (``filled``), the manifest version that added it, and the group that names it
     together (:data:`IMAGE_STATISTICS`, :data:`TEXEL_COLUMNS`, :data:`FILE_COLUMNS`,
-    :data:`RUN_COLUMNS`)."""
+    :data:`INTRINSICS_COLUMNS`, :data:`POSE_COLUMNS`, :data:`RATE_COLUMNS`, :data:`RUN_COLUMNS`)."""
 
     name: str
     type: pa.DataType
@@ -162,24 +168,26 @@ MANIFEST_COLUMNS: Final[tuple[Column, ...]] = (
     Column("label_path", pa.string(), "YOLO detection label file (null with `labels.format: pose`)", group="files"),
     Column("pose_label_path", pa.string(), "YOLO pose label file (null with `labels.format: detect`)", group="files"),
     Column("exr_path", pa.string(), "linear EXR, when written", group="files"),
-    Column("width", pa.int32(), "image size, pixels", required=True),
-    Column("height", pa.int32(), required=True),
-    Column("fx", _F64, "pinhole intrinsics, pixels", required=True),
-    Column("fy", _F64, required=True),
-    Column("cx", _F64, required=True),
-    Column("cy", _F64, required=True),
+    Column("width", pa.int32(), "image size, pixels", required=True, group="intrinsics"),
+    Column("height", pa.int32(), required=True, group="intrinsics"),
+    Column("fx", _F64, "pinhole intrinsics, pixels", required=True, group="intrinsics"),
+    Column("fy", _F64, required=True, group="intrinsics"),
+    Column("cx", _F64, required=True, group="intrinsics"),
+    Column("cy", _F64, required=True, group="intrinsics"),
     Column("cam_from_world", MATRIX, "world to OpenCV camera", required=True),
     Column("world_from_tanker", MATRIX,
-           "tanker body frame (origin: the average drogue centre) to world", required=True),
-    Column("world_from_receiver", MATRIX, "receiver body frame (origin: the probe tip) to world", required=True),
-    Column("world_from_drogue", MATRIX, "drogue body frame (origin: the drogue centre) to world", required=True),
+           "tanker body frame (origin: the average drogue centre) to world", required=True, group="poses"),
+    Column("world_from_receiver", MATRIX, "receiver body frame (origin: the probe tip) to world", required=True,
+           group="poses"),
+    Column("world_from_drogue", MATRIX, "drogue body frame (origin: the drogue centre) to world", required=True,
+           group="poses"),
     Column("cam_from_tanker_per_s", MATRIX,
            "the time derivative of `cam_from_world @ world_from_<object>` at the frame's time, per "
            "second (by finite difference over 1 ms): with `sensor_readout_s`, each label point is "
            "where `(M + rate t) X` projects at its row's time t (null without a rolling shutter; "
-           "version 11)", since="11"),
-    Column("cam_from_receiver_per_s", MATRIX, since="11"),
-    Column("cam_from_drogue_per_s", MATRIX, since="11"),
+           "version 11)", since="11", group="rates"),
+    Column("cam_from_receiver_per_s", MATRIX, since="11", group="rates"),
+    Column("cam_from_drogue_per_s", MATRIX, since="11", group="rates"),
     Column("ptd_receiver_m", _vec(3), "probe-to-drogue vector in the receiver frame, metres", required=True),
     Column("distance_m", _F64, "its length", required=True),
     Column("seed", pa.int64(), "the dataset's root seed", required=True),
@@ -350,6 +358,10 @@ MANIFEST_COLUMNS: Final[tuple[Column, ...]] = (
 )
 
 
+#: Each manifest column by its name.
+COLUMNS: Final[Mapping[str, Column]] = {c.name: c for c in MANIFEST_COLUMNS}
+
+
 def _group(name: str) -> tuple[str, ...]:
     """The names of :data:`MANIFEST_COLUMNS` of group ``name``, in the schema's order."""
     return tuple(c.name for c in MANIFEST_COLUMNS if c.group == name)
@@ -366,6 +378,13 @@ IMAGE_STATISTICS: Final = _group("image statistics")
 TEXEL_COLUMNS: Final = _group("texels")
 #: Manifest columns that name a frame's files (relative to the dataset root; null when absent).
 FILE_COLUMNS: Final = _group("files")
+#: A frame's pinhole camera: width, height, fx, fy, cx, cy (:class:`datagen.core.camera.Intrinsics`).
+INTRINSICS_COLUMNS: Final = _group("intrinsics")
+#: Each rigid object's pose column, ``world_from_<object>``, by object.
+POSE_COLUMNS: Final = {c.name.removeprefix("world_from_"): c.name for c in MANIFEST_COLUMNS if c.group == "poses"}
+#: Each rigid object's pose rate column (a rolling shutter's), ``cam_from_<object>_per_s``, by object.
+RATE_COLUMNS: Final = {c.name.removeprefix("cam_from_").removesuffix("_per_s"): c.name
+                       for c in MANIFEST_COLUMNS if c.group == "rates"}
 #: Manifest columns that describe the run rather than the frame: they differ between
 #: two builds of the same config; every other column is identical.
 RUN_COLUMNS: Final = _group("run")
@@ -406,6 +425,111 @@ APPEARANCE: Final[dict[str, tuple[str, ...]]] = {
     "texels": TEXEL_COLUMNS,
 }
 
+
+
+def manifest_record(values: Mapping[str, object]) -> dict[str, object]:
+    """A frame's manifest row from ``values``, in the schema's order: a value for each of
+    :data:`MANIFEST_COLUMNS` and for nothing else, a required column's not None (ValueError
+    naming the columns otherwise: a column added to the table without its computation, or
+    computed under another name, fails the first frame written, never becomes nulls)."""
+    missing = [c.name for c in MANIFEST_COLUMNS if c.name not in values]
+    unknown = sorted(set(values) - COLUMNS.keys())
+    empty = [c.name for c in MANIFEST_COLUMNS if c.required and c.name in values and values[c.name] is None]
+    if missing or unknown or empty:
+        raise ValueError("a manifest row " + "; ".join(
+            f"{what} {', '.join(names)}" for what, names in (("without columns", missing),
+                                                             ("with columns no manifest has:", unknown),
+                                                             ("with nulls in required columns", empty)) if names))
+    return {c.name: values[c.name] for c in MANIFEST_COLUMNS}
+
+
+def column_values(array: pa.Array | pa.ChunkedArray, column: Column) -> Any:
+    """A manifest column's values as a reader holds them, by its Arrow type: floats (and
+    fixed-size lists of them: vectors, matrices) as one float64 array ``(B, ...)`` with NaN
+    where a value or a row is null; never-null integers as int64 ``(B,)``; every other
+    column (text, flags, integers that may be null, lists of records) as a list of Python
+    values, None where null."""
+    t = column.type
+    if pa.types.is_floating(t) or pa.types.is_fixed_size_list(t):
+        shape: tuple[int, ...] = ()
+        while pa.types.is_fixed_size_list(t):
+            shape, t = (*shape, t.list_size), t.value_type
+        return flat_floats(_one_chunk(array)).reshape(len(array), *shape)
+    if pa.types.is_integer(t) and column.required:
+        return np.asarray(_one_chunk(array), dtype=np.int64)
+    return array.to_pylist()
+
+
+def _one_chunk(array: pa.Array | pa.ChunkedArray) -> pa.Array:
+    return array.combine_chunks() if isinstance(array, pa.ChunkedArray) else array
+
+
+def flat_floats(array: pa.Array) -> NDArray[np.float64]:
+    """A float column, or (nested) fixed-size lists of floats, flattened to float64, NaN where
+    a value or a list is null."""
+    if pa.types.is_fixed_size_list(array.type):
+        n = array.type.list_size
+        values = flat_floats(array.values.slice(array.offset * n, len(array) * n)).reshape(len(array), -1)
+        null = np.asarray(array.is_null())
+        if null.any():
+            values = values.copy()
+            values[null] = np.nan  # a null list hides its (arbitrary) values
+        return values.reshape(-1)
+    return np.asarray(pc.fill_null(array, float("nan")).to_numpy(zero_copy_only=False), dtype=np.float64)
+
+
+class ManifestColumns(Mapping[str, Any]):
+    """The manifest columns of a table of rows, each decoded when first read
+    (:func:`column_values`) and kept: a reader's view of its rows, by column name."""
+
+    def __init__(self, table: pa.Table) -> None:
+        self.table = table
+        self._values: dict[str, Any] = {}
+
+    def __getitem__(self, name: str) -> Any:
+        if name not in self._values:
+            if name not in COLUMNS or name not in self.table.column_names:
+                raise KeyError(name)
+            self._values[name] = column_values(self.table.column(name), COLUMNS[name])
+        return self._values[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return (c.name for c in MANIFEST_COLUMNS if c.name in self.table.column_names)
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)
+
+    def null(self, name: str) -> NDArray[np.bool_]:
+        """``(B,)`` whether each row's value of column ``name`` is null."""
+        return np.asarray(_one_chunk(self.table.column(name)).is_null().to_numpy(zero_copy_only=False), dtype=bool)
+
+
+_T = TypeVar("_T")
+
+
+class ManifestColumn(Generic[_T]):
+    """A manifest column as an attribute of the rows that hold it (an object whose ``columns``
+    is a :class:`ManifestColumns`): its values (:func:`column_values`), under the column's
+    own name, so that a reader names no column in a string; a name that is no manifest
+    column fails when the class is made."""
+
+    name: str
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        if name not in COLUMNS:
+            raise TypeError(f"{owner.__name__}.{name}: no manifest column of that name")
+        self.name = name
+
+    @overload
+    def __get__(self, obj: None, owner: type | None = None) -> ManifestColumn[_T]: ...
+
+    @overload
+    def __get__(self, obj: object, owner: type | None = None) -> _T: ...
+
+    def __get__(self, obj: object, owner: type | None = None) -> Any:
+        if obj is None:
+            return self
+        return obj.columns[self.name]  # type: ignore[attr-defined]  # (the owner's rows)
 
 
 def manifest_schema() -> pa.Schema:

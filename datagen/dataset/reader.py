@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 import pyarrow as pa
@@ -33,7 +33,13 @@ from datagen.dataset.columns import (
     APPEARANCE,
     COLUMNS_SINCE,
     FILE_COLUMNS,
+    INTRINSICS_COLUMNS,
+    POSE_COLUMNS,
+    RATE_COLUMNS,
     READABLE_MANIFEST_VERSIONS,
+    ManifestColumn,
+    ManifestColumns,
+    flat_floats,
     manifest_schema,
     read_features,
     read_objects,
@@ -157,25 +163,48 @@ class DatasetMeta(Labelled):
             yield held[key][1], row_of[positions[start:end]]
 
 
-@dataclass(frozen=True, eq=False)
-class DatasetView(DatasetMeta):
-    """A dataset's metadata and manifest rows (all of them, or one shard's), per-feature
-    columns as ``(B, F)`` arrays (rows sorted by frame id)."""
+class _FrameRows:
+    """The per-frame manifest columns every reader of a dataset's rows has, in frame order
+    (its ``columns``: :class:`~datagen.dataset.columns.ManifestColumns`), each under its
+    column's name (:class:`~datagen.dataset.columns.ManifestColumn`)."""
 
+    columns: ManifestColumns
+    frame_id = ManifestColumn[NDArray[np.int64]]()
+    split = ManifestColumn[list[str]]()
+    image_path = ManifestColumn[list[str | None]]()
+    label_path = ManifestColumn[list[str | None]]()  # the detection label file, None in a pose-only dataset
+    pose_label_path = ManifestColumn[list[str | None]]()  # the pose label file, None without pose labels
+    exr_path = ManifestColumn[list[str | None]]()
+    approach_index = ManifestColumn[NDArray[np.int64]]()
+    approach_number = ManifestColumn[NDArray[np.int64]]()
+    world_texel_px = ManifestColumn[NDArray[np.float64]]()  # the largest world texel shown, NaN: none seen
+
+    def __len__(self) -> int:
+        return len(self.frame_id)
+
+    @property
+    def stems(self) -> list[str]:
+        """Each row's file stem (the frame's image, or label, file name without extension)."""
+        return [Path(next((p for p in paths if p), f"{int(frame):08d}")).stem
+                for frame, *paths in zip(self.frame_id, self.image_path, self.label_path, self.pose_label_path,
+                                         strict=True)]
+
+
+@dataclass(frozen=True, eq=False)
+class _Rows(_FrameRows):
+    columns: ManifestColumns
+
+
+@dataclass(frozen=True, eq=False)
+class DatasetView(_FrameRows, DatasetMeta):
+    """A dataset's metadata and manifest rows (all of them, or one shard's), per-feature
+    columns as ``(B, F)`` arrays (rows sorted by frame id); every other manifest column is
+    in ``columns``."""
+
+    columns: ManifestColumns
     manifest_file: list[str]  # per row: the manifest it came from (relative to root)
-    frame_id: NDArray[np.int64]
-    split: list[str]
-    image_path: list[str | None]
-    label_path: list[str | None]  # the detection label file, None in a pose-only dataset
-    pose_label_path: list[str | None]  # the pose label file, None without pose labels
-    exr_path: list[str | None]
     row_intrinsics: NDArray[np.float64]  # (B, 6): width, height, fx, fy, cx, cy
-    cam_from_world: NDArray[np.float64]  # (B, 4, 4)
     world_from: dict[str, NDArray[np.float64]]  # object -> (B, 4, 4)
-    distance_m: NDArray[np.float64]
-    ptd_receiver_m: NDArray[np.float64]  # (B, 3)
-    approach_index: NDArray[np.int64]
-    approach_number: NDArray[np.int64]
     class_id: NDArray[np.int64]  # (B, F)
     center_px: NDArray[np.float64]  # (B, F, 2)
     tight_xyxy: NDArray[np.float64]  # (B, F, 4)
@@ -192,10 +221,14 @@ class DatasetView(DatasetMeta):
     distortion: NDArray[np.float64]  # (B, 5) the lens's OpenCV coefficients, zeros for a pinhole frame
     readout_s: NDArray[np.float64]  # (B,) a rolling shutter's readout, 0 for a global shutter
     cam_from_per_s: dict[str, NDArray[np.float64]]  # object -> (B, 4, 4) d/dt cam_from_<object> (0: no shutter)
-    appearance: dict[str, list]  # column -> per-row value (None where not drawn), of schema.APPEARANCE
+    cam_from_world = ManifestColumn[NDArray[np.float64]]()  # (B, 4, 4)
+    distance_m = ManifestColumn[NDArray[np.float64]]()
+    ptd_receiver_m = ManifestColumn[NDArray[np.float64]]()  # (B, 3)
 
-    def __len__(self) -> int:
-        return len(self.frame_id)
+    @property
+    def appearance(self) -> dict[str, Any]:
+        """Each column of :data:`~datagen.dataset.columns.APPEARANCE` the rows hold: its values."""
+        return {c: self.columns[c] for cols in APPEARANCE.values() for c in cols if c in self.columns}
 
     def frames(self, *, unique: bool = False) -> DatasetView:
         return self  # (a view with duplicates was loaded asking for them)
@@ -213,18 +246,9 @@ class DatasetView(DatasetMeta):
         expected = np.array([k.width, k.height, k.fx, k.fy, k.cx, k.cy])
         return np.isclose(self.row_intrinsics, expected, rtol=0, atol=1e-9).all(axis=1)
 
-    @property
-    def world_texel_px(self) -> list[float | None]:
-        return self.appearance["world_texel_px"]
-
     def cam_from_objects(self) -> NDArray[np.float64]:
         """``(B, O, 4, 4)`` in the order of ``features.objects``."""
         return np.stack([self.cam_from_world @ self.world_from[o] for o in self.features.objects], axis=1)
-
-    @property
-    def stems(self) -> list[str]:
-        """Each row's file stem (the frame's image, or label, file name without extension)."""
-        return _stems(self)
 
     def shutter(self) -> RollingShutter | None:
         """The frames' rolling shutters (None when every frame's is global)."""
@@ -246,33 +270,17 @@ class DatasetView(DatasetMeta):
 
 
 @dataclass(frozen=True, eq=False)
-class DatasetIndex:
-    """The small per-row columns of every manifest, in frame order (as a :class:`DatasetView`
-    of the whole dataset orders its rows): what the checks across shards need."""
+class DatasetIndex(_FrameRows):
+    """The small per-row columns of every manifest (:data:`INDEX_COLUMNS`), in frame order (as a
+    :class:`DatasetView` of the whole dataset orders its rows): what the checks across shards need."""
 
     root: Path
     doc: dict
     label_format: str
     manifest_file: list[str]
-    frame_id: NDArray[np.int64]
-    split: list[str]
-    image_path: list[str | None]
-    label_path: list[str | None]
-    pose_label_path: list[str | None]
-    exr_path: list[str | None]
-    approach_index: NDArray[np.int64]
-    approach_number: NDArray[np.int64]
-    world_texel_px: list[float | None]  # the largest world texel the frame showed (schema.TEXEL_COLUMNS)
+    columns: ManifestColumns
     rank: dict[str, NDArray[np.int64]]  # manifest -> each of its rows' position in frame order (its rows sorted)
     limits: ReadLimits  # the dataset's (DatasetMeta.limits)
-
-    def __len__(self) -> int:
-        return len(self.frame_id)
-
-    @property
-    def stems(self) -> list[str]:
-        """Each row's file stem (the frame's image, or label, file name without extension)."""
-        return _stems(self)
 
     @functools.cached_property
     def folder(self) -> DatasetFolder:
@@ -310,14 +318,8 @@ def plan_gaps(rows: FrameOrder, only: str | None = None) -> list[str]:
     return gaps
 
 
-def _stems(rows: FrameOrder) -> list[str]:
-    return [Path(next((p for p in paths if p), f"{int(frame):08d}")).stem
-            for frame, *paths in zip(rows.frame_id, rows.image_path, rows.label_path, rows.pose_label_path,
-                                     strict=True)]
-
-
-#: The columns of :class:`DatasetIndex`.
-INDEX_COLUMNS: Final = ("frame_id", "split", *FILE_COLUMNS, "approach_index", "approach_number", "world_texel_px")
+#: The columns of :class:`DatasetIndex`: those every reader of rows has (:class:`_FrameRows`).
+INDEX_COLUMNS: Final = tuple(name for name, value in vars(_FrameRows).items() if isinstance(value, ManifestColumn))
 
 
 @dataclass(frozen=True, eq=False)
@@ -382,9 +384,9 @@ class DatasetSource(DatasetMeta):
         names them)."""
         tables = self.read_manifests(INDEX_COLUMNS)
         names = [name for name, t in zip(self.manifests, tables, strict=True) for _ in range(t.num_rows)]
-        _check_splits(self.root, [v for t in tables for v in t.column("split").to_pylist()], names,
-                      [v for t in tables for v in t.column("frame_id").to_pylist()])
-        frame_ids = np.concatenate([np.asarray(t.column("frame_id"), dtype=np.int64) for t in tables])
+        stored = _Rows(ManifestColumns(pa.concat_tables(tables)))
+        frame_ids = stored.frame_id
+        _check_splits(self.root, stored.split, names, frame_ids)
         order = np.argsort(frame_ids, kind="stable")
         rank = np.empty(len(order), dtype=np.int64)
         rank[order] = np.arange(len(order))
@@ -393,18 +395,8 @@ class DatasetSource(DatasetMeta):
             mine = rank[start:start + t.num_rows]
             ranks[name] = mine[np.argsort(frame_ids[start:start + t.num_rows], kind="stable")]
             start += t.num_rows
-
-        def column(c: str) -> list:
-            values = [v for t in tables for v in t.column(c).to_pylist()]
-            return [values[i] for i in order]
-
-        def integers(c: str) -> NDArray[np.int64]:
-            return np.concatenate([np.asarray(t.column(c), dtype=np.int64) for t in tables])[order]
-
-        image, label, pose_label, exr = (column(c) for c in FILE_COLUMNS)
-        return DatasetIndex(self.root, self.doc, self.label_format, [names[i] for i in order], frame_ids[order],
-                            column("split"), image, label, pose_label, exr, integers("approach_index"),
-                            integers("approach_number"), column("world_texel_px"), ranks, self.limits)
+        return DatasetIndex(self.root, self.doc, self.label_format, [names[i] for i in order],
+                            ManifestColumns(stored.columns.table.take(pa.array(order))), ranks, self.limits)
 
 
 def _read_json(path: Path) -> dict:
@@ -461,19 +453,7 @@ def _check_document(doc: dict, path: Path) -> None:
 def _floats(array: pa.Array, shape: tuple[int, ...]) -> NDArray[np.float64]:
     """A float column, or (nested) fixed-size lists of floats, as an array of ``shape``, NaN
     where a value or a list is null."""
-    return _flat_floats(array).reshape(shape)
-
-
-def _flat_floats(array: pa.Array) -> NDArray[np.float64]:
-    if pa.types.is_fixed_size_list(array.type):
-        n = array.type.list_size
-        values = _flat_floats(array.values.slice(array.offset * n, len(array) * n)).reshape(len(array), -1)
-        null = np.asarray(array.is_null())
-        if null.any():
-            values = values.copy()
-            values[null] = np.nan  # a null list hides its (arbitrary) values
-        return values.reshape(-1)
-    return np.asarray(pc.fill_null(array, float("nan")).to_numpy(zero_copy_only=False), dtype=np.float64)
+    return flat_floats(array).reshape(shape)
 
 
 def load_dataset(root: str | Path, *, allow_duplicates: bool = False, checked: bool = True) -> DatasetView:
@@ -672,7 +652,7 @@ def _check_values(table: pa.Table, path: Path, limits: ReadLimits) -> None:
                 refuse(column, bad, m.tolist(), f"a rigid transform (a rotation, a translation within "
                        f"{MAX_WORLD_M:g} m, last row 0 0 0 1)")
     if "sensor_readout_s" in names:
-        r = _flat_floats(table.column("sensor_readout_s").combine_chunks())
+        r = flat_floats(table.column("sensor_readout_s").combine_chunks())
         bad = ~(np.isnan(r) | ((r >= 0.0) & (r <= MAX_READOUT_S)))
         if bad.any():
             refuse("sensor_readout_s", bad, r.tolist(), f"null or a readout from 0 to {MAX_READOUT_S:g} s")
@@ -695,7 +675,7 @@ def _check_values(table: pa.Table, path: Path, limits: ReadLimits) -> None:
         if bad.any():
             refuse("features.keypoint_flag", np.isin(np.arange(table.num_rows), rows[bad]),
                    [flags[rows == r].tolist() for r in range(table.num_rows)], "Ultralytics' keypoint flags 0, 1 or 2")
-        seen = _flat_floats(flat.field("visible_fraction"))
+        seen = flat_floats(flat.field("visible_fraction"))
         bad = ~(np.isnan(seen) | ((seen >= 0) & (seen <= 1)))
         if bad.any():
             refuse("features.visible_fraction", np.isin(np.arange(table.num_rows), rows[bad]),
@@ -722,52 +702,38 @@ def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, al
     root, features = meta.root, meta.features
     names = [name for name, t in zip(manifests, tables, strict=True) for _ in range(t.num_rows)]
     try:
-        table = pa.concat_tables(tables)
+        stored = _Rows(ManifestColumns(pa.concat_tables(tables)))
     except pa.ArrowException as exc:
         raise DatagenError(f"{root / 'manifests'}: manifests with different schemas ({exc})") from None
-    frame_ids = np.asarray(table.column("frame_id"))
     if not allow_duplicates:
-        _refuse_duplicates(root, frame_ids, names)
-    order = np.argsort(frame_ids, kind="stable")
-    table = table.take(pa.array(order))
+        _refuse_duplicates(root, stored.frame_id, names)
+    order = np.argsort(stored.frame_id, kind="stable")
+    rows = _Rows(ManifestColumns(stored.columns.table.take(pa.array(order))))
+    table = rows.columns.table
     names = [names[i] for i in order]
     b, f = table.num_rows, len(features)
-    _check_splits(root, table.column("split").to_pylist(), names, table.column("frame_id").to_pylist())
+    _check_splits(root, rows.split, names, rows.frame_id)
     flat = _records(table, "features", f, f"feature records, features.parquet has {f} classes", root, names)
     for column in FILE_COLUMNS:
-        for i, rel in enumerate(table.column(column).to_pylist()):
+        for i, rel in enumerate(rows.columns[column]):
             if rel is not None and not named_inside(rel):
-                raise DatagenError(f"{root / names[i]}: frame {table.column('frame_id')[i]}: {column} {rel[:80]!r} "
-                                   f"{NOT_INSIDE}")
-
-    def matrices(name: str) -> NDArray[np.float64]:
-        return _floats(table.column(name).combine_chunks(), (b, 4, 4))
+                raise DatagenError(f"{root / names[i]}: frame {rows.frame_id[i]}: {column} {rel[:80]!r} {NOT_INSIDE}")
 
     exclusion = np.array(flat.field("exclusion").to_pylist(), dtype=object).reshape(b, f)
     n_obj = len(features.objects)
     objects = _records(table, "objects", n_obj, f"object records, features.parquet has {n_obj} objects", root,
                        names)
+    cols = rows.columns
     view = DatasetView(
         root=root,
         doc=meta.doc,
         data_yaml=meta.data_yaml,
         pose_yaml=meta.pose_yaml,
         labelling=meta.labelling,
+        columns=cols,
         manifest_file=names,
-        frame_id=np.asarray(table.column("frame_id"), dtype=np.int64),
-        split=table.column("split").to_pylist(),
-        image_path=table.column("image_path").to_pylist(),
-        label_path=table.column("label_path").to_pylist(),
-        pose_label_path=table.column("pose_label_path").to_pylist(),
-        exr_path=table.column("exr_path").to_pylist(),
-        row_intrinsics=np.stack([np.asarray(table.column(c), dtype=np.float64)
-                                 for c in ("width", "height", "fx", "fy", "cx", "cy")], axis=1),
-        cam_from_world=matrices("cam_from_world"),
-        world_from={o: matrices(f"world_from_{o}") for o in RIGID_OBJECTS},
-        distance_m=np.asarray(table.column("distance_m"), dtype=np.float64),
-        ptd_receiver_m=_floats(table.column("ptd_receiver_m").combine_chunks(), (b, 3)),
-        approach_index=np.asarray(table.column("approach_index"), dtype=np.int64),
-        approach_number=np.asarray(table.column("approach_number"), dtype=np.int64),
+        row_intrinsics=np.stack([np.asarray(cols[c], dtype=np.float64) for c in INTRINSICS_COLUMNS], axis=1),
+        world_from={o: cols[c] for o, c in POSE_COLUMNS.items()},
         class_id=np.asarray(flat.field("class_id"), dtype=np.int64).reshape(b, f),
         center_px=_floats(flat.field("center_px"), (b, f, 2)),
         tight_xyxy=_floats(flat.field("tight_xyxy"), (b, f, 4)),
@@ -782,11 +748,9 @@ def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, al
         object_tight_xyxy=_floats(objects.field("tight_xyxy"), (b, n_obj, 4)),
         object_label_xyxy=_floats(objects.field("label_xyxy"), (b, n_obj, 4)),
         object_exclusion=np.array(objects.field("exclusion").to_pylist(), dtype=object).reshape(b, n_obj),
-        distortion=_nulls_as_zero(table, "sensor_distortion", (b, 5)),  # zeros: a pinhole
-        readout_s=_nulls_as_zero(table, "sensor_readout_s", (b,)),
-        cam_from_per_s={o: _nulls_as_zero(table, f"cam_from_{o}_per_s", (b, 4, 4)) for o in RIGID_OBJECTS},
-        appearance={c: table.column(c).to_pylist() for cols in APPEARANCE.values() for c in cols
-                    if c in table.column_names},
+        distortion=_nulls_as_zero(cols, "sensor_distortion"),  # zeros: a pinhole
+        readout_s=_nulls_as_zero(cols, "sensor_readout_s"),
+        cam_from_per_s={o: _nulls_as_zero(cols, c) for o, c in RATE_COLUMNS.items()},
     )
     if checked and not view.intrinsics_as_built.all():
         b = int(np.argmin(view.intrinsics_as_built))
@@ -796,7 +760,7 @@ def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, al
     return view
 
 
-def _check_splits(root: Path, splits: list, names: list[str], frame_ids: list) -> None:
+def _check_splits(root: Path, splits: list, names: list[str], frame_ids: Sequence[int] | NDArray[np.int64]) -> None:
     """Each row's split is the split its manifest's name says (a split names folders that
     readers and exports write to)."""
     for split, name, frame in zip(splits, names, frame_ids, strict=True):
@@ -828,14 +792,11 @@ def _records(table: pa.Table, column: str, count: int, what: str, root: Path, na
     return lists.flatten()
 
 
-def _nulls_as_zero(table, column: str, shape: tuple[int, ...]) -> NDArray[np.float64]:
-    """A float column (or fixed-size lists of floats) of ``shape``, zeros where a row is null or
-    the manifest predates the column (a row's values as they are otherwise)."""
-    if column not in table.column_names:
-        return np.zeros(shape)
-    array = table.column(column).combine_chunks()
-    values = _floats(array, shape).copy()
-    values[np.asarray(array.is_null().to_numpy(zero_copy_only=False), dtype=bool)] = 0.0
+def _nulls_as_zero(columns: ManifestColumns, column: str) -> NDArray[np.float64]:
+    """A float column (or fixed-size lists of floats), zeros where a row is null (a row's
+    values as they are otherwise)."""
+    values = np.array(columns[column], dtype=np.float64)
+    values[columns.null(column)] = 0.0
     return values
 
 

@@ -1,60 +1,90 @@
-"""A frame's manifest row, made from what the build knows of the frame (its state, look,
-labels and render); the columns and their types are the dataset's contract
-(:mod:`datagen.dataset.columns`)."""
+"""A frame's manifest row, made from what the build knows of the frame (its files, camera,
+draws, labels, render and run); the columns, their order and types are the dataset's
+contract (:data:`datagen.dataset.columns.MANIFEST_COLUMNS`), and
+:func:`~datagen.dataset.columns.manifest_record` holds the row to it: a column of the table
+that nothing here computes fails the first frame written."""
 
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 
 import numpy as np
 
 from datagen.core.camera import Intrinsics
-from datagen.core.conventions import RIGID_OBJECTS
-from datagen.dataset.columns import MEASURED_COLUMNS, FeatureColumns, matrix_field
-from datagen.scene.approach import FrameState
-from datagen.scene.look import FrameLook, sun_direction_world
+from datagen.dataset.columns import (
+    INTRINSICS_COLUMNS,
+    MEASURED_COLUMNS,
+    POSE_COLUMNS,
+    RATE_COLUMNS,
+    FeatureColumns,
+    manifest_record,
+    matrix_field,
+)
+from datagen.pipeline.frame import FrameDraws
+from datagen.scene.look import sun_direction_world
 
-__all__ = ["manifest_row"]
+__all__ = ["FrameFiles", "FrameRender", "FrameRun", "manifest_row"]
 
 
-def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, label_path: str | None,
-                 pose_label_path: str | None, exr_path: str | None, intrinsics: Intrinsics, state: FrameState,
-                 look: FrameLook, seed: int, render_seed: int, spp: int | None, denoise: str | None,
-                 features: FeatureColumns, objects: list[dict], n_labeled: int, render_s: float | None,
-                 denoise_s: float | None, frame_s: float, worker: str, worker_rss_mib: float,
-                 rendered: dict | None = None) -> dict:
-    """One frame's manifest row, column by column (:func:`datagen.dataset.columns.manifest_schema`): the frame,
-    its files, the camera, the poses, the approach, every appearance draw, the features,
-    what the render measured (:data:`~datagen.dataset.columns.MEASURED_COLUMNS`, from ``rendered``) and the run
-    columns (:data:`~datagen.dataset.columns.RUN_COLUMNS`)."""
-    rendered = rendered or {}
+@dataclass(frozen=True)
+class FrameFiles:
+    """A frame's place in the dataset and its files (relative to the root; None: not written),
+    under their columns' names."""
+
+    frame_id: int
+    split: str
+    shard: int
+    image_path: str | None
+    label_path: str | None
+    pose_label_path: str | None
+    exr_path: str | None
+
+
+@dataclass(frozen=True)
+class FrameRender:
+    """What rendering a frame gives its row: the samples, the denoiser, what the render
+    measured (:data:`~datagen.dataset.columns.MEASURED_COLUMNS`) and the seconds inside
+    ``mi.render`` and the denoiser (None: not denoised)."""
+
+    spp: int
+    denoise: str
+    measured: dict[str, object]
+    render_s: float
+    denoise_s: float | None
+
+
+@dataclass(frozen=True)
+class FrameRun:
+    """The run's columns of a frame (:data:`~datagen.dataset.columns.RUN_COLUMNS` but the
+    render's seconds): they differ between two builds of one config."""
+
+    frame_s: float
+    worker: str
+    worker_rss_mib: float
+
+
+def manifest_row(files: FrameFiles, intrinsics: Intrinsics, draws: FrameDraws, features: FeatureColumns,
+                 objects: list[dict], render: FrameRender | None, run: FrameRun) -> dict[str, object]:
+    """One frame's manifest row (:func:`~datagen.dataset.columns.manifest_record`): its files,
+    the camera, the poses, the approach, every appearance draw, the features, what the render
+    measured (null without one) and the run's columns."""
+    state, look = draws.state, draws.look
     k = intrinsics
-    return {
-        "frame_id": frame,
-        "split": split,
-        "shard": shard,
-        "image_path": image_path,
-        "label_path": label_path,
-        "pose_label_path": pose_label_path,
-        "exr_path": exr_path,
-        "width": k.width,
-        "height": k.height,
-        "fx": k.fx,
-        "fy": k.fy,
-        "cx": k.cx,
-        "cy": k.cy,
+    rates = look.sensor_readout_s is not None
+    measured = render.measured if render is not None else {}
+    return manifest_record({
+        **dataclasses.asdict(files),
+        **dict(zip(INTRINSICS_COLUMNS, (k.width, k.height, k.fx, k.fy, k.cx, k.cy), strict=True)),
         "cam_from_world": matrix_field(state.cam_from_world),
-        "world_from_tanker": matrix_field(state.world_from_tanker),
-        "world_from_receiver": matrix_field(state.world_from_receiver),
-        "world_from_drogue": matrix_field(state.world_from_drogue),
-        **{f"cam_from_{o}_per_s": matrix_field(state.cam_from_per_s(o)) if look.sensor_readout_s is not None
-           else None for o in RIGID_OBJECTS},
+        **{column: matrix_field(state.world_from(o)) for o, column in POSE_COLUMNS.items()},
+        **{column: matrix_field(state.cam_from_per_s(o)) if rates else None for o, column in RATE_COLUMNS.items()},
         "ptd_receiver_m": state.ptd_receiver_m.tolist(),
         "distance_m": state.distance_m,
-        "seed": seed,
-        "render_seed": render_seed,
-        "spp": spp,
-        "denoise": denoise,
+        "seed": draws.seed,
+        "render_seed": draws.render_seed,
+        "spp": render.spp if render is not None else None,
+        "denoise": render.denoise if render is not None else None,
         "mount": state.mount,
         "approach_index": state.approach_index,
         "approach_number": state.approach_number,
@@ -68,13 +98,11 @@ def manifest_row(*, frame: int, split: str, shard: int, image_path: str | None, 
              "metallic": m.metallic, "specular": m.specular}
             for obj, classes in look.materials.items() for cls, m in classes.items()
         ],
-        **{name: rendered.get(name) for name in MEASURED_COLUMNS},
-        "n_labeled": n_labeled,
+        **{name: measured.get(name) for name in MEASURED_COLUMNS},
+        "n_labeled": int(features.labeled.sum()),
         "features": features,
         "objects": objects,
-        "render_s": render_s,
-        "denoise_s": denoise_s,
-        "frame_s": frame_s,
-        "worker": worker,
-        "worker_rss_mib": worker_rss_mib,
-    }
+        "render_s": render.render_s if render is not None else None,
+        "denoise_s": render.denoise_s if render is not None else None,
+        **dataclasses.asdict(run),
+    })

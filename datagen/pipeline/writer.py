@@ -18,7 +18,7 @@ import time
 from collections import Counter, deque
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -28,7 +28,7 @@ from datagen.atomic import write_exr, write_image, write_text
 from datagen.core.box_content import blank_boxes
 from datagen.core.keypoints import pose_rows
 from datagen.core.label_boxes import FrameLabels
-from datagen.dataset.columns import feature_records, object_records, write_manifest
+from datagen.dataset.columns import FeatureColumns, feature_records, object_records, write_manifest
 from datagen.dataset.layout import Layout, ShardJob
 from datagen.dataset.yolo import pose_lines, yolo_lines
 from datagen.pipeline.frame import (
@@ -39,7 +39,7 @@ from datagen.pipeline.frame import (
     shard_labels,
     training_image,
 )
-from datagen.pipeline.manifest_row import manifest_row
+from datagen.pipeline.manifest_row import FrameFiles, FrameRender, FrameRun, manifest_row
 from datagen.pipeline.progress import ShardSummary
 from datagen.render.timing import StageClock
 from datagen.scene.approach import FrameStates
@@ -102,18 +102,63 @@ def shard_groups(jobs: list[ShardJob], workers: int, together: bool = True) -> l
 @dataclass(frozen=True)
 class FrameRecord:
     """What writing one frame gives its shard (:meth:`ShardWriter.frame`): the manifest row,
-    and for a rendered frame the label boxes that show nothing of their feature (``blank``,
-    :func:`datagen.core.box_content.blank_boxes`) and the seconds per stage of the frame
-    (None: not rendered)."""
+    its feature records, its render (None: not rendered by this run) and its seconds, and
+    for a rendered frame the label boxes that show nothing of their feature (``blank``,
+    :func:`datagen.core.box_content.blank_boxes`) and the seconds per stage."""
 
-    row: dict
+    row: dict[str, object]
+    features: FeatureColumns
+    render: FrameRender | None
+    frame_s: float
     blank: int = 0
     stages: dict[str, float] | None = None
 
     @property
     def rendered(self) -> bool:
-        """Whether the frame was rendered (its row has a render time)."""
-        return self.row["render_s"] is not None
+        return self.render is not None
+
+
+@dataclass
+class _ShardTotals:
+    """A shard's frames summed as they are written (:meth:`add`), and the renderer's counts
+    of kernels and recordings after each frame (:meth:`compiled_and_recorded`)."""
+
+    classes: int
+    rows: list[dict] = field(default_factory=list)
+    labels: int = 0
+    excluded: Counter[str] = field(default_factory=Counter)
+    rendered: int = 0
+    render_s: float = 0.0
+    denoise_s: float = 0.0
+    frame_s: float = 0.0
+    blank: int = 0
+    blank_frames: int = 0
+    compiled: int = 0
+    recorded: int = 0
+    stages: Counter[str] = field(default_factory=Counter)  # seconds per stage of the rendered frames
+
+    def __post_init__(self) -> None:
+        self.per_class = np.zeros(self.classes, dtype=np.int64)  # label lines per class
+
+    def add(self, record: FrameRecord) -> None:
+        self.rows.append(record.row)
+        self.labels += int(record.features.labeled.sum())
+        self.per_class += record.features.labeled
+        self.excluded.update(record.features.exclusion_counts())
+        if record.render is not None:
+            self.rendered += 1
+            self.render_s += record.render.render_s
+            self.denoise_s += record.render.denoise_s or 0.0
+            self.frame_s += record.frame_s
+            self.blank += record.blank
+            self.blank_frames += record.blank > 0
+            self.stages.update(record.stages or {})
+
+    def summary(self, name: str, frames: int) -> ShardSummary:
+        return ShardSummary(name, frames, self.labels, dict(self.excluded), self.rendered, self.render_s,
+                            self.denoise_s, self.frame_s, stages=dict(self.stages), blank=self.blank,
+                            blank_frames=self.blank_frames, compiled=self.compiled, recorded=self.recorded,
+                            per_class=self.per_class.tolist())
 
 
 class ShardWriter:
@@ -162,50 +207,32 @@ class ShardWriter:
         for this shard's frames only)."""
         start = time.perf_counter()
         self._stop = stop or (lambda: False)
-        rows: list[dict] = []
-        excluded: Counter[str] = Counter()
-        labels = 0
-        rendered, render_s, denoise_s, frame_s, blank, blank_frames, compiled = 0, 0.0, 0.0, 0.0, 0, 0, 0
-        recorded = 0
-        stages: Counter = Counter()  # seconds per stage of the rendered frames
+        totals = _ShardTotals(len(self.scene.features))
         self.states.prefetch(job.frames)  # the shard's approach chains, simulated together
         approaches = {} if approaches is None else approaches  # each chain's weather and liveries, drawn once
         draws = [draw_frame(self.scene, self.states, i, approaches) for i in job.frames]
         labels_all, objects_all = shard_labels(self.scene, draws)  # every frame's labels at once
-        per_class = np.zeros(len(self.scene.features), dtype=np.int64)  # label lines per class
         recording = self._census.recording() if self._census is not None else contextlib.nullcontext()
         with recording:  # the kernels each frame launches
             for b, frame_draws in enumerate(draws):
                 if self._stop():
                     raise KeyboardInterrupt
                 record = self.frame(job, frame_draws, labels_all.frame(b), objects_all.frame(b))
-                row = record.row
-                rows.append(row)
-                labels += row["n_labeled"]
-                per_class += row["features"].labeled
-                excluded.update(row["features"].exclusion_counts())
+                totals.add(record)
                 if record.rendered:
                     assert self._census is not None and self.renderer is not None  # (a rendering writer's)
-                    rendered += 1
                     new = self._census.new_kernels()
-                    compiled += 0 if self._first_frame else new  # the first frame compiles (or loads) them all
+                    totals.compiled += 0 if self._first_frame else new  # the first frame compiles (or loads) them all
                     recordings = self.renderer.recordings + self.renderer.cast_recordings
-                    recorded += 0 if self._first_frame else recordings - self._recordings  # the first frame records
+                    # the first frame records
+                    totals.recorded += 0 if self._first_frame else recordings - self._recordings
                     self._recordings = recordings
                     self._first_frame = False
-                    render_s += row["render_s"]
-                    blank += record.blank
-                    blank_frames += record.blank > 0
-                    denoise_s += row["denoise_s"] or 0.0
-                    frame_s += row["frame_s"]
-                    stages.update(record.stages or {})
                 if progress is not None:
                     progress(1)
         self._wait_for_writes(0)
-        summary = ShardSummary(job.name, len(job.frames), labels, dict(excluded), rendered, render_s, denoise_s,
-                               frame_s, stages=dict(stages), blank=blank, blank_frames=blank_frames,
-                               compiled=compiled, recorded=recorded, per_class=per_class.tolist())
-        write_manifest(self.layout.manifest(job), rows, summary.counts())
+        summary = totals.summary(job.name, len(job.frames))
+        write_manifest(self.layout.manifest(job), totals.rows, summary.counts())
         summary.wall_s = time.perf_counter() - start
         return summary
 
@@ -218,14 +245,13 @@ class ShardWriter:
         k, features = scene.intrinsics, scene.features
         i = draws.index
         image_rel = exr_rel = None
-        fraction = center_visible = render_s = denoise_s = None
-        rendered: dict = {}
+        fraction = center_visible = None
+        render = None
         blank = 0
         if self.renderer is not None:
             image_rel = layout.image_rel(job.split, job.shard, i)
             exr_rel = layout.exr_rel(job.split, job.shard, i) if scene.config.render.exr else None
-            render_s, denoise_s, rendered, srgb = self._render(draws, layout.root / image_rel,
-                                                               layout.root / exr_rel if exr_rel else None)
+            render, srgb = self._render(draws, layout.root / image_rel, layout.root / exr_rel if exr_rel else None)
             with self._clock.stage("feature visibility"):
                 fraction, center_visible = self.renderer.feature_visibility(draws.state, features)
             labels = scene.labelling.occlude(labels, fraction)
@@ -239,26 +265,19 @@ class ShardWriter:
         if pose_rel is not None:
             rows = pose_rows(objects, labels.center_px, records.keypoint_flag, scene.pose_layout, k.width, k.height)
             write_text(layout.root / pose_rel, "".join(line + "\n" for line in pose_lines(rows)))
-        row = manifest_row(
-            frame=i, split=job.split, shard=job.shard, image_path=image_rel, label_path=label_rel,
-            pose_label_path=pose_rel, exr_path=exr_rel, intrinsics=k, state=draws.state, look=draws.look,
-            seed=draws.seed,
-            render_seed=draws.render_seed, spp=scene.config.render.spp if self.renderer is not None else None,
-            denoise=scene.config.render.denoise if self.renderer is not None else None,
-            features=records, objects=object_records(objects, features.objects),
-            n_labeled=int(labels.labeled.sum()),
-            rendered=rendered, render_s=render_s, denoise_s=denoise_s, frame_s=time.perf_counter() - started,
-            worker=f"{platform.node()}:{os.getpid()}", worker_rss_mib=_rss_mib())
-        if self.renderer is None:
-            return FrameRecord(row)
+        files = FrameFiles(i, job.split, job.shard, image_rel, label_rel, pose_rel, exr_rel)
+        run = FrameRun(time.perf_counter() - started, f"{platform.node()}:{os.getpid()}", _rss_mib())
+        row = manifest_row(files, k, draws, records, object_records(objects, features.objects), render, run)
+        if render is None:
+            return FrameRecord(row, records, None, run.frame_s)
         seconds = self._clock.seconds  # and "other": what the named stages leave of the frame's time
-        return FrameRecord(row, blank, dict(seconds, other=row["frame_s"] - sum(seconds.values())))
+        return FrameRecord(row, records, render, run.frame_s, blank,
+                           dict(seconds, other=run.frame_s - sum(seconds.values())))
 
-    def _render(self, draws: FrameDraws, image: Path, exr: Path | None
-                ) -> tuple[float | None, float | None, dict, np.ndarray]:
-        """Render and write the frame's image (and EXR). Returns seconds in mi.render and
-        in the denoiser (None when not denoised), what the render measured
-        (:data:`datagen.dataset.columns.MEASURED_COLUMNS`) and the 8-bit sRGB training image.
+    def _render(self, draws: FrameDraws, image: Path, exr: Path | None) -> tuple[FrameRender, np.ndarray]:
+        """Render and write the frame's image (and EXR). Returns what its row records of the
+        render (:class:`~datagen.pipeline.manifest_row.FrameRender`) and the 8-bit sRGB
+        training image.
         A frame whose files an earlier, interrupted run left is rendered again: its
         measurements live only in the manifest that run did not write, and a shard holds
         few frames."""
@@ -281,7 +300,8 @@ class ShardWriter:
         self._writes.append(self._io.submit(write))
         with self._clock.stage("waiting for image writes"):
             self._wait_for_writes(MAX_PENDING_WRITES)
-        return result.render_s, result.denoise_s, measured, srgb
+        render = self.scene.config.render
+        return FrameRender(render.spp, render.denoise, measured, result.render_s, result.denoise_s), srgb
 
     def _wait_for_writes(self, keep: int) -> None:
         """Wait until at most ``keep`` image writes are pending; re-raise their errors."""

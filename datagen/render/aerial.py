@@ -84,7 +84,7 @@ def aerial_class(variant: str):
         def __init__(self, inner) -> None:
             super().__init__(mi.Properties())
             self.inner = inner
-            self._frame: dict = {}  # (set_frame)
+            self._frame: dict | None = None  # (set_frame; None: the air dims nothing)
             self._paths: tuple | None = None
 
         def set_frame(self, *, air: Atmosphere, grid: NDArray[np.float32], intrinsics: Intrinsics,
@@ -192,6 +192,7 @@ def aerial_class(variant: str):
         def _grid(self, u, v, width: int, height: int):
             """The airlight and the column transmittance at continuous pixel ``(u, v)``."""
             f = self._frame
+            assert f is not None  # (read only where a frame set it: sample)
             gw, gh = f["gw"], f["gh"]
             gx = dr.clip((u - 0.5) * ((gw - 1) / max(width - 1, 1)), 0.0, gw - 1.0)
             gy = dr.clip((v - 0.5) * ((gh - 1) / max(height - 1, 1)), 0.0, gh - 1.0)

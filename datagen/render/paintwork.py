@@ -48,7 +48,7 @@ from datagen.core.conventions import luminance, texture_rng
 from datagen.core.transforms import vec3
 
 if TYPE_CHECKING:
-    from datagen.config.schema import Config
+    from datagen.config.schema import LiveryConfig
     from datagen.scene.look import FrameLook
 
 __all__ = ["BEACON_GAIN", "BEACON_HZ", "BEACON_ON", "LIGHT_RADIUS_M", "LIGHT_STANDOFF_M", "LIVERY_OBJECTS", "Airframe",
@@ -104,8 +104,8 @@ class Paintwork:
     """The liveries, markings and lights of a config's scene (nothing of them where
     ``randomization.livery`` is off)."""
 
-    def __init__(self, config: Config, pixel_rad: float) -> None:
-        lv = config.randomization.livery
+    def __init__(self, livery: LiveryConfig, pixel_rad: float) -> None:
+        lv = livery
         self.enabled = lv.enabled
         self.markings = lv.enabled and lv.markings
         self.lights = lv.enabled and lv.lights

@@ -198,8 +198,9 @@ class Renderer(RayCasting):
         self._sky_probe_inputs: tuple[Any, Any] | None = None
         self._traffic_ids: tuple[int, ...] = ()
         self._hose_points: int | None = None  # the hose's point count
-        self.world = World(self.config, pixel_rad=1.0 / self.output_intrinsics.fx)
-        self.paintwork = Paintwork(self.config, pixel_rad=1.0 / self.output_intrinsics.fx)
+        randomization = self.config.randomization
+        self.world = World(randomization, pixel_rad=1.0 / self.output_intrinsics.fx)
+        self.paintwork = Paintwork(randomization.livery, pixel_rad=1.0 / self.output_intrinsics.fx)
 
     def _description(self) -> dict:
         """The scene's ``mi.load_dict`` entries, the hose aside (its Mitsuba objects made here)."""

@@ -42,7 +42,7 @@ from datagen.core.transforms import vec3
 from datagen.scene.look import FrameLook
 
 if TYPE_CHECKING:
-    from datagen.config.schema import Config
+    from datagen.config.schema import RandomizationConfig
 
 __all__ = ["CLOUD_LAYERS", "CLOUD_SIZE_M", "EARTH_CAP_M", "SEA_COLOUR", "SURFACES", "World",
            "earth_cap", "sphere_drop"]
@@ -152,11 +152,11 @@ def earth_cap() -> tuple[NDArray[np.float32], NDArray[np.uint32], NDArray[np.flo
 
 
 class World:
-    """Which world pieces a config renders, their scene entries and their per-frame updates."""
+    """Which world pieces a config's randomization renders, their scene entries and their
+    per-frame updates."""
 
-    def __init__(self, config: Config, pixel_rad: float) -> None:
-        r = config.randomization
-        self.config = config
+    def __init__(self, randomization: RandomizationConfig, pixel_rad: float) -> None:
+        r = randomization
         self.clouds = r.clouds.enabled
         self.waves = r.sea.waves
         self.whitecaps = r.sea.whitecaps

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from datagen.analysis.audit import AuditResult
+from datagen.analysis.audit.summary import AppearanceColumn, DriftBin, DriftSummary, Learnability, PoseLearnability
 from datagen.atomic import write_image, write_text
 from datagen.core.label_boxes import FrameLabels
 from datagen.dataset.reader import DatasetMeta, DatasetView
@@ -43,14 +44,13 @@ def colour_key_html() -> str:
 
 def report_document(result: AuditResult) -> dict:
     """report.json: machine-readable, for gating in CI (``passed`` and each check's)."""
-    stats = result.stats
     return {
         "dataset": str(result.root),
         "name": result.name,
         "frames": result.frames,
         "passed": result.passed,
         "checks": [c.as_dict() for c in result.checks],
-        "stats": stats,
+        "stats": result.stats.to_json(),
     }
 
 
@@ -79,19 +79,20 @@ def write_report(result: AuditResult, dataset: DatasetMeta, out: Path, *,
         rows.append(f"<tr class='{status.lower().replace('/', '')}'><td>{esc(c.name)}</td><td>{status}</td>"
                     f"<td>{c.checked}</td><td>{c.failures}</td><td>{worst}</td><td>{esc(c.description)}"
                     f"{'<ul>' + offenders + '</ul>' if offenders else ''}</td></tr>")
-    drift = result.stats["tight_drift_px"]
+    stats = result.stats
+    drift = stats.drift
 
-    def cells(stat: dict) -> str:
+    def cells(stat: DriftSummary) -> str:
         """Count, mean, median, p95 and max cells of one drift bin (empty where no feature)."""
-        return f"<td>{stat['count']}</td>" + "".join(
-            f"<td>{stat[k]:.3f}</td>" if k in stat else "<td></td>" for k in ("mean", "median", "p95", "max"))
+        return f"<td>{stat.count}</td>" + "".join(
+            f"<td>{v:.3f}</td>" if stat.count else "<td></td>" for v in (stat.mean, stat.median, stat.p95, stat.max))
 
-    def table(bins: list[dict], label: str) -> str:
-        body = "".join(f"<tr><td>{b['lo']:g}-{b['hi']:g}</td>{cells(b)}</tr>" for b in bins)
+    def table(bins: tuple[DriftBin, ...], label: str) -> str:
+        body = "".join(f"<tr><td>{b.lo:g}-{b.hi:g}</td>{cells(b.drift)}</tr>" for b in bins)
         return (f"<table><tr><th>{label}</th><th>features</th><th>mean</th><th>median</th><th>p95</th>"
                 f"<th>max</th></tr>{body}</table>")
 
-    sizes = "".join(f"<tr><td>{esc(s)}</td>{cells(v)}</tr>" for s, v in drift["by_size"].items())
+    sizes = "".join(f"<tr><td>{esc(s)}</td>{cells(v)}</tr>" for s, v in drift.by_size.items())
     figures = "".join(f"<figure><img alt='{esc(name)}' src='{data_uri(path.read_bytes(), 'png')}'>"
                       f"<figcaption>{esc(name)}</figcaption></figure>" for name, path in plots.items())
     overlay_html, sheets = [], []
@@ -129,16 +130,16 @@ Verdict: <span class="verdict">{verdict}</span></p>
 <h2>Checks</h2>
 <table><tr><th>check</th><th>result</th><th>checked</th><th>failures</th><th>worst</th><th>what (worst offenders)</th></tr>
 {''.join(rows)}</table>
-{_learnable_html(result.stats["learnable"], esc) if "learnable" in result.stats else ""}
-{_pose_html(result.stats["learnable_pose"]) if "learnable_pose" in result.stats else ""}
-{_appearance_html(result.stats.get("appearance", {}), result.frames, esc)}
+{_learnable_html(stats.learnable, esc) if stats.learnable is not None else ""}
+{_pose_html(stats.learnable_pose) if stats.learnable_pose is not None else ""}
+{_appearance_html(stats.appearance, result.frames, esc)}
 <h2>Parallax: tight-box centre drift from the true centre projection</h2>
-<p>{drift['features']} features in view; median {_fmt(drift['median'])} px, 95th percentile {_fmt(drift['p95'])} px,
-max {_fmt(drift['max'])} px. Corrected boxes are centred on the true centre; a detector trained on tight
+<p>{drift.overall.count} features in view; median {_fmt(drift.overall.median)} px, 95th percentile {_fmt(drift.overall.p95)} px,
+max {_fmt(drift.overall.max)} px. Corrected boxes are centred on the true centre; a detector trained on tight
 boxes learns this drift.</p>
-{table(drift['by_distance_m'], 'distance (m)')}
+{table(drift.by_distance_m, 'distance (m)')}
 <table><tr><th>size</th><th>features</th><th>mean</th><th>median</th><th>p95</th><th>max</th></tr>{sizes}</table>
-{table(drift['by_obliqueness_deg'], 'obliqueness (deg)')}
+{table(drift.by_obliqueness_deg, 'obliqueness (deg)')}
 <h2>Plots</h2>
 {figures}
 <h2>Overlays</h2>
@@ -175,27 +176,27 @@ def _earlier_sheets(out: Path) -> list[str]:
     return [f for f in recorded_files(REPORTS["audit"], out) if _SHEET.fullmatch(f)]
 
 
-def _appearance_html(stats: dict, frames: int, esc) -> str:
+def _appearance_html(stats: dict[str, dict[str, AppearanceColumn]], frames: int, esc) -> str:
     """The appearance section: one row per drawn column, its histogram as a bar strip."""
     bars = "\u2581\u2582\u2583\u2584\u2585\u2586\u2587\u2588"
     rows = []
     for dimension, columns in stats.items():
         for name, entry in columns.items():
-            if not entry["frames"]:
+            if not entry.frames:
                 shown = "<td colspan='3'>not drawn (randomizer off)</td>"
-            elif "values" in entry:
-                shown = "<td colspan='3'>" + ", ".join(f"{esc(str(v))}: {n}" for v, n in entry["values"].items()) \
+            elif entry.values is not None:
+                shown = "<td colspan='3'>" + ", ".join(f"{esc(str(v))}: {n}" for v, n in entry.values.items()) \
                     + "</td>"
-            elif "histogram" in entry:
-                top = max(entry["histogram"]) or 1
+            elif entry.histogram is not None:
+                top = max(entry.histogram) or 1
                 strip = "".join(bars[min(len(bars) - 1, round(c / top * (len(bars) - 1)))] if c else "\u2007"
-                                for c in entry["histogram"])
-                shown = (f"<td>{entry['min']:.4g} to {entry['max']:.4g}</td><td>{entry['mean']:.4g}</td>"
-                         f"<td class='hist' title='{entry['histogram']}'>{strip}</td>")
+                                for c in entry.histogram)
+                shown = (f"<td>{entry.min:.4g} to {entry.max:.4g}</td><td>{entry.mean:.4g}</td>"
+                         f"<td class='hist' title='{entry.histogram}'>{strip}</td>")
             else:
                 shown = "<td colspan='3'></td>"
             rows.append(f"<tr><td>{esc(dimension)}</td><td><code>{esc(name)}</code></td>"
-                        f"<td>{entry['frames']} of {frames}</td>{shown}</tr>")
+                        f"<td>{entry.frames} of {frames}</td>{shown}</tr>")
     if not rows:
         return ""
     return ("<h2>Appearance: what the dataset's frames drew</h2><p>Per randomization dimension, the frames "
@@ -205,38 +206,38 @@ def _appearance_html(stats: dict, frames: int, esc) -> str:
             f"<th>histogram</th></tr>{''.join(rows)}</table>")
 
 
-def _learnable_html(stats: dict, esc) -> str:
+def _learnable_html(stats: Learnability, esc) -> str:
     """The report's section on what Ultralytics' trainer can learn of the label lines."""
     def pct(v: float | None) -> str:
         return "-" if v is None else f"{100 * v:.1f}%"
 
     def rows(items) -> str:
-        return "".join(f"<tr><td>{esc(str(k))}</td><td>{v['lines']}</td><td>{pct(v['share'])}</td></tr>"
+        return "".join(f"<tr><td>{esc(str(k))}</td><td>{v.lines}</td><td>{pct(v.share)}</td></tr>"
                        for k, v in items)
 
     head = "<tr><th>{}</th><th>lines</th><th>learnable</th></tr>"
-    distance = [(f"{b['lo']:g}-{b['hi']:g}", b) for b in stats["by_distance_m"] if b["lines"]]
-    worst = [(w["class"], w) for w in stats["worst_classes"]]
+    distance = [(f"{b.lo:g}-{b.hi:g}", b.lines) for b in stats.by_distance_m if b.lines.lines]
+    everyone = "<tr><td colspan=3>every class fully learnable</td></tr>"
     return f"""<h2>Learnable by the detector</h2>
-<p>{stats['lines']} label lines; {pct(stats['share'])} survive Ultralytics' training transforms at imgsz
-{stats['train_imgsz']} ({pct(stats['share_survive_2px'])} have both sides above 2 px) and hold an anchor centre
-({pct(stats['share_with_anchor'])}), and are large enough for the untrained head's assigner (both sides at
-least {stats['assignable_side_px']:g} px: {pct(stats['share_assignable'])}) or reached the edge margin while
-growing ({pct(stats['share_at_edge_margin'])}); the check asks for {pct(stats['threshold'])}. Label boxes
-are at least {stats['min_box_px']:g} px there ({esc(stats['small_boxes'])} smaller ones, as far as the edge
+<p>{stats.lines} label lines; {pct(stats.share)} survive Ultralytics' training transforms at imgsz
+{stats.train_imgsz} ({pct(stats.share_survive_2px)} have both sides above 2 px) and hold an anchor centre
+({pct(stats.share_with_anchor)}), and are large enough for the untrained head's assigner (both sides at
+least {stats.assignable_side_px:g} px: {pct(stats.share_assignable)}) or reached the edge margin while
+growing ({pct(stats.share_at_edge_margin)}); the check asks for {pct(stats.threshold)}. Label boxes
+are at least {stats.min_box_px:g} px there ({esc(stats.small_boxes)} smaller ones, as far as the edge
 margin allows).</p>
 <table>{head.format('distance (m)')}{rows(distance)}</table>
-<table>{head.format('size')}{rows(stats['by_size'].items())}</table>
-<table>{head.format('worst classes')}{rows(worst) or '<tr><td colspan=3>every class fully learnable</td></tr>'}</table>
+<table>{head.format('size')}{rows(stats.by_size.items())}</table>
+<table>{head.format('worst classes')}{rows(stats.worst_classes) or everyone}</table>
 """
 
 
-def _pose_html(stats: dict) -> str:
+def _pose_html(stats: PoseLearnability) -> str:
     """The report's line on the pose instances (one per labeled object)."""
-    share = "-" if stats["share"] is None else f"{100 * stats['share']:.1f}%"
+    share = "-" if stats.share is None else f"{100 * stats.share:.1f}%"
     return f"""<h2>Pose instances</h2>
-<p>{stats['instances']} pose instances (one per labeled object, its keypoints the true centre projections of its
-features); {share} survive Ultralytics' training transforms at imgsz {stats['imgsz']} without mosaic and hold an
+<p>{stats.instances} pose instances (one per labeled object, its keypoints the true centre projections of its
+features); {share} survive Ultralytics' training transforms at imgsz {stats.imgsz} without mosaic and hold an
 anchor centre.</p>
 """
 

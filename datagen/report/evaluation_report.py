@@ -71,7 +71,7 @@ def write_evaluation(view: FrameOrder, runs: list[tuple[dict, dict]], out: Path,
     files = ["results.parquet"]
     if detector is not None:
         scores = summarize_detections(detector, DISTANCE_EDGES)
-        doc["detector"] = scores
+        doc["detector"] = scores.to_json()
         write_parquet(out / "detections.parquet", _detections_table(detector), compression="zstd")
         files.append("detections.parquet")
         plots.update(plot_detector(scores, out / "plots", name=str(view.doc.get("name", ""))))

@@ -14,6 +14,8 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 from datagen.analysis.audit.check import DriftPlot
+from datagen.analysis.audit.summary import AuditStatistics
+from datagen.analysis.detections import DetectorSummary
 from datagen.atomic import write_figure
 from datagen.config.schema import Config
 from datagen.scene.chains import trace_approach
@@ -58,7 +60,7 @@ def plot_approaches(config: Config, path: Path, approaches: int = 5, seed: int |
     _save_png(fig, path, dpi=110)
 
 
-def plot_audit(stats: dict, plot: DriftPlot, folder: Path) -> dict[str, Path]:
+def plot_audit(stats: AuditStatistics, plot: DriftPlot, folder: Path) -> dict[str, Path]:
     """The audit's figures as PNGs in ``folder`` (``stats``: the statistics' summary);
     returns {name: path}."""
     import numpy as np
@@ -73,10 +75,10 @@ def plot_audit(stats: dict, plot: DriftPlot, folder: Path) -> dict[str, Path]:
     fig, ax = _figure(figsize=(8, 4.5))
     if len(scatter):
         ax.scatter(scatter[:, 0], np.maximum(scatter[:, 1], floor), s=3, alpha=0.25, label="a feature in a frame")
-        bins = [b for b in stats["tight_drift_px"]["by_distance_m"] if b["count"]]
-        mid = [(b["lo"] + b["hi"]) / 2 for b in bins]
-        ax.plot(mid, [max(b["median"], floor) for b in bins], "o-", color="C3", label="median per 10 m")
-        ax.plot(mid, [max(b["p95"], floor) for b in bins], "s--", color="C1", label="95th percentile")
+        bins = [b for b in stats.drift.by_distance_m if b.drift.count]
+        mid = [(b.lo + b.hi) / 2 for b in bins]
+        ax.plot(mid, [max(b.drift.median or 0.0, floor) for b in bins], "o-", color="C3", label="median per 10 m")
+        ax.plot(mid, [max(b.drift.p95 or 0.0, floor) for b in bins], "s--", color="C1", label="95th percentile")
         ax.legend()
     ax.set(yscale="log", xlabel="probe-to-drogue distance (m)", ylabel="tight-box centre drift (px)",
            title="Tight-box (perceived) centre vs true centre projection")
@@ -89,10 +91,10 @@ def plot_audit(stats: dict, plot: DriftPlot, folder: Path) -> dict[str, Path]:
         axes[0].bxp([{"label": tag, **{k: max(v, floor) for k, v in box.items()}} for tag, box in boxes],
                     showfliers=False)
     axes[0].set(yscale="log", xlabel="feature size", ylabel="tight-box centre drift (px)", title="by feature size")
-    bins = [b for b in stats["tight_drift_px"]["by_obliqueness_deg"] if b["count"]]
-    mid = [(b["lo"] + b["hi"]) / 2 for b in bins]
-    axes[1].plot(mid, [max(b["median"], floor) for b in bins], "o-", label="median")
-    axes[1].plot(mid, [max(b["p95"], floor) for b in bins], "s--", label="95th percentile")
+    bins = [b for b in stats.drift.by_obliqueness_deg if b.drift.count]
+    mid = [(b.lo + b.hi) / 2 for b in bins]
+    axes[1].plot(mid, [max(b.drift.median or 0.0, floor) for b in bins], "o-", label="median")
+    axes[1].plot(mid, [max(b.drift.p95 or 0.0, floor) for b in bins], "s--", label="95th percentile")
     axes[1].set(yscale="log", xlabel="view obliqueness (deg; 0 = seen head-on)", ylabel="drift (px)",
                 title="by view obliqueness")
     axes[1].legend()
@@ -100,7 +102,7 @@ def plot_audit(stats: dict, plot: DriftPlot, folder: Path) -> dict[str, Path]:
         ax.grid(True, alpha=0.3)
     save(fig, "drift_by_size_and_obliqueness")
 
-    per_class = stats["labels_per_class"]
+    per_class = stats.labels_per_class
     fig, ax = _figure(figsize=(max(8, 0.12 * len(per_class)), 4))
     ax.bar(range(len(per_class)), list(per_class.values()))
     ax.set(xlabel="class id", ylabel="labeled (frames)", title="Labels per class")
@@ -108,11 +110,11 @@ def plot_audit(stats: dict, plot: DriftPlot, folder: Path) -> dict[str, Path]:
     save(fig, "labels_per_class")
 
     fig, axes = _figure(1, 2, figsize=(11, 4))
-    exclusions = stats["exclusions"]
+    exclusions = stats.exclusions
     axes[0].bar(list(exclusions), list(exclusions.values()), color=["C2"] + ["C7"] * (len(exclusions) - 1))
     axes[0].set(ylabel="features x frames", title="Labeled and excluded, by reason")
     axes[0].tick_params(axis="x", rotation=20)
-    hist = stats["visibility"]["visible_fraction_histogram"]
+    hist = stats.visibility.visible_fraction_histogram
     axes[1].bar(np.arange(10) / 10 + 0.05, hist, width=0.09)
     axes[1].set(xlabel="visible fraction of a labeled feature's points", ylabel="count",
                 title="Visibility of labeled features (ray casts)")
@@ -121,13 +123,13 @@ def plot_audit(stats: dict, plot: DriftPlot, folder: Path) -> dict[str, Path]:
     save(fig, "exclusions_and_visibility")
 
     fig, axes = _figure(1, 2, figsize=(11, 4))
-    cov = stats["distance_coverage"]
-    edges = np.asarray(cov["edges_m"])
-    axes[0].bar(edges[:-1] + 2.5, cov["frames"], width=4.5)
+    cov = stats.coverage
+    edges = np.asarray(cov.edges_m)
+    axes[0].bar(edges[:-1] + 2.5, cov.frames, width=4.5)
     axes[0].set(xlabel="probe-to-drogue distance (m)", ylabel="frames", title="Distance coverage")
     axes[0].yaxis.set_major_locator(MaxNLocator(integer=True))  # frames are counted whole
-    pnp = stats["pnp_below_3_features"]
-    shares = [100 * v["share_below_3"] for v in pnp.values()]
+    pnp = stats.pnp
+    shares = [100 * v.share_below_3 for v in pnp.values()]
     axes[1].bar(list(pnp), shares, color="C3")
     axes[1].set(ylabel="% of frames", ylim=(0, max(10.0, 1.1 * max(shares, default=0.0))),
                 title="Frames where an object has < 3 labeled features (no PnP)")
@@ -195,27 +197,28 @@ def plot_evaluation(runs, summaries, folder: Path, *, name: str = "") -> dict[st
     return out
 
 
-def plot_detector(summary: dict, folder: Path, *, name: str = "") -> dict[str, Path]:
+def plot_detector(summary: DetectorSummary, folder: Path, *, name: str = "") -> dict[str, Path]:
     """The detector against distance (recall within the match radius, misses and spurious
     detections; the centre error's median and 95th percentile) and recall per class."""
     import numpy as np
 
-    bins = [b for b in summary["by_distance"] if b["labeled"] or b["spurious"]]
-    mid = np.array([(b["lo_m"] + b["hi_m"]) / 2 for b in bins])
+    bins = [b.counts for b in summary.by_distance if b.counts.labeled or b.counts.spurious]
+    mid = np.array([(b.lo_m + b.hi_m) / 2 for b in summary.by_distance if b.counts.labeled or b.counts.spurious])
     fig, axes = _figure(1, 2, figsize=(13, 4.2))
-    labeled = np.array([max(b["labeled"], 1) for b in bins])
-    for key, style in (("matched", "o-"), ("mislocated", "s--"), ("missed", "^--")):
-        axes[0].plot(mid, [100 * b[key] / n for b, n in zip(bins, labeled)], style, ms=4,
-                     label=f"{key} (% of labeled)")
-    axes[0].plot(mid, [100 * b["spurious"] / n for b, n in zip(bins, labeled)], "x:", label="spurious (% of labeled)")
+    labeled = np.array([max(b.labeled, 1) for b in bins])
+    for key, counts, style in (("matched", [b.matched for b in bins], "o-"),
+                               ("mislocated", [b.mislocated for b in bins], "s--"),
+                               ("missed", [b.missed for b in bins], "^--")):
+        axes[0].plot(mid, [100 * c / n for c, n in zip(counts, labeled)], style, ms=4, label=f"{key} (% of labeled)")
+    axes[0].plot(mid, [100 * b.spurious / n for b, n in zip(bins, labeled)], "x:", label="spurious (% of labeled)")
     axes[0].set(xlabel="probe-to-drogue distance (m)", ylabel="% of labeled features", ylim=(0, None),
-                title=f"found within {summary['match_px']:g} px of the true centre")
-    err = [(m, b["error_median_px"], b["error_p95_px"]) for m, b in zip(mid, bins) if b["error_median_px"] is not None]
+                title=f"found within {summary.match_px:g} px of the true centre")
+    err = [(m, b.error_median_px, b.error_p95_px) for m, b in zip(mid, bins) if b.error_median_px is not None]
     if err:
         e = np.array(err, dtype=float)
         axes[1].plot(e[:, 0], e[:, 1], "o-", label="median")
         axes[1].plot(e[:, 0], e[:, 2], "s--", label="95th percentile")
-    axes[1].axhline(summary["match_px"], color="k", lw=0.8, ls=":", label="match radius")
+    axes[1].axhline(summary.match_px, color="k", lw=0.8, ls=":", label="match radius")
     axes[1].set(yscale="log", xlabel="probe-to-drogue distance (m)", ylabel="detected centre - true centre (px)",
                 title="centre error of detected labeled features")
     for ax in axes:
@@ -224,12 +227,12 @@ def plot_detector(summary: dict, folder: Path, *, name: str = "") -> dict[str, P
     fig.suptitle(f"{name}: the detector against the true feature centres")
     out = {"detector_vs_distance": _save_png(fig, Path(folder) / "detector_vs_distance.png")}
 
-    classes = list(summary["by_class"].items())
+    classes = list(summary.by_class.values())
     fig, ax = _figure(figsize=(max(8, 0.13 * len(classes)), 4))
-    recall = [100 * (c["recall"] or 0) for _, c in classes]
-    ax.bar(range(len(classes)), recall, color=["C0" if c["labeled"] else "C7" for _, c in classes])
+    recall = [100 * (c.recall or 0) for c in classes]
+    ax.bar(range(len(classes)), recall, color=["C0" if c.labeled else "C7" for c in classes])
     ax.set(xlabel="class id", ylabel="recall (%)", ylim=(0, 102),
-           title=f"{name}: labeled features found within {summary['match_px']:g} px, per class (grey: never labeled)")
+           title=f"{name}: labeled features found within {summary.match_px:g} px, per class (grey: never labeled)")
     ax.grid(True, axis="y", alpha=0.3)
     out["detector_by_class"] = _save_png(fig, Path(folder) / "detector_by_class.png")
     return out

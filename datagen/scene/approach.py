@@ -184,7 +184,7 @@ def _state(config: Config, seed: int, frame_index: int, approach_index: int, sna
 def _body_from_cam(config: Config, seed: int, approach_index: int, snap: ChainSnapshot) -> FloatArray:
     """The camera on its body at the snapshot's time: the approach's mount, turned by the
     approach's vibration at that time (:mod:`datagen.scene.vibration`)."""
-    shake = vibration(config, seed, approach_index)
+    shake = vibration(config.camera, seed, approach_index)
     if shake is None:
         return snap.body_from_cam
     turned = snap.body_from_cam.copy()

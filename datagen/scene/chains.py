@@ -98,7 +98,7 @@ class _Chain:
         start = draw_start(self.config, self.rng, distance_m)
         self.probe = self.turbulence.position + start_offset(start)
         self.rotvec = rotvec_from_rotation(rotation_from_ypr(start.yaw_rad, start.pitch_rad, start.roll_rad))
-        shift, rot = mount_jitter(self.config, self.rng)
+        shift, rot = mount_jitter(self.config.camera.mount_jitter, self.rng)
         nominal = MOUNTS[self.config.camera.mount].body_from_cam()
         self.body_from_cam = make_transform(np.eye(3), shift) @ nominal @ make_transform(rot, np.zeros(3))
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.config.schema import Config
+from datagen.config.schema import Config, MountJitterConfig
 from datagen.core.conventions import GRAVITY_MPS2
 from datagen.core.transforms import make_transform, rotation_from_ypr
 
@@ -113,10 +113,10 @@ class TankerFlight:
         return make_transform(rotation_from_ypr(heading, 0.0, self.bank), [pos[0], pos[1], self.altitude])
 
 
-def mount_jitter(config: Config, rng: np.random.Generator) -> tuple[FloatArray, FloatArray]:
+def mount_jitter(jitter: MountJitterConfig, rng: np.random.Generator) -> tuple[FloatArray, FloatArray]:
     """One approach's mount perturbation: a translation ``(3,)`` in the body frame and a
-    rotation ``(3, 3)`` about the camera's own axes, each within the configured bounds."""
-    j = config.camera.mount_jitter
+    rotation ``(3, 3)`` about the camera's own axes, each within ``jitter``'s bounds."""
+    j = jitter
     shift = rng.uniform(-j.translation_m, j.translation_m, size=3)
     ypr = np.radians(rng.uniform(-j.rotation_deg, j.rotation_deg, size=3))
     return shift, rotation_from_ypr(*ypr)

@@ -268,7 +268,7 @@ def draw_world(config: Config, look: FrameLook, seed: int, state: FrameState,
         materials["drogue"].update({cls: Material(*m) for cls, m in drawn.materials.items()})
         materials["hose"]["rubber"] = Material(drawn.hose[0], drawn.hose[1], 0.0, 0.35)
         world["materials"] = materials
-    shake = vibration(config, seed, state.approach_index)
+    shake = vibration(config.camera, seed, state.approach_index)
     if shake is not None:
         world.update(camera_vibration_rms_deg=shake.rms_deg, camera_vibration_hz=shake.mean_frequency_hz)
     world.update(sensor_draws(config, seed, state.frame_index))
@@ -395,7 +395,7 @@ def _approach_world(config: Config, seed: int, approach_index: int, base: float)
     if r.traffic.enabled:
         from datagen.scene.traffic import draw_traffic
 
-        world.update(draw_traffic(config, world_rng(seed, approach_index, "traffic")))
+        world.update(draw_traffic(r.traffic, config.camera, world_rng(seed, approach_index, "traffic")))
     w = r.window
     if w.enabled:
         from datagen.assets.rig import MOUNTS

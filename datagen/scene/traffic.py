@@ -25,7 +25,7 @@ from datagen.assets.rig import MOUNTS
 from datagen.core.transforms import make_transform, rotation_from_ypr
 
 if TYPE_CHECKING:
-    from datagen.config.schema import Config
+    from datagen.config.schema import CameraConfig, TrafficConfig
     from datagen.scene.approach import FrameState
 
 __all__ = ["CLEARANCE_M", "VIEW_SHARE", "draw_traffic", "world_from_traffic"]
@@ -38,20 +38,21 @@ VIEW_SHARE: Final = 0.9
 TRIES: Final = 16
 
 
-def draw_traffic(config: Config, rng: np.random.Generator) -> dict:
+def draw_traffic(traffic: TrafficConfig, camera: CameraConfig, rng: np.random.Generator) -> dict:
     """An approach's other aircraft: ``other_aircraft`` (``"none"`` on most approaches, else
-    its kind), its place in the tanker frame and its heading off the tanker's."""
+    its kind), its place in the tanker frame (in ``camera``'s view) and its heading off the
+    tanker's."""
     from datagen.core.camera import Intrinsics
 
-    t = config.randomization.traffic
+    t = traffic
     present = bool(rng.random() < t.share)
     names = list(t.kinds)
     weights = np.cumsum([t.kinds[n] for n in names], dtype=np.float64)
     kind = names[min(int(np.searchsorted(weights / weights[-1], rng.random(), side="right")), len(names) - 1)]
-    mount = MOUNTS[config.camera.mount]
+    mount = MOUNTS[camera.mount]
     origin = np.asarray(mount.position_m, dtype=np.float64)
     axes = mount.body_from_cam()[:3, :3]  # camera axes in the body (= tanker) frame
-    k = Intrinsics.from_hfov_deg(config.camera.width, config.camera.height, config.camera.hfov_deg)
+    k = Intrinsics.from_hfov_deg(camera.width, camera.height, camera.hfov_deg)
     half_w, half_h = math.tan(k.hfov_rad / 2) * VIEW_SHARE, math.tan(k.vfov_rad / 2) * VIEW_SHARE
     best, best_clearance = origin, -math.inf
     for _ in range(TRIES):

@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from datagen.core.transforms import rotation_from_rotvec
 
 if TYPE_CHECKING:
-    from datagen.config.schema import Config
+    from datagen.config.schema import CameraConfig
 
 __all__ = ["COMPONENTS", "MOUNT_VIBRATION", "MountVibration", "Vibration", "vibration"]
 
@@ -84,12 +84,12 @@ class Vibration:
         return rotation_from_rotvec(self.rotvec(time_s))
 
 
-def vibration(config: Config, seed: int, approach_index: int) -> Vibration | None:
-    """Approach ``approach_index``'s vibration, or None where ``camera.vibration`` is off."""
-    v = config.camera.vibration
+def vibration(camera: CameraConfig, seed: int, approach_index: int) -> Vibration | None:
+    """Approach ``approach_index``'s vibration of ``camera``, or None where its vibration is off."""
+    v = camera.vibration
     if not v.enabled or v.scale == 0.0:
         return None
-    return _drawn(config.camera.mount, float(v.scale), int(seed), int(approach_index))
+    return _drawn(camera.mount, float(v.scale), int(seed), int(approach_index))
 
 
 @functools.lru_cache(maxsize=256)

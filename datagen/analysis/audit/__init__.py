@@ -10,9 +10,10 @@ function of distance, feature size and view obliqueness (paper Fig. 8).
 One module per group of per-frame checks (:mod:`.manifest_checks`, :mod:`.label_lines`,
 :mod:`.pose`, :mod:`.image_checks`) on their common base (:mod:`.check`), the checks of
 the dataset's files (:mod:`.dataset_files`), the statistics (:mod:`.statistics`, with the
-box geometry of :mod:`.box_geometry`), the driver that feeds them shard by shard
-(:mod:`.driver`, over :meth:`datagen.dataset.reader.DatasetMeta.shards`), and the
-frames the report draws (:mod:`.frames`).
+box geometry of :mod:`.box_geometry`; their typed values and JSON form: :mod:`.summary`),
+the driver that feeds them shard by shard (:mod:`.driver`, over
+:meth:`datagen.dataset.reader.DatasetMeta.shards`), and the frames the report draws
+(:mod:`.frames`).
 """
 
 from datagen.analysis.audit.box_geometry import feature_normals, obliqueness_deg, tight_centre_drift_px

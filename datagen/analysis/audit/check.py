@@ -13,6 +13,7 @@ from typing import Final, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from datagen.analysis.audit.summary import AuditStatistics, Learnability, PoseLearnability
 from datagen.analysis.exact import Spill
 from datagen.core.errors import shown
 from datagen.core.label_boxes import Exclusion, FrameLabels
@@ -127,6 +128,10 @@ class GroupPart:
     values: dict[str, NDArray] | None = None
 
 
+#: A group's section of the statistics (a field of :class:`~datagen.analysis.audit.summary.AuditStatistics`).
+Section = Learnability | PoseLearnability
+
+
 @dataclass(frozen=True)
 class Finish:
     """What a group's dataset-wide part is given once every frame is checked."""
@@ -153,8 +158,8 @@ class CheckGroup(Protocol):
         """The per-frame checks of ``view``'s rows."""
         ...
 
-    def finish(self, meta: DatasetMeta, done: Finish) -> tuple[list[Check], tuple[str, dict] | None]:
-        """The group's checks, and its ``(key, section)`` of the statistics (None: none)."""
+    def finish(self, meta: DatasetMeta, done: Finish) -> tuple[list[Check], Section | None]:
+        """The group's checks, and its section of the statistics (None: none)."""
         ...
 
 
@@ -172,7 +177,7 @@ class AuditResult:
     name: str
     frames: int
     checks: list[Check]
-    stats: dict  # the statistics, as report.json records them
+    stats: AuditStatistics  # report.json records their to_json()
     plot: DriftPlot
 
     @property

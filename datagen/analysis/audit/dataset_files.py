@@ -164,7 +164,7 @@ def check_texels(view: FrameOrder) -> Check:
     on screen (the manifest's ``world_texel_px``; 0 for the procedural sea and clouds)."""
     check = Check("world_texels", f"no rendered frame shows a world texel over {MAX_WORLD_TEXEL_PX:g} px "
                   "(the sea and clouds are procedural: 0)")
-    values = np.array([np.nan if v is None else v for v in view.world_texel_px], dtype=np.float64)
+    values = np.asarray(view.world_texel_px, dtype=np.float64)  # NaN (or None) where no sea or cloud was seen
     seen = np.isfinite(values)
     check.checked = int(seen.sum())
     check.applicable = check.checked > 0

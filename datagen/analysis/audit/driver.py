@@ -3,6 +3,7 @@ worker processes) or on a whole view, merged into one :class:`~datagen.analysis.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Final
@@ -10,13 +11,14 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from datagen.analysis.audit.check import AuditResult, Check, CheckGroup, Finish, GroupPart, Recomputed
+from datagen.analysis.audit.check import AuditResult, Check, CheckGroup, Finish, GroupPart, Recomputed, Section
 from datagen.analysis.audit.dataset_files import check_files, check_recipe, check_texels
 from datagen.analysis.audit.image_checks import ImageChecks
 from datagen.analysis.audit.label_lines import MIN_LEARNABLE_SHARE, LabelLineChecks
 from datagen.analysis.audit.manifest_checks import ManifestChecks
 from datagen.analysis.audit.pose import PoseChecks
 from datagen.analysis.audit.statistics import Totals, appearance_finish, statistics, statistics_part
+from datagen.analysis.audit.summary import Learnability, PoseLearnability
 from datagen.analysis.exact import Spill
 from datagen.console import NullProgress, Progress
 from datagen.dataset.reader import DatasetMeta, DatasetView, Shard
@@ -88,15 +90,17 @@ def audit(dataset: DatasetMeta, *, min_learnable: float = MIN_LEARNABLE_SHARE, w
             del part
         progress.close()
         found_stats = statistics(dataset, spill, totals)
-        stats = found_stats.summary
         done = Finish(merged, spill, found_stats.top_m, min_learnable)
         checks: list[Check] = []
+        sections: list[Section] = []
         for group in groups:
             group_checks, section = group.finish(dataset, done)
             checks += group_checks
-            if section is not None:
-                stats[section[0]] = section[1]
-        stats["appearance"] = appearance_finish(spill, totals.appearance)
+            sections += [section] if section is not None else []
+        stats = dataclasses.replace(
+            found_stats.summary, appearance=appearance_finish(spill, totals.appearance),
+            learnable=next((s for s in sections if isinstance(s, Learnability)), None),
+            learnable_pose=next((s for s in sections if isinstance(s, PoseLearnability)), None))
     checks += [check_files(index), check_recipe(dataset), check_texels(index)]
     return AuditResult(dataset.root, str(dataset.doc.get("name", dataset.root.name)), len(index),
                        [c.finish() for c in checks], stats, found_stats.plot)

@@ -11,7 +11,7 @@ from typing import Final
 
 import numpy as np
 
-from datagen.analysis.audit.check import Check, Finish, GroupPart, Recomputed
+from datagen.analysis.audit.check import Check, Finish, GroupPart, Recomputed, Section
 from datagen.analysis.audit.dataset_files import decode_image, quiet_stderr
 from datagen.core.box_content import BLANK_REASONS, blank_boxes
 from datagen.dataset.reader import DatasetMeta, DatasetView
@@ -72,5 +72,5 @@ class ImageChecks:
     def frames(self, view: DatasetView, found: Recomputed) -> GroupPart:
         return GroupPart(check_images(view))
 
-    def finish(self, meta: DatasetMeta, done: Finish) -> tuple[list[Check], tuple[str, dict] | None]:
+    def finish(self, meta: DatasetMeta, done: Finish) -> tuple[list[Check], Section | None]:
         return [done.merged["images"], done.merged["image_content"], done.merged["label_content"]], None

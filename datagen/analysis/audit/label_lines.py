@@ -23,9 +23,11 @@ from datagen.analysis.audit.check import (
     Finish,
     GroupPart,
     Recomputed,
+    Section,
     label_files,
 )
 from datagen.analysis.audit.statistics import bin_of
+from datagen.analysis.audit.summary import Learnability, LearnableBin, LearnableShare
 from datagen.analysis.exact import Spill, median, median_positions, order_statistics
 from datagen.core.label_boxes import Exclusion, FrameLabels
 from datagen.core.training import ASSIGNABLE_SIDE_PX
@@ -266,7 +268,7 @@ def learnable_part(view: DatasetView, lines: NDArray[np.float64]) -> dict[str, N
             "train_w": np.minimum(bw * train.scale[0], bh * train.scale[1])}
 
 
-def check_learnable(meta: DatasetMeta, spill: Spill, top: float, min_share: float) -> tuple[Check, dict]:
+def check_learnable(meta: DatasetMeta, spill: Spill, top: float, min_share: float) -> tuple[Check, Learnability]:
     """Which label lines Ultralytics' trainer keeps at ``labels.train_imgsz``, can assign to an
     anchor and gives a target at the start of training (:func:`learnable_part` of every
     shard, in ``spill``'s stream ``lines``); the check passes while at least ``min_share``
@@ -302,41 +304,39 @@ def check_learnable(meta: DatasetMeta, spill: Spill, top: float, min_share: floa
     lines, good = (int(v) for v in per_class.sum(axis=0))
     check.checked = lines
     check.worst = None if not lines else float(1.0 - good / lines)
-    by_class = {}
+    by_class: dict[str, LearnableShare] = {}
     for c in np.flatnonzero(per_class[:, 0]):
         n, ok_n = (int(v) for v in per_class[c])
-        by_class[names[c]] = {"lines": n, "share": ok_n / n}
+        by_class[names[c]] = LearnableShare(n, ok_n / n)
         if ok_n < n:
             check.fail(f"class {c} {names[c]}", f"{ok_n / n:.1%} of {n} lines learnable", float(1.0 - ok_n / n))
     check.failures = lines - good  # offenders are the classes above; the count is of label lines
 
-    def share(counts: NDArray[np.int64]) -> dict:
+    def share(counts: NDArray[np.int64]) -> LearnableShare:
         n, ok_n = (int(v) for v in counts)
-        return {"lines": n, "share": ok_n / n if n else None}
+        return LearnableShare(n, ok_n / n if n else None)
 
     sizes = np.array(meta.features.size, dtype=object)
-    stats = {
-        "train_imgsz": rules.train_imgsz,
-        "min_box_px": rules.min_box_px,
-        "small_boxes": rules.small_boxes,
-        "threshold": min_share,
-        "lines": lines,
-        "share": good / lines if lines else None,
-        "share_survive_2px": survived / lines if lines else None,
-        "share_with_anchor": anchored_ / lines if lines else None,
-        "share_assignable": assignable / lines if lines else None,
-        "share_at_edge_margin": border / lines if lines else None,
-        "assignable_side_px": ASSIGNABLE_SIDE_PX,
-        "min_side_train_px": {"median": _median_of(spill, "lines", "train_w") if lines else None,
-                              "min": low if lines else None},
-        "by_distance_m": [{"lo": float(lo), "hi": float(hi), **share(per_bin[k])}
-                          for k, (lo, hi) in enumerate(itertools.pairwise(edges))],
-        "by_size": {(tag or "untagged"): share(per_class[sizes == tag].sum(axis=0))
-                    for tag in sorted(set(meta.features.size))},
-        "by_class": by_class,
-        "worst_classes": [{"class": n, **v} for n, v in sorted(by_class.items(), key=lambda kv: kv[1]["share"])
-                          if v["share"] < 1.0][:10],
-    }
+    stats = Learnability(
+        train_imgsz=rules.train_imgsz,
+        min_box_px=rules.min_box_px,
+        small_boxes=rules.small_boxes,
+        threshold=min_share,
+        lines=lines,
+        share=good / lines if lines else None,
+        share_survive_2px=survived / lines if lines else None,
+        share_with_anchor=anchored_ / lines if lines else None,
+        share_assignable=assignable / lines if lines else None,
+        share_at_edge_margin=border / lines if lines else None,
+        assignable_side_px=ASSIGNABLE_SIDE_PX,
+        min_side_train_median_px=_median_of(spill, "lines", "train_w") if lines else None,
+        min_side_train_px=low if lines else None,
+        by_distance_m=tuple(LearnableBin(float(lo), float(hi), share(per_bin[k]))
+                            for k, (lo, hi) in enumerate(itertools.pairwise(edges))),
+        by_size={(tag or "untagged"): share(per_class[sizes == tag].sum(axis=0))
+                 for tag in sorted(set(meta.features.size))},
+        by_class=by_class,
+    )
     return check, stats
 
 
@@ -385,7 +385,7 @@ class LabelLineChecks:
         checks, parsed = check_label_files(view, found.labels)
         return GroupPart(checks, learnable_part(view, parsed))
 
-    def finish(self, meta: DatasetMeta, done: Finish) -> tuple[list[Check], tuple[str, dict] | None]:
+    def finish(self, meta: DatasetMeta, done: Finish) -> tuple[list[Check], Section | None]:
         learnable, section = check_learnable(meta, done.spill, done.top_m, done.min_learnable)
         checks = [done.merged[n] for n in ("label_lines", "centre_drift", "edge_margin_and_front", "ultralytics_rules")]
-        return [*checks, learnable, check_names(meta)], ("learnable", section)
+        return [*checks, learnable, check_names(meta)], section

@@ -5,7 +5,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from datagen.analysis.audit.check import MANIFEST_TOLERANCE_PX, REASONS, Check, Finish, GroupPart, Recomputed, nan_error
+from datagen.analysis.audit.check import (
+    MANIFEST_TOLERANCE_PX,
+    REASONS,
+    Check,
+    Finish,
+    GroupPart,
+    Recomputed,
+    Section,
+    nan_error,
+)
 from datagen.core.label_boxes import Exclusion, FrameLabels
 from datagen.dataset.reader import DatasetMeta, DatasetView
 
@@ -70,5 +79,5 @@ class ManifestChecks:
     def frames(self, view: DatasetView, found: Recomputed) -> GroupPart:
         return GroupPart([check_manifest(view, found.labels), check_objects(view, found.objects)])
 
-    def finish(self, meta: DatasetMeta, done: Finish) -> tuple[list[Check], tuple[str, dict] | None]:
+    def finish(self, meta: DatasetMeta, done: Finish) -> tuple[list[Check], Section | None]:
         return [done.merged["manifest_boxes"], done.merged["manifest_objects"]], None

@@ -15,8 +15,10 @@ from datagen.analysis.audit.check import (
     Finish,
     GroupPart,
     Recomputed,
+    Section,
     label_files,
 )
+from datagen.analysis.audit.summary import PoseLearnability
 from datagen.core.keypoints import KEYPOINT_RANGE, keypoint_flags, mirror_name
 from datagen.core.label_boxes import Exclusion, FrameLabels
 from datagen.dataset.reader import DatasetMeta, DatasetView
@@ -159,11 +161,11 @@ def pose_learnable_part(view: DatasetView, instances: NDArray[np.float64]) -> ND
     return view.train_view.reaches_loss(xyxy)
 
 
-def pose_learnable(meta: DatasetMeta, counts: NDArray[np.int64]) -> dict:
+def pose_learnable(meta: DatasetMeta, counts: NDArray[np.int64]) -> PoseLearnability:
     """The share of pose instances that are learnable (:func:`pose_learnable_part`;
     ``counts``: instances, learnable ones)."""
     n, good = (int(v) for v in counts)
-    return {"instances": n, "learnable": good, "share": good / n if n else None, "imgsz": meta.train_view.imgsz}
+    return PoseLearnability(n, good, good / n if n else None, meta.train_view.imgsz)
 
 
 class PoseChecks:
@@ -179,9 +181,9 @@ class PoseChecks:
         checks, instances = check_pose_files(view, found.labels, found.objects)
         return GroupPart(checks, {"learnable": pose_learnable_part(view, instances)})
 
-    def finish(self, meta: DatasetMeta, done: Finish) -> tuple[list[Check], tuple[str, dict] | None]:
+    def finish(self, meta: DatasetMeta, done: Finish) -> tuple[list[Check], Section | None]:
         counts = np.zeros(2, dtype=np.int64)  # pose instances, learnable ones
         for part in done.spill.parts(self.stream, "learnable"):
             counts += (part["learnable"].size, part["learnable"].sum())
         checks = [done.merged[n] for n in ("pose_lines", "keypoint_flags", "ultralytics_pose_rules")]
-        return [*checks, check_pose_names(meta)], ("learnable_pose", pose_learnable(meta, counts))
+        return [*checks, check_pose_names(meta)], pose_learnable(meta, counts)

@@ -16,6 +16,16 @@ from numpy.typing import NDArray
 
 from datagen.analysis.audit.box_geometry import feature_normals, obliqueness_deg, tight_centre_drift_px
 from datagen.analysis.audit.check import DriftPlot
+from datagen.analysis.audit.summary import (
+    AppearanceColumn,
+    AuditStatistics,
+    DistanceCoverage,
+    DriftBin,
+    DriftStatistics,
+    DriftSummary,
+    PnPCoverage,
+    Visibility,
+)
 from datagen.analysis.exact import (
     OrderedSum,
     Spill,
@@ -216,9 +226,10 @@ def _whiskers(spill: Spill, groups: dict[int, dict], size_of_class: NDArray[np.i
 
 @dataclass(frozen=True)
 class Statistics:
-    """The statistics of a dataset (:func:`statistics`)."""
+    """The statistics of a dataset (:func:`statistics`): the group sections and the
+    appearance are added to ``summary`` when they are done."""
 
-    summary: dict  # as report.json records them
+    summary: AuditStatistics
     plot: DriftPlot
     top_m: float  # the far end of the distance bins (a multiple of 10 m)
 
@@ -236,14 +247,13 @@ def statistics(meta: DatasetMeta, spill: Spill, totals: Totals) -> Statistics:
     drift = _drift_statistics(spill, distance_edges, size_of_class)
     groups = drift["groups"]
 
-    def summary(g: int) -> dict:
+    def summary(g: int) -> DriftSummary:
         v = groups.get(g)
-        return {"count": 0} if v is None else {"count": v["count"], "mean": v["mean"], "median": v["median"],
-                                               "p95": v["p95"], "max": v["max"]}
+        return DriftSummary(0) if v is None else DriftSummary(v["count"], v["mean"], v["median"], v["p95"], v["max"])
 
-    def binned(base: int, edges: NDArray) -> list[dict]:
-        return [{"lo": float(lo), "hi": float(hi), **summary(base + k)}
-                for k, (lo, hi) in enumerate(itertools.pairwise(edges))]
+    def binned(base: int, edges: NDArray) -> tuple[DriftBin, ...]:
+        return tuple(DriftBin(float(lo), float(hi), summary(base + k))
+                     for k, (lo, hi) in enumerate(itertools.pairwise(edges)))
 
     coverage_edges = np.arange(0.0, top + 5.0, 5.0)
     coverage = np.zeros(len(coverage_edges) - 1, dtype=np.int64)
@@ -253,40 +263,36 @@ def statistics(meta: DatasetMeta, spill: Spill, totals: Totals) -> Statistics:
         coverage += np.histogram(part["distance"], bins=coverage_edges)[0]
         for j, counts in enumerate(labeled):
             counts += np.bincount(part["labeled"][:, j], minlength=counts.size)
-    pnp = {}
+    pnp: dict[str, PnPCoverage] = {}
     for obj, counts in zip(features.objects, labeled, strict=True):
         cum = np.cumsum(counts)
         below = int(counts[:PNP_MIN_FEATURES].sum())
         def labeled_at(k: int, cum: NDArray[np.int64] = cum) -> float:
             return float(np.searchsorted(cum, k, side="right"))
 
-        pnp[obj] = {"frames_below_3": below, "share_below_3": below / frames if frames else 0.0,
-                    "median_labeled": median(frames, labeled_at) if frames else 0.0}
+        pnp[obj] = PnPCoverage(below, below / frames if frames else 0.0,
+                               median(frames, labeled_at) if frames else 0.0)
     per_class, exclusions = totals.per_class, totals.exclusions
-    whole = summary(_ALL)
-    stats = {
-        "tight_drift_px": {
-            "features": whole["count"],
-            "mean": whole.get("mean"),
-            "median": whole.get("median"),
-            "p95": whole.get("p95"),
-            "max": whole.get("max"),
-            "by_distance_m": binned(_BY_DISTANCE, distance_edges),
-            "by_size": {(tag or "untagged"): summary(_BY_SIZE + i) for i, tag in enumerate(tags)},
-            "by_obliqueness_deg": binned(_BY_OBLIQUENESS, OBLIQUENESS_EDGES_DEG),
-        },
-        "labels_per_class": {features.name[i]: int(per_class[i]) for i in range(len(features))},
-        "exclusions": {r.reason or "labeled": int(exclusions[r]) for r in Exclusion},
-        "visibility": {
-            "labeled_features_rendered": totals.visible_n,
-            "visible_fraction_histogram": totals.visible.tolist(),
-            "share_fully_visible": totals.visible_full / totals.visible_n if totals.visible_n else None,
+    stats = AuditStatistics(
+        drift=DriftStatistics(
+            overall=summary(_ALL),
+            by_distance_m=binned(_BY_DISTANCE, distance_edges),
+            by_size={(tag or "untagged"): summary(_BY_SIZE + i) for i, tag in enumerate(tags)},
+            by_obliqueness_deg=binned(_BY_OBLIQUENESS, OBLIQUENESS_EDGES_DEG),
+        ),
+        labels_per_class={features.name[i]: int(per_class[i]) for i in range(len(features))},
+        exclusions={r.reason or "labeled": int(exclusions[r]) for r in Exclusion},
+        visibility=Visibility(
+            labeled_features_rendered=totals.visible_n,
+            visible_fraction_histogram=totals.visible.tolist(),
+            share_fully_visible=totals.visible_full / totals.visible_n if totals.visible_n else None,
             # centre_visible is 1 or 0 where rendered: the mean is the share of ones
-            "share_centre_visible": totals.cv_ones / totals.cv_count if totals.cv_count else None,
-        },
-        "pnp_below_3_features": pnp,
-        "distance_coverage": {"edges_m": coverage_edges.tolist(), "frames": coverage.tolist()},
-    }
+            share_centre_visible=totals.cv_ones / totals.cv_count if totals.cv_count else None,
+        ),
+        pnp=pnp,
+        coverage=DistanceCoverage(coverage_edges.tolist(), coverage.tolist()),
+        appearance={},
+    )
     boxes = [((tag or "untagged"), groups[_BY_SIZE + i]["box"]) for i, tag in enumerate(tags)
              if "box" in groups.get(_BY_SIZE + i, {})]
     return Statistics(stats, DriftPlot(drift["scatter"], boxes), top)
@@ -296,11 +302,17 @@ def statistics(meta: DatasetMeta, spill: Spill, totals: Totals) -> Statistics:
 APPEARANCE_BINS: Final = 10
 
 
-def _appearance_part(columns: dict[str, list], rank: NDArray[np.int64]) -> dict[str, dict]:
-    """Per appearance column of some rows: how many drew it, and the draws (counts per value
+def _appearance_part(columns: dict[str, Any], rank: NDArray[np.int64]) -> dict[str, dict]:
+    """Per appearance column of some rows (:func:`datagen.dataset.columns.column_values`: floats
+    NaN where not drawn, other values None): how many drew it, and the draws (counts per value
     for names and flags; for numbers the values with their frames' ``rank``)."""
-    out = {}
+    out: dict[str, dict] = {}
     for name, column in columns.items():
+        if isinstance(column, np.ndarray):
+            drawn_rows = ~np.isnan(column.reshape(len(column), -1)).all(axis=1)
+            out[name] = {"frames": int(drawn_rows.sum()), "numbers": column[drawn_rows].reshape(-1),
+                         "rank": rank[drawn_rows]}
+            continue
         rows = [i for i, v in enumerate(column) if v is not None]
         drawn = [column[i] for i in rows]
         if drawn and isinstance(drawn[0], (bool, str)):
@@ -312,24 +324,25 @@ def _appearance_part(columns: dict[str, list], rank: NDArray[np.int64]) -> dict[
     return out
 
 
-def appearance_finish(spill: Spill, columns: dict[str, dict]) -> dict:
+def appearance_finish(spill: Spill, columns: dict[str, dict]) -> dict[str, dict[str, AppearanceColumn]]:
     """The appearance section: per dimension (:data:`datagen.dataset.columns.APPEARANCE`) and
     column, how many frames drew it and the distribution of the draws (a histogram of
     :data:`APPEARANCE_BINS` bins for numbers, counts per value for names and flags). A
     column no frame drew (its randomizer off) has ``frames`` 0. ``columns``: the counts
     (:class:`Totals`); the numbers are in ``spill``'s streams ``appearance.<column>``."""
-    out: dict[str, dict] = {}
+    out: dict[str, dict[str, AppearanceColumn]] = {}
     for dimension, names in APPEARANCE.items():
         section = {}
         for name in names:
             if name not in columns:
                 continue
-            entry: dict = {"frames": columns[name]["frames"]}
+            frames = columns[name]["frames"]
             if "values" in columns[name]:
-                entry["values"] = dict(sorted(columns[name]["values"].items()))
-            elif entry["frames"]:
-                entry.update(_number_summary(spill, f"appearance.{name}"))
-            section[name] = entry
+                section[name] = AppearanceColumn(frames, values=dict(sorted(columns[name]["values"].items())))
+            elif frames:
+                section[name] = AppearanceColumn(frames, **_number_summary(spill, f"appearance.{name}"))
+            else:
+                section[name] = AppearanceColumn(frames)
         out[dimension] = section
     return out
 
