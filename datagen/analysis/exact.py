@@ -347,7 +347,7 @@ class Spill:
             raise OSError(exc.errno, f"{exc.strerror} (values spilled while reading the dataset: "
                           "set TMPDIR to a folder with room)", f.name) from exc
 
-    def add(self, stream: str, rank: NDArray[np.int64] | None, **columns: NDArray) -> None:
+    def add(self, stream: str, rank: NDArray[np.integer] | None, **columns: NDArray) -> None:
         """One part's rows of ``stream``: their ``rank`` and columns (stored ordered by rank,
         rows of equal rank kept in the order given; ``rank`` None: a stream read back only
         part by part, whose order does not matter)."""

@@ -277,14 +277,12 @@ def evaluate(
     accuracy and reliability against distance (paper 3.3-3.6). With --predictions, also
     the detector itself against the true centres: per class and distance, features
     matched, mislocated and missed, spurious detections and the centre error."""
-    from datagen.analysis.detections import score_detections, summarize_detections
+    from datagen.analysis.detections import score_detections
     from datagen.analysis.evaluate import (
-        DISTANCE_EDGES,
         PnPSettings,
         evaluate_runs,
         failure_text,
         plan_evaluation,
-        summarize,
     )
     from datagen.console import ConsoleProgress
     from datagen.dataset.reader import open_dataset
@@ -308,15 +306,14 @@ def evaluate(
     if plan.predictions is not None:
         detector = score_detections(source, plan.predictions, split=plan.split, match_px=match_px)
     written = write_evaluation(index, runs, folder, settings=settings, detector=detector)
-    if detector is not None:
-        d = summarize_detections(detector, DISTANCE_EDGES).overall
+    if written.detector is not None:
+        d = written.detector.overall
         typer.echo(f"detector: {d.matched} of {d.labeled} labeled features found within {match_px:g} px "
                    f"of the true centre ({100 * (d.recall or 0):.1f}%), {d.mislocated} further away, "
                    f"{d.missed} missed, {d.spurious} spurious detections; "
                    + (f"centre error median {d.error_median_px:.2f} px, 95th percentile {d.error_p95_px:.2f} px"
                       if d.error_median_px is not None else "no centre error (no feature found)"))
-    for described, result in runs:
-        s = summarize(result, settings)
+    for (described, result), s in zip(runs, written.summaries, strict=True):
         what = f"noise {described['noise_px']:g} px" if described["source"] == "truth" else "predictions"
         typer.echo(f"{what}: reliability {100 * (s.overall.reliability or 0):.1f}% of {len(result['frame_id'])}, "
                    f"{_mean_error(s.overall)}, {_at_contact(s.at['contact'], settings.contact_m)}, "
@@ -324,7 +321,7 @@ def evaluate(
         failures = [(r, n) for r, n in s.reasons.items() if r != "ok" and n]
         if failures:
             typer.echo("  failed: " + ", ".join(f"{n} {failure_text(r, settings, conf)}" for r, n in failures))
-    typer.echo(f"wrote {written['json']}")
+    typer.echo(f"wrote {written.files['json']}")
 
 
 @app.command()

@@ -11,24 +11,35 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 
-from datagen.analysis.detections import DetectionScores, summarize_detections
-from datagen.analysis.evaluate import DISTANCE_EDGES, REASONS, PnPSettings, summarize
+from datagen.analysis.detections import DetectionScores, DetectorSummary, summarize_detections
+from datagen.analysis.evaluate import DISTANCE_EDGES, REASONS, PnPSettings, RunSummary, summarize
 from datagen.atomic import write_parquet, write_text
 from datagen.dataset.reader import FrameOrder
 from datagen.dataset.reports import REPORTS, claim_report_folder
 from datagen.paths import real_folder
 
-__all__ = ["write_evaluation"]
+__all__ = ["WrittenEvaluation", "write_evaluation"]
+
+
+@dataclass(frozen=True)
+class WrittenEvaluation:
+    """What :func:`write_evaluation` wrote (``files``: ``json``, ``parquet`` and each plot) and
+    the summaries it wrote there: each run's, and the detector's (None: no predictions)."""
+
+    files: dict[str, Path]
+    summaries: list[RunSummary]
+    detector: DetectorSummary | None
 
 
 def write_evaluation(view: FrameOrder, runs: list[tuple[dict, dict]], out: Path,
                      settings: PnPSettings = PnPSettings(), detector: DetectionScores | None = None
-                     ) -> dict[str, Path]:
+                     ) -> WrittenEvaluation:
     """``evaluation.json`` (settings and each run's metrics), ``results.parquet`` (one row
     per frame and run) and PNG plots in the style of the paper's Figs 14-17.
 
@@ -69,6 +80,7 @@ def write_evaluation(view: FrameOrder, runs: list[tuple[dict, dict]], out: Path,
     write_parquet(out / "results.parquet", pa.concat_tables(tables), compression="zstd")
     plots = plot_evaluation(runs, summaries, out / "plots", name=str(view.doc.get("name", "")))
     files = ["results.parquet"]
+    scores = None
     if detector is not None:
         scores = summarize_detections(detector, DISTANCE_EDGES)
         doc["detector"] = scores.to_json()
@@ -79,7 +91,8 @@ def write_evaluation(view: FrameOrder, runs: list[tuple[dict, dict]], out: Path,
     # its folder), which --overwrite removes and nothing else.
     doc["files"] = [*files, *(str(p.relative_to(out)) for p in plots.values())]
     write_text(out / "evaluation.json", json.dumps(doc, indent=2) + "\n")
-    return {"json": out / "evaluation.json", "parquet": out / "results.parquet", **plots}
+    return WrittenEvaluation({"json": out / "evaluation.json", "parquet": out / "results.parquet", **plots},
+                             summaries, scores)
 
 
 def _detections_table(s: DetectionScores) -> pa.Table:

@@ -17,7 +17,7 @@ from datagen.analysis.audit.image_checks import ImageChecks
 from datagen.analysis.audit.label_lines import MIN_LEARNABLE_SHARE, LabelLineChecks
 from datagen.analysis.audit.manifest_checks import ManifestChecks
 from datagen.analysis.audit.pose import PoseChecks
-from datagen.analysis.audit.statistics import Totals, appearance_finish, statistics, statistics_part
+from datagen.analysis.audit.statistics import StatisticsPart, Totals, appearance_finish, statistics, statistics_part
 from datagen.analysis.audit.summary import Learnability, PoseLearnability
 from datagen.analysis.exact import Spill
 from datagen.console import NullProgress, Progress
@@ -35,7 +35,7 @@ class _Part:
     statistics need (:func:`statistics_part`)."""
 
     groups: list[GroupPart]  # of the groups that apply, in GROUPS order
-    stats: dict
+    stats: StatisticsPart
 
 
 def _audit_part(view: DatasetView, rank: NDArray[np.int64]) -> _Part:

@@ -44,7 +44,30 @@ PNP_MIN_FEATURES: Final = 3
 
 
 # --- statistics ------------------------------------------------------------------------------
-def statistics_part(view: DatasetView, labels: FrameLabels, rank: NDArray[np.int64]) -> dict:
+@dataclass(frozen=True)
+class StatisticsPart:
+    """What the statistics keep of some rows (:func:`statistics_part`): per feature in view its
+    drift (px), distance (m), obliqueness (degrees), class and its frame's ``rank`` in the
+    dataset's frame order; counts of exclusions and of labeled features per class; per frame
+    the labeled features of each object and the distance; the labeled features' visible
+    fractions, the centres seen and visible (counts); and the appearance draws
+    (:func:`_appearance_part`)."""
+
+    drift: NDArray[np.float64]
+    distance: NDArray[np.float64]
+    obliqueness: NDArray[np.float64]
+    cls: NDArray[np.int16]
+    rank: NDArray[np.int32]
+    exclusions: NDArray[np.int64]
+    labeled_per_class: NDArray[np.int64]
+    labeled_per_object: NDArray[np.int32]
+    visible_fraction: NDArray[np.float64]
+    centre_visible: tuple[int, int]
+    frame_distance: NDArray[np.float64]
+    appearance: dict[str, dict]
+
+
+def statistics_part(view: DatasetView, labels: FrameLabels, rank: NDArray[np.int64]) -> StatisticsPart:
     """What the statistics need of ``view``'s rows: the drift, distance, obliqueness and class
     of each feature in view (with its frame's position ``rank`` in the dataset's frame
     order, so that the merged values keep the order a whole-dataset view has), and counts."""
@@ -62,18 +85,18 @@ def statistics_part(view: DatasetView, labels: FrameLabels, rank: NDArray[np.int
     vis = view.visible_fraction[labels.labeled]
     cv = view.center_visible[labels.labeled]
     cv = cv[np.isfinite(cv)]
-    return {
-        "drift": drift[inside], "distance": view.distance_m[rows], "obliqueness": oblique[inside],
-        "class": cls.astype(np.int16), "rank": rank[rows].astype(np.int32),
-        "exclusions": np.bincount(labels.exclusion.ravel().astype(np.int64), minlength=max(Exclusion) + 1),
-        "labeled_per_class": labels.labeled.sum(axis=0),
-        "labeled_per_object": np.stack([labels.labeled[:, features.object_index == j].sum(axis=1)
-                                        for j in range(len(features.objects))], axis=1).astype(np.int32),
-        "visible_fraction": vis[np.isfinite(vis)],
-        "centre_visible": (int(cv.size), int((cv == 1.0).sum())),
-        "frame_distance": view.distance_m.copy(),
-        "appearance": _appearance_part(view.appearance, rank),
-    }
+    return StatisticsPart(
+        drift=drift[inside], distance=view.distance_m[rows], obliqueness=oblique[inside],
+        cls=cls.astype(np.int16), rank=rank[rows].astype(np.int32),
+        exclusions=np.bincount(labels.exclusion.ravel().astype(np.int64), minlength=max(Exclusion) + 1),
+        labeled_per_class=labels.labeled.sum(axis=0),
+        labeled_per_object=np.stack([labels.labeled[:, features.object_index == j].sum(axis=1)
+                                     for j in range(len(features.objects))], axis=1).astype(np.int32),
+        visible_fraction=vis[np.isfinite(vis)],
+        centre_visible=(int(cv.size), int((cv == 1.0).sum())),
+        frame_distance=view.distance_m.copy(),
+        appearance=_appearance_part(view.appearance, rank),
+    )
 
 
 class Totals:
@@ -87,19 +110,19 @@ class Totals:
         self.visible_n = self.visible_full = self.cv_count = self.cv_ones = 0
         self.appearance: dict[str, dict] = {}  # column -> frames, and counts per value (names, flags)
 
-    def add(self, spill: Spill, part: dict) -> None:
-        spill.add("drift", part["rank"], drift=part["drift"], distance=part["distance"],
-                  obliqueness=part["obliqueness"], cls=part["class"])
-        spill.add("frames", None, distance=part["frame_distance"], labeled=part["labeled_per_object"])
-        self.exclusions += part["exclusions"]
-        self.per_class += part["labeled_per_class"]
-        vis = part["visible_fraction"]
+    def add(self, spill: Spill, part: StatisticsPart) -> None:
+        spill.add("drift", part.rank, drift=part.drift, distance=part.distance, obliqueness=part.obliqueness,
+                  cls=part.cls)
+        spill.add("frames", None, distance=part.frame_distance, labeled=part.labeled_per_object)
+        self.exclusions += part.exclusions
+        self.per_class += part.labeled_per_class
+        vis = part.visible_fraction
         self.visible += np.histogram(vis, bins=10, range=(0.0, 1.0))[0]
         self.visible_n += vis.size
         self.visible_full += int((vis >= 1.0).sum())
-        self.cv_count += part["centre_visible"][0]
-        self.cv_ones += part["centre_visible"][1]
-        for name, column in part["appearance"].items():
+        self.cv_count += part.centre_visible[0]
+        self.cv_ones += part.centre_visible[1]
+        for name, column in part.appearance.items():
             mine = self.appearance.setdefault(name, {"frames": 0})
             mine["frames"] += column["frames"]
             if "values" in column:
