@@ -42,9 +42,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 import pyarrow.parquet as pq
 from matplotlib.figure import Figure
 
+from datagen.analysis.evaluate import REASONS, RunResult, summarize
 from datagen.atomic import link_or_copy, write_figure
 from datagen.config import find_config, load_config, override_config
 from datagen.pipeline.build import build_dataset
@@ -158,20 +160,31 @@ def evaluate(test: Path, out: Path, *options: str) -> dict:
     return json.loads((out / "evaluation.json").read_text())
 
 
-def per_frame(out: Path) -> list[dict]:
-    """Each run of an evaluation's results.parquet as the arrays plot_evaluation takes."""
-    table = pq.read_table(out / "results.parquet").to_pydict()
-    runs: dict[tuple, dict] = {}
-    for i, source in enumerate(table["source"]):
-        key = (source, repr(table["noise_px"][i]))
-        r = runs.setdefault(key, {"distance_m": [], "error_m": [], "success": [], "reason": [], "solve_s": [],
-                                  "target": None})
-        r["distance_m"].append(table["distance_m"][i])
-        r["error_m"].append(np.nan if table["error_m"][i] is None else table["error_m"][i])
-        r["success"].append(table["success"][i])
-        r["reason"].append(0)
-        r["solve_s"].append(table["solve_s"][i])
-    return [{k: (np.asarray(v) if isinstance(v, list) else v) for k, v in r.items()} for r in runs.values()]
+def per_frame(out: Path) -> list[RunResult]:
+    """Each run of an evaluation (its results.parquet, in the order of evaluation.json's runs)
+    as the results the evaluation summarized."""
+    table = pq.read_table(out / "results.parquet")
+    targets = [run["target"] for run in json.loads((out / "evaluation.json").read_text())["runs"]]
+    keys = list(zip(table.column("source").to_pylist(), map(repr, table.column("noise_px").to_pylist()), strict=True))
+    results = []
+    for key, target in zip(dict.fromkeys(keys), targets, strict=True):
+        rows = pa.array([k == key for k in keys])
+        t = table.filter(rows)
+
+        def floats(name: str, shape: tuple[int, ...] = (-1,), t=t) -> np.ndarray:
+            column = t.column(name).combine_chunks()
+            values = column.flatten() if pa.types.is_fixed_size_list(column.type) else column
+            return np.asarray(values.to_numpy(zero_copy_only=False), dtype=np.float64).reshape(shape)
+
+        results.append(RunResult(
+            frame_id=np.asarray(t.column("frame_id"), dtype=np.int64), distance_m=floats("distance_m"),
+            matches_receiver=np.asarray(t.column("matches_receiver"), dtype=np.int32),
+            matches_target=np.asarray(t.column("matches_target"), dtype=np.int32),
+            reason=np.array([REASONS.index(r) for r in t.column("reason").to_pylist()], dtype=np.int8),
+            ptd_m=floats("ptd_m", (-1, 3)), truth_m=floats("truth_m", (-1, 3)), error_m=floats("error_m"),
+            error_to_drogue_m=floats("error_to_drogue_m"), solve_s=floats("solve_s"), missing_predictions=0,
+            target=target))
+    return results
 
 
 def bias_table(detections: Path) -> list[dict]:
@@ -266,8 +279,9 @@ def main() -> None:
     summary: dict = {"scene": train_config.name, "train_seed": args.train_seed, "test_seed": args.test_seed,
                      "test_frames": args.test_frames, "cost": cost, "models": {}}
     truth = evaluate(args.out / "test", args.out / "eval" / "truth", "--noise-px", ",".join(f"{r:g}" for r in NOISE_PX))
-    plots_runs = list(zip(truth["runs"], per_frame(args.out / "eval" / "truth"), strict=True))
-    plots_summaries = list(truth["runs"])
+    truth_results = per_frame(args.out / "eval" / "truth")
+    plots_runs = list(zip(truth["runs"], truth_results, strict=True))
+    plots_summaries = [summarize(r) for r in truth_results]
     bias = {}
     for name in sets:
         start = time.perf_counter()
@@ -282,7 +296,7 @@ def main() -> None:
                                    "bias_by_offset": bias[name]}
         (result,) = per_frame(args.out / "eval" / name)
         plots_runs.append(({"source": "predictions", "predictions": f"{name} labels"}, result))
-        plots_summaries.append(run)
+        plots_summaries.append(summarize(result))
     plots = plot_evaluation(plots_runs, plots_summaries, args.out / "plots", name=f"{train_config.name} held-out")
     plots["bias"] = plot_bias(bias, args.out / "plots" / "bias_along_parallax.png")
     summary["truth"] = [{k: run[k] for k in ("noise_px", "overall", "at", "by_distance")} for run in truth["runs"]]

@@ -54,24 +54,24 @@ def podcam(tmp_path_factory):
 
 def test_noise_free_points_give_the_true_vector_within_a_millimetre(wingcam) -> None:
     result = evaluate(wingcam, noise_px=0.0)
-    ok = result["success"]
+    ok = result.success
     assert ok.mean() > 0.9
-    assert result["error_m"][ok].max() < 1e-3
+    assert result.error_m[ok].max() < 1e-3
     summary = summarize(result)
     for b in summary.by_distance:
         assert b.stats.max_m is None or b.stats.max_m < 1e-3
     # Frames without a vector have a reason, and it is the right one.
-    few = (result["matches_receiver"] < 3) | (result["matches_target"] < 3)
-    assert np.array_equal(result["reason"] == 1, few)
+    few = (result.matches_receiver < 3) | (result.matches_target < 3)
+    assert np.array_equal(result.reason == 1, few)
 
 
 def test_the_drogue_vector_is_the_manifests_true_ptd(podcam) -> None:
     result = evaluate(podcam, noise_px=0.0)
-    assert result["target"] == "drogue"
-    ok = result["success"]
+    assert result.target == "drogue"
+    ok = result.success
     assert ok.mean() >= 0.35  # far out, the probe shows three features: poses they fit apart are refused
-    np.testing.assert_allclose(result["truth_m"], podcam.ptd_receiver_m, atol=1e-9)
-    assert result["error_to_drogue_m"][ok].max() < 1e-3
+    np.testing.assert_allclose(result.truth_m, podcam.ptd_receiver_m, atol=1e-9)
+    assert result.error_to_drogue_m[ok].max() < 1e-3
 
 
 def test_a_pose_that_epnp_sqpnp_and_ransac_all_miss_is_still_found() -> None:
@@ -134,7 +134,7 @@ def test_error_grows_with_the_noise_radius(wingcam) -> None:
     assert means == sorted(means) and means[0] < 1e-3 < means[1] and means[3] > 2 * means[1]
     # The noise is seeded: the same run gives the same vectors.
     a, b = evaluate(wingcam, noise_px=1.0, run=2), evaluate(wingcam, noise_px=1.0, run=2)
-    np.testing.assert_array_equal(a["ptd_m"], b["ptd_m"])
+    np.testing.assert_array_equal(a.ptd_m, b.ptd_m)
 
 
 def test_predictions_are_parsed_and_matched_by_stem(wingcam, tmp_path: Path) -> None:
@@ -165,8 +165,8 @@ def test_predictions_are_parsed_and_matched_by_stem(wingcam, tmp_path: Path) -> 
         assert found[stem][f][2] == 0.9
         np.testing.assert_allclose(found[stem][f][:2], wingcam.center_px[b, f], atol=1e-5)
     result = evaluate(wingcam, predictions=found)
-    ok = result["success"]
-    assert ok.mean() > 0.8 and result["error_m"][ok].max() < 5e-3
+    ok = result.success
+    assert ok.mean() > 0.8 and result.error_m[ok].max() < 5e-3
 
 
 def test_a_bad_prediction_line_names_its_file(tmp_path: Path) -> None:
@@ -221,8 +221,8 @@ def test_evaluate_command_writes_json_parquet_and_plots(wingcam, tmp_path: Path)
 
 def test_split_limits_the_attempts_and_bad_inputs_are_one_line(wingcam, tmp_path: Path) -> None:
     val = evaluate(wingcam, noise_px=0.0, split="val")
-    assert len(val["frame_id"]) == wingcam.split.count("val") > 0
-    assert set(val["frame_id"]) == {int(f) for f, s in zip(wingcam.frame_id, wingcam.split) if s == "val"}
+    assert len(val) == wingcam.split.count("val") > 0
+    assert set(val.frame_id.tolist()) == {int(f) for f, s in zip(wingcam.frame_id, wingcam.split) if s == "val"}
     out = subprocess.run([sys.executable, "-m", "datagen", "evaluate", str(wingcam.root), "--noise-px", "0,nan"],
                          capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert out.returncode == 2 and out.stderr.strip() == (

@@ -176,12 +176,12 @@ def test_evaluate_scores_pose_predictions_at_the_true_centres_like_the_truth(tmp
     scored, truth = evaluate(view, predictions=found), evaluate(view)
     # The same features are found in every frame, and the same frames succeed.
     for key in ("matches_receiver", "matches_target", "success"):
-        np.testing.assert_array_equal(scored[key], truth[key], err_msg=key)
+        np.testing.assert_array_equal(getattr(scored, key), getattr(truth, key), err_msg=key)
     # The same vectors where PnP is well posed: with exactly three matches an object's pose
     # is ambiguous (P3P has up to four solutions), and the 7-decimal keypoints can tip it.
-    posed = scored["success"] & (truth["matches_receiver"] >= 4) & (truth["matches_target"] >= 4)
+    posed = scored.success & (truth.matches_receiver >= 4) & (truth.matches_target >= 4)
     assert posed.sum() > 0
-    np.testing.assert_allclose(scored["ptd_m"][posed], truth["ptd_m"][posed], atol=1e-3)
+    np.testing.assert_allclose(scored.ptd_m[posed], truth.ptd_m[posed], atol=1e-3)
 
 
 def test_overwrite_removes_the_pose_set_and_unlinks_its_link_without_following_it(tmp_path) -> None:

@@ -163,9 +163,9 @@ def test_distorted_labels_differ_from_pinhole_ones_and_the_audit_recomputes_them
 
 def test_pnp_through_the_recorded_lens_recovers_the_true_vector(distorted: Path) -> None:
     result = evaluate(load_dataset(distorted), noise_px=0.0)
-    ok = result["success"]
+    ok = result.success
     assert ok.mean() > 0.8
-    assert result["error_m"][ok].max() < 1e-3
+    assert result.error_m[ok].max() < 1e-3
 
 
 @pytest.mark.parametrize("seed", [0, 55, 2**31 - 1])

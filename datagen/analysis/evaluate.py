@@ -47,6 +47,7 @@ __all__ = [
     "EvaluationPlan",
     "PnPSettings",
     "Run",
+    "RunResult",
     "RunSummary",
     "covered_splits",
     "evaluate",
@@ -397,6 +398,37 @@ class Run:
     predictions: Mapping | None = None
 
 
+@dataclass(frozen=True)
+class RunResult:
+    """One run's per-frame results, in frame order (:func:`evaluate_runs`): each frame's id and
+    probe-to-drogue distance (m), the matched features of the receiver and of the target, why
+    the frame failed (``reason``: an index into :data:`REASONS`, 0 where it succeeded), the
+    PtD vector (``ptd_m``, ``(N, 3)``, NaN where none), the true vector to the target's origin
+    (``truth_m``), the error against it and against the true drogue centre (m), the solve's
+    seconds; the frames without a prediction file, and the target object."""
+
+    frame_id: NDArray[np.int64]
+    distance_m: NDArray[np.float64]
+    matches_receiver: NDArray[np.int32]
+    matches_target: NDArray[np.int32]
+    reason: NDArray[np.int8]
+    ptd_m: NDArray[np.float64]
+    truth_m: NDArray[np.float64]
+    error_m: NDArray[np.float64]
+    error_to_drogue_m: NDArray[np.float64]
+    solve_s: NDArray[np.float64]
+    missing_predictions: int
+    target: str
+
+    def __len__(self) -> int:
+        return len(self.frame_id)
+
+    @property
+    def success(self) -> NDArray[np.bool_]:
+        """``(N,)`` whether each frame gave an accepted PtD vector."""
+        return self.reason == 0
+
+
 @dataclass
 class _Chain:
     """What one run carries from frame to frame within an approach."""
@@ -523,7 +555,7 @@ def _blocks(index: FrameOrder, attempted: NDArray[np.int64], n: int) -> list[NDA
 
 def evaluate_runs(dataset: DatasetMeta, runs: list[Run], *, seed: int | None = None,
                   settings: PnPSettings = PnPSettings(), split: str | None = None, workers: int = 1,
-                  progress: Progress | None = None) -> list[dict]:
+                  progress: Progress | None = None) -> list[RunResult]:
     """PtD vectors of every frame (frame order) for each run's 2D points, in one pass over
     the dataset: a loaded view, or an opened source read shard by shard as the frames in
     frame order reach them (one shard per split held at a time). With ``workers`` > 1 the
@@ -549,28 +581,25 @@ def evaluate_runs(dataset: DatasetMeta, runs: list[Run], *, seed: int | None = N
     results = []
     for r, run in enumerate(runs):
         out: dict[str, Any] = {c: np.concatenate([p[r][c] for p in parts]) for c in _COLUMNS}
-        out["success"] = out["reason"] == 0
-        out["error_m"] = np.linalg.norm(out["ptd_m"] - out["truth_m"], axis=1)
-        out["error_to_drogue_m"] = np.linalg.norm(out["ptd_m"] - out.pop("ptd_receiver_m"), axis=1)
-        has = out.pop("has_predictions")
-        out["missing_predictions"] = 0 if run.predictions is None else int((~has).sum())
-        out["target"] = target
-        results.append(out)
+        ptd_m = out["ptd_m"]
+        results.append(RunResult(
+            frame_id=out["frame_id"], distance_m=out["distance_m"], matches_receiver=out["matches_receiver"],
+            matches_target=out["matches_target"], reason=out["reason"], ptd_m=ptd_m, truth_m=out["truth_m"],
+            error_m=np.linalg.norm(ptd_m - out["truth_m"], axis=1),
+            error_to_drogue_m=np.linalg.norm(ptd_m - out["ptd_receiver_m"], axis=1), solve_s=out["solve_s"],
+            missing_predictions=0 if run.predictions is None else int((~out["has_predictions"]).sum()),
+            target=target))
     return results
 
 
 def evaluate(view: DatasetMeta, *, noise_px: float = 0.0, run: int = 0, seed: int | None = None,
              predictions: Mapping | None = None, settings: PnPSettings = PnPSettings(),
-             split: str | None = None) -> dict[str, NDArray]:
-    """PtD vectors of every frame (frame order) for one source of 2D points.
+             split: str | None = None) -> RunResult:
+    """PtD vectors of every frame (frame order) for one source of 2D points
+    (:class:`RunResult`).
 
     ``split`` limits the attempts to one split's frames (``val`` when scoring a
     detector on what it did not train on).
-
-    Returns per-frame arrays: ``frame_id``, ``distance_m``, ``matches_receiver``,
-    ``matches_target``, ``reason`` (index into :data:`REASONS`), ``success``, ``ptd_m``
-    (NaN where no vector), ``truth_m`` (the true vector to the target's origin),
-    ``error_m``, ``error_to_drogue_m`` (against the true drogue centre) and ``solve_s``.
     """
     return evaluate_runs(view, [Run(noise_px, run, predictions)], seed=seed, settings=settings, split=split)[0]
 
@@ -645,10 +674,10 @@ class RunSummary:
                 "solve_ms_mean": self.solve_ms_mean}
 
 
-def summarize(result: dict, settings: PnPSettings = PnPSettings()) -> RunSummary:
+def summarize(result: RunResult, settings: PnPSettings = PnPSettings()) -> RunSummary:
     """Metrics of one run: overall, per distance bin, at contact, at the table distances,
     and the failure reasons."""
-    d, e, ok = result["distance_m"], result["error_m"], result["success"]
+    d, e, ok = result.distance_m, result.error_m, result.success
     bins = tuple(DistanceBin(float(lo), float(hi), ErrorStats.of(e[(d >= lo) & (d < hi)], ok[(d >= lo) & (d < hi)]))
                  for lo, hi in itertools.pairwise(DISTANCE_EDGES))
     contact = d < settings.contact_m
@@ -656,9 +685,9 @@ def summarize(result: dict, settings: PnPSettings = PnPSettings()) -> RunSummary
     for x in TABLE_DISTANCES_M:
         sel = np.abs(d - x) < 2.5
         at[f"{x:g}m"] = ErrorStats.of(e[sel], ok[sel])
-    reasons = {r: int((result["reason"] == i).sum()) for i, r in enumerate(REASONS)}
-    solve = result["solve_s"]
-    return RunSummary(result["target"], ErrorStats.of(e, ok), bins, at, reasons,
+    reasons = {r: int((result.reason == i).sum()) for i, r in enumerate(REASONS)}
+    solve = result.solve_s
+    return RunSummary(result.target, ErrorStats.of(e, ok), bins, at, reasons,
                       float(solve.mean() * 1e3) if solve.size else None)
 
 

@@ -315,7 +315,7 @@ def evaluate(
                       if d.error_median_px is not None else "no centre error (no feature found)"))
     for (described, result), s in zip(runs, written.summaries, strict=True):
         what = f"noise {described['noise_px']:g} px" if described["source"] == "truth" else "predictions"
-        typer.echo(f"{what}: reliability {100 * (s.overall.reliability or 0):.1f}% of {len(result['frame_id'])}, "
+        typer.echo(f"{what}: reliability {100 * (s.overall.reliability or 0):.1f}% of {len(result)}, "
                    f"{_mean_error(s.overall)}, {_at_contact(s.at['contact'], settings.contact_m)}, "
                    f"target {s.target}")
         failures = [(r, n) for r, n in s.reasons.items() if r != "ok" and n]

@@ -18,7 +18,7 @@ import numpy as np
 import pyarrow as pa
 
 from datagen.analysis.detections import DetectionScores, DetectorSummary, summarize_detections
-from datagen.analysis.evaluate import DISTANCE_EDGES, REASONS, PnPSettings, RunSummary, summarize
+from datagen.analysis.evaluate import DISTANCE_EDGES, REASONS, PnPSettings, RunResult, RunSummary, summarize
 from datagen.atomic import write_parquet, write_text
 from datagen.dataset.reader import FrameOrder
 from datagen.dataset.reports import REPORTS, claim_report_folder
@@ -37,7 +37,7 @@ class WrittenEvaluation:
     detector: DetectorSummary | None
 
 
-def write_evaluation(view: FrameOrder, runs: list[tuple[dict, dict]], out: Path,
+def write_evaluation(view: FrameOrder, runs: list[tuple[dict, RunResult]], out: Path,
                      settings: PnPSettings = PnPSettings(), detector: DetectionScores | None = None
                      ) -> WrittenEvaluation:
     """``evaluation.json`` (settings and each run's metrics), ``results.parquet`` (one row
@@ -61,21 +61,21 @@ def write_evaluation(view: FrameOrder, runs: list[tuple[dict, dict]], out: Path,
            "runs": [{**source, **s.to_json()} for (source, _), s in zip(runs, summaries, strict=True)]}
     tables = []
     for source, r in runs:
-        n = len(r["frame_id"])
+        n = len(r)
         tables.append(pa.table({
             "source": pa.array([source["source"]] * n),
             "noise_px": pa.array([float(source.get("noise_px", math.nan))] * n),
-            "frame_id": pa.array(r["frame_id"]),
-            "distance_m": pa.array(r["distance_m"]),
-            "matches_receiver": pa.array(r["matches_receiver"]),
-            "matches_target": pa.array(r["matches_target"]),
-            "success": pa.array(r["success"]),
-            "reason": pa.array([REASONS[i] for i in r["reason"]]),
-            "ptd_m": pa.FixedSizeListArray.from_arrays(pa.array(r["ptd_m"].ravel()), 3),
-            "truth_m": pa.FixedSizeListArray.from_arrays(pa.array(r["truth_m"].ravel()), 3),
-            "error_m": pa.array(r["error_m"]),
-            "error_to_drogue_m": pa.array(r["error_to_drogue_m"]),
-            "solve_s": pa.array(r["solve_s"]),
+            "frame_id": pa.array(r.frame_id),
+            "distance_m": pa.array(r.distance_m),
+            "matches_receiver": pa.array(r.matches_receiver),
+            "matches_target": pa.array(r.matches_target),
+            "success": pa.array(r.success),
+            "reason": pa.array([REASONS[i] for i in r.reason]),
+            "ptd_m": pa.FixedSizeListArray.from_arrays(pa.array(r.ptd_m.ravel()), 3),
+            "truth_m": pa.FixedSizeListArray.from_arrays(pa.array(r.truth_m.ravel()), 3),
+            "error_m": pa.array(r.error_m),
+            "error_to_drogue_m": pa.array(r.error_to_drogue_m),
+            "solve_s": pa.array(r.solve_s),
         }))
     write_parquet(out / "results.parquet", pa.concat_tables(tables), compression="zstd")
     plots = plot_evaluation(runs, summaries, out / "plots", name=str(view.doc.get("name", "")))

@@ -16,6 +16,7 @@ from matplotlib.ticker import MaxNLocator
 from datagen.analysis.audit.check import DriftPlot
 from datagen.analysis.audit.summary import AuditStatistics
 from datagen.analysis.detections import DetectorSummary
+from datagen.analysis.evaluate import RunResult, RunSummary
 from datagen.atomic import write_figure
 from datagen.config.schema import Config
 from datagen.scene.chains import trace_approach
@@ -152,7 +153,8 @@ def _label(source: dict) -> str:
             else f"predictions ({source.get('predictions', '')})")
 
 
-def plot_evaluation(runs, summaries, folder: Path, *, name: str = "") -> dict[str, Path]:
+def plot_evaluation(runs: list[tuple[dict, RunResult]], summaries: list[RunSummary], folder: Path, *,
+                    name: str = "") -> dict[str, Path]:
     """PtD error magnitude against distance, one panel per run with the mean and +-2 sigma
     per distance bin (paper Figs 14-17), and reliability against distance; ``summaries``:
     each run's :class:`~datagen.analysis.evaluate.RunSummary`."""
@@ -164,16 +166,16 @@ def plot_evaluation(runs, summaries, folder: Path, *, name: str = "") -> dict[st
     rows = (n + cols - 1) // cols
     fig, axes = _figure(rows, cols, figsize=(7 * cols, 4.2 * rows), squeeze=False)
     for ax, (source, result), summary in zip(axes.ravel(), runs, summaries):
-        ok = result["success"]
-        d, e = result["distance_m"], result["error_m"]
+        ok = result.success
+        d, e = result.distance_m, result.error_m
         floor = ERROR_FLOOR_M  # a log axis shows no 0: errors below it (noise-free points) are drawn on it
         below = int((e[ok] < floor).sum())
         ax.scatter(d[ok], np.maximum(e[ok], floor), s=2, alpha=0.3, color="C0",
                    label="prediction error" + (f" ({below} below {floor:g} m drawn at it)" if below else ""))
         bins = [b for b in summary.by_distance if b.stats.mean_m is not None]
         mid = [(b.lo_m + b.hi_m) / 2 for b in bins]
-        ax.plot(mid, [max(b.stats.mean_m, floor) for b in bins], "-", color="C3", label="mean")
-        ax.plot(mid, [max(b.stats.plus_2sigma_m, floor) for b in bins], "--", color="C1", label="mean + 2 sigma")
+        ax.plot(mid, [max(b.stats.mean_m or 0.0, floor) for b in bins], "-", color="C3", label="mean")
+        ax.plot(mid, [max(b.stats.plus_2sigma_m or 0.0, floor) for b in bins], "--", color="C1", label="mean + 2 sigma")
         ax.axhline(0.07, color="k", lw=0.8, ls=":", label="7 cm (acceptable at contact)")
         ax.set(xscale="symlog", xlim=(0, 125), yscale="log", xlabel="probe-to-drogue distance (m)",
                ylabel="PtD error magnitude (m)", title=f"{_label(source)}: target {summary.target}")
@@ -187,7 +189,7 @@ def plot_evaluation(runs, summaries, folder: Path, *, name: str = "") -> dict[st
     fig, ax = _figure(figsize=(8, 4))
     for (source, _), summary in zip(runs, summaries):
         bins = [b for b in summary.by_distance if b.stats.attempts]
-        ax.plot([(b.lo_m + b.hi_m) / 2 for b in bins], [100 * b.stats.reliability for b in bins], "o-",
+        ax.plot([(b.lo_m + b.hi_m) / 2 for b in bins], [100 * (b.stats.reliability or 0.0) for b in bins], "o-",
                 ms=3, label=_label(source))
     ax.set(xlabel="probe-to-drogue distance (m)", ylabel="reliability (%)", ylim=(0, 102),
            title=f"{name}: successful PtD predictions / attempts")
