@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from datagen.core.camera import Intrinsics
 from datagen.render.sensor import sun_glare
@@ -155,3 +157,14 @@ def test_the_warm_up_compiles_the_kernel_a_frames_motion_blur_runs() -> None:
         motion_blur(rng.random((h, w, 3), dtype=np.float32), rng.normal(0.0, 5.0, grid).astype(np.float32),
                     stride=MOTION_STRIDE, device=True)
         assert census.new_kernels() == 0
+
+
+@settings(max_examples=40, deadline=None)
+@given(gamma=st.floats(0.5, 2.0), shoulder=st.one_of(st.just(0.0), st.floats(0.0, 1.0)))
+def test_the_tone_table_found_by_bisection_equals_evaluating_every_entry(gamma: float, shoulder: float) -> None:
+    from datagen.render import tonemap
+
+    tonemap._tone_table.cache_clear()
+    every = tonemap._encoded(tonemap.tone_curve(np.linspace(0.0, tonemap.TONE_RANGE, tonemap._TONE_ENTRIES),
+                                                gamma, shoulder))
+    np.testing.assert_array_equal(tonemap._tone_table(gamma, shoulder), every)

@@ -53,9 +53,39 @@ def _srgb_table() -> NDArray[np.uint8]:
     return _encoded(np.linspace(0.0, 1.0, _SRGB_LEVELS))
 
 
+#: Entries of the table with a tone curve: the linear values 0 to :data:`TONE_RANGE` in steps
+#: of 1 / (:data:`_SRGB_LEVELS` - 1).
+_TONE_ENTRIES: Final = TONE_RANGE * (_SRGB_LEVELS - 1) + 1
+
+
+def _tone_value(i: NDArray[np.int64], gamma: float, shoulder: float) -> NDArray[np.uint8]:
+    """Entries ``i`` of the table with a tone curve: ``np.linspace(0, TONE_RANGE, _TONE_ENTRIES)[i]``
+    (numpy's own arithmetic: ``i * step``, the last entry the range's end) toned and encoded."""
+    step = TONE_RANGE / (_TONE_ENTRIES - 1)
+    x = np.where(i == _TONE_ENTRIES - 1, float(TONE_RANGE), i.astype(np.float64) * step)
+    return _encoded(tone_curve(x, gamma, shoulder))
+
+
 @functools.lru_cache(maxsize=4)
 def _tone_table(gamma: float, shoulder: float) -> NDArray[np.uint8]:
-    return _encoded(tone_curve(np.linspace(0.0, TONE_RANGE, TONE_RANGE * (_SRGB_LEVELS - 1) + 1), gamma, shoulder))
+    """The 8-bit table of a tone curve (``gamma``, ``shoulder``): a rising step function of at
+    most 256 steps, so it is found from where each step begins (a bisection per level over
+    the entries, all levels at once: a few thousand entries evaluated, not half a million;
+    a frame draws its own curve). The same table as evaluating every entry
+    (``tests/test_sensor.py``)."""
+    n = _TONE_ENTRIES
+    levels = np.arange(1, 256)
+    lo, hi = np.zeros(255, dtype=np.int64), np.full(255, n, dtype=np.int64)  # first entry >= level in [lo, hi]
+    while np.any(lo < hi):
+        mid = (lo + hi) // 2
+        rising = _tone_value(np.minimum(mid, n - 1), gamma, shoulder) >= levels
+        lo, hi = np.where(rising, lo, mid + 1), np.where(rising, mid, hi)
+    first = _tone_value(np.zeros(1, dtype=np.int64), gamma, shoulder)[0]  # the level of entry 0
+    starts = np.concatenate([[0], lo])  # where each level from 0 to 255 begins (n: never reached)
+    counts = np.diff(np.concatenate([starts, [n]]))
+    table = np.repeat(np.arange(256, dtype=np.uint8), counts)
+    table[: starts[first + 1] if first < 255 else n] = first
+    return table
 
 
 def to_srgb8(linear: NDArray[np.floating], tone: tuple[float, float] | None = None) -> NDArray[np.uint8]:
