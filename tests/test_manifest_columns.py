@@ -93,9 +93,10 @@ def test_the_index_reads_the_columns_its_readers_name() -> None:
 
 def test_a_column_added_to_the_table_is_written_read_and_documented_with_only_its_computation(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """As a contributor adds one: a line in the table, and the value computed where the row is
-    made (here: twice the distance); the schema, the reader and the page of columns follow."""
-    extra = Column("distance_twice_m", pa.float64(), "twice the probe-to-drogue distance, metres", since="12")
+    """As a contributor adds one: a line in the table (name, type, meaning, version, unit), and
+    the value computed where the row is made (here: twice the distance); the schema, the
+    reader and the page of columns follow."""
+    extra = Column("distance_twice_m", pa.float64(), "twice the probe-to-drogue distance", since="12", unit="m")
     table = (*MANIFEST_COLUMNS, extra)
     monkeypatch.setattr(columns_module, "MANIFEST_COLUMNS", table)
     monkeypatch.setattr(columns_module, "COLUMNS", {c.name: c for c in table})
@@ -110,7 +111,6 @@ def test_a_column_added_to_the_table_is_written_read_and_documented_with_only_it
     shard = open_dataset(tmp_path / "ds").read_shard("manifests/train-00000.parquet")
     for view in (load_dataset(tmp_path / "ds"), shard):
         np.testing.assert_array_equal(view.columns[extra.name], 2.0 * view.distance_m)
-    assert "| `distance_twice_m` | float64 or null | twice the probe-to-drogue distance, metres |" \
-        in manifest_table()
+    assert "| `distance_twice_m` | float64 or null | m | twice the probe-to-drogue distance |" in manifest_table()
     assert column_values(pa.array([1.0, None]), extra).tolist()[0] == 1.0
     assert manifest_schema().field(extra.name).type == pa.float64() and MATRIX == COLUMNS["cam_from_world"].type

@@ -123,7 +123,8 @@ class Column:
     """A manifest column: its name, Arrow type and meaning (as ``manifests/README.md``'s table
     of columns gives it; empty: the column shares the row of the one before it), whether it
     is never null (``required``: the schema says so), or is nullable in the schema but always
-    written (``filled``), the manifest version that added it, and the group that names it
+    written (``filled``), the manifest version that added it, its unit (empty: none, or a
+    name, a count or a share), and the group that names it
     together (:data:`IMAGE_STATISTICS`, :data:`TEXEL_COLUMNS`, :data:`FILE_COLUMNS`,
     :data:`INTRINSICS_COLUMNS`, :data:`POSE_COLUMNS`, :data:`RATE_COLUMNS`, :data:`RUN_COLUMNS`)."""
 
@@ -134,6 +135,7 @@ class Column:
     filled: bool = False
     since: str = "7"
     group: str = ""
+    unit: str = ""
 
     @property
     def field(self) -> pa.Field:
@@ -168,55 +170,57 @@ MANIFEST_COLUMNS: Final[tuple[Column, ...]] = (
     Column("label_path", pa.string(), "YOLO detection label file (null with `labels.format: pose`)", group="files"),
     Column("pose_label_path", pa.string(), "YOLO pose label file (null with `labels.format: detect`)", group="files"),
     Column("exr_path", pa.string(), "linear EXR, when written", group="files"),
-    Column("width", pa.int32(), "image size, pixels", required=True, group="intrinsics"),
-    Column("height", pa.int32(), required=True, group="intrinsics"),
-    Column("fx", _F64, "pinhole intrinsics, pixels", required=True, group="intrinsics"),
-    Column("fy", _F64, required=True, group="intrinsics"),
-    Column("cx", _F64, required=True, group="intrinsics"),
-    Column("cy", _F64, required=True, group="intrinsics"),
-    Column("cam_from_world", MATRIX, "world to OpenCV camera", required=True),
+    Column("width", pa.int32(), "image size, pixels", required=True, group="intrinsics", unit="px"),
+    Column("height", pa.int32(), required=True, group="intrinsics", unit="px"),
+    Column("fx", _F64, "pinhole intrinsics, pixels", required=True, group="intrinsics", unit="px"),
+    Column("fy", _F64, required=True, group="intrinsics", unit="px"),
+    Column("cx", _F64, required=True, group="intrinsics", unit="px"),
+    Column("cy", _F64, required=True, group="intrinsics", unit="px"),
+    Column("cam_from_world", MATRIX, "world to OpenCV camera", required=True, unit="m (translation)"),
     Column("world_from_tanker", MATRIX,
-           "tanker body frame (origin: the average drogue centre) to world", required=True, group="poses"),
+           "tanker body frame (origin: the average drogue centre) to world", required=True, group="poses",
+           unit="m (translation)"),
     Column("world_from_receiver", MATRIX, "receiver body frame (origin: the probe tip) to world", required=True,
-           group="poses"),
+           group="poses", unit="m (translation)"),
     Column("world_from_drogue", MATRIX, "drogue body frame (origin: the drogue centre) to world", required=True,
-           group="poses"),
+           group="poses", unit="m (translation)"),
     Column("cam_from_tanker_per_s", MATRIX,
            "the time derivative of `cam_from_world @ world_from_<object>` at the frame's time, per "
            "second (by finite difference over 1 ms): with `sensor_readout_s`, each label point is "
            "where `(M + rate t) X` projects at its row's time t (null without a rolling shutter; "
-           "version 11)", since="11", group="rates"),
-    Column("cam_from_receiver_per_s", MATRIX, since="11", group="rates"),
-    Column("cam_from_drogue_per_s", MATRIX, since="11", group="rates"),
-    Column("ptd_receiver_m", _vec(3), "probe-to-drogue vector in the receiver frame, metres", required=True),
-    Column("distance_m", _F64, "its length", required=True),
+           "version 11)", since="11", group="rates", unit="per s"),
+    Column("cam_from_receiver_per_s", MATRIX, since="11", group="rates", unit="per s"),
+    Column("cam_from_drogue_per_s", MATRIX, since="11", group="rates", unit="per s"),
+    Column("ptd_receiver_m", _vec(3), "probe-to-drogue vector in the receiver frame, metres", required=True, unit="m"),
+    Column("distance_m", _F64, "its length", required=True, unit="m"),
     Column("seed", pa.int64(), "the dataset's root seed", required=True),
     Column("render_seed", pa.int64(),
            "Mitsuba sampler seed of the frame (derived from `seed`, `frame_id`)", required=True),
-    Column("spp", pa.int32(), "samples per pixel (null without rendering)"),
+    Column("spp", pa.int32(), "samples per pixel (null without rendering)", unit="samples"),
     Column("denoise", pa.string(), "denoiser applied to the linear image: `off` or `oidn` (null without rendering)"),
     Column("mount", pa.string(), "camera mount: `wingcam`, `dashcam` or `podcam`", required=True),
     Column("approach_index", pa.int64(), "approach chain the frame comes from", required=True),
     Column("approach_number", pa.int32(),
            "approach within the chain (0 unless 'time' sampling passed a contact)", required=True),
-    Column("time_s", _F64, "time since the chain started, seconds", required=True),
+    Column("time_s", _F64, "time since the chain started, seconds", required=True, unit="s"),
     Column("turbulence_intensity", _F64, "turbulence multiplier of the approach", required=True),
-    Column("bank_deg", _F64, "tanker bank angle, degrees (0: straight and level)", required=True),
-    Column("sun_elevation_deg", _F64, "sun draw (azimuth from the tanker's heading)", required=True),
-    Column("sun_azimuth_deg", _F64, required=True),
+    Column("bank_deg", _F64, "tanker bank angle, degrees (0: straight and level)", required=True, unit="deg"),
+    Column("sun_elevation_deg", _F64, "sun draw (azimuth from the tanker's heading)", required=True, unit="deg"),
+    Column("sun_azimuth_deg", _F64, required=True, unit="deg"),
     Column("sun_direction_world", _vec(3), "unit vector towards the sun, world frame", required=True),
     Column("turbidity", _F64, "sky draws (Mitsuba `sunsky`)", required=True),
     Column("sun_scale", _F64, required=True),
     Column("sky_scale", _F64, required=True),
-    Column("exposure_ev", _F64, "exposure compensation, stops", required=True),
+    Column("exposure_ev", _F64, "exposure compensation, stops", required=True, unit="EV"),
     Column("sea_roughness", _F64, "principled roughness of the sea surface", required=True),
-    Column("sea_wind_speed_mps", _F64, "wind speed the roughness follows (Cox-Munk), m/s; null when drawn uniformly"),
+    Column("sea_wind_speed_mps", _F64, "wind speed the roughness follows (Cox-Munk), m/s; null when drawn uniformly",
+           unit="m/s"),
     Column("haze_visibility_m", _F64,
            "the approach's meteorological visibility at sea level, metres (Koschmieder, 550 nm), when"
-           " aerial perspective is on"),
+           " aerial perspective is on", unit="m"),
     Column("haze_scale_height_m", _F64,
            "the approach's aerosol scale height, metres, when aerial perspective is on (version 9; "
-           "null in rows read from older versions)", since="9"),
+           "null in rows read from older versions)", since="9", unit="m"),
     Column("materials", pa.list_(MATERIAL_RECORD),
            "per object and part class: `object`, `part_class`, `base_color` (linear RGB), "
            "`roughness`, `metallic`, `specular`", required=True),
@@ -227,22 +231,22 @@ MANIFEST_COLUMNS: Final[tuple[Column, ...]] = (
            "the deck's form: `cumulus`, `stratocumulus` or `overcast` (version 10; null: clouds off, "
            "or rows read from older versions)", since="10"),
     Column("cloud_deck_coverage", _F64, "share of the cloud deck's area that is cloud (null: clouds off)"),
-    Column("cloud_deck_altitude_m", _F64, "the deck's altitude above sea level, m"),
+    Column("cloud_deck_altitude_m", _F64, "the deck's altitude above sea level, m", unit="m"),
     Column("cloud_deck_thickness_m", _F64,
            "how thick the deck's thickest cells are, m (its body: slopes, self-shadowing, bases; "
-           "version 10)", since="10"),
+           "version 10)", since="10", unit="m"),
     Column("cloud_layer_coverage", _F64, "share of the scattered layer's area that is cloud"),
     Column("cloud_layer_altitude_m", _F64,
            "the scattered layer's altitude above sea level, m (above or below the tanker; constant "
-           "over an approach)"),
+           "over an approach)", unit="m"),
     Column("cloud_layer_thickness_m", _F64,
-           "how thick the scattered layer's thickest cells are, m (version 10)", since="10"),
+           "how thick the scattered layer's thickest cells are, m (version 10)", since="10", unit="m"),
     Column("cloud_opacity", _F64, "opacity of a cloud's thick core"),
     Column("cloud_albedo", _F64, "diffuse reflectance of the clouds"),
     Column("cloud_seed", pa.int64(), "seed of the layers' noise fields"),
     Column("sea_wind_direction_deg", _F64,
            "direction the wind blows towards, degrees counter-clockwise from world x (null: waves "
-           "off)"),
+           "off)", unit="deg"),
     Column("sea_wave_slope_variance", _F64,
            "mean square slope the wave trains carry where a pixel resolves them all (the microfacet "
            "roughness keeps the rest of the sea's)"),
@@ -265,8 +269,9 @@ MANIFEST_COLUMNS: Final[tuple[Column, ...]] = (
     Column("aircraft_light_scale", _F64,
            "a steady light's radiance over that of a white diffuser in the frame's daylight (beacons "
            "3x; version 12)", since="12"),
-    Column("sensor_iso", _F64, "sensor gain, ISO (null: camera model or its noise off)"),
-    Column("sensor_exposure_time_s", _F64, "exposure time, s: the length of the motion blur (null: motion blur off)"),
+    Column("sensor_iso", _F64, "sensor gain, ISO (null: camera model or its noise off)", unit="ISO"),
+    Column("sensor_exposure_time_s", _F64, "exposure time, s: the length of the motion blur (null: motion blur off)",
+           unit="s"),
     Column("sensor_vignetting", _F64, "corner light falloff, 0-1"),
     Column("sensor_glare", _F64, "strength of the sun's veiling glare and ghosts"),
     Column("sensor_distortion", _vec(5),
@@ -278,21 +283,24 @@ MANIFEST_COLUMNS: Final[tuple[Column, ...]] = (
     Column("sensor_seed", pa.int64(), "seed of the sensor noise"),
     Column("camera_vibration_rms_deg", _F64,
            "the approach's camera vibration: RMS pointing angle, degrees (version 11; null: vibration"
-           " off, or rows read from older versions)", since="11"),
-    Column("camera_vibration_hz", _F64, "its power-weighted mean frequency, Hz (version 11)", since="11"),
+           " off, or rows read from older versions)", since="11", unit="deg"),
+    Column("camera_vibration_hz", _F64, "its power-weighted mean frequency, Hz (version 11)", since="11", unit="Hz"),
     Column("drogue_canopy", pa.string(),
            "the approach's canopy scheme (`datagen.assets.drogues.CANOPIES`; its parts' colours are "
            "in `materials`; version 11; null: drogue draws off)", since="11"),
     Column("drogue_tape", pa.bool_(), "the canopy's rim carries reflective tape (version 11)", since="11"),
     Column("hose_band_colour", _vec(3),
            "linear RGB of the hose's marker bands (version 11; null: no bands)", since="11"),
-    Column("hose_band_spacing_m", _F64, "distance between the hose's marker bands, m (version 11)", since="11"),
-    Column("hose_band_width_m", _F64, "length of each marker band along the hose, m (version 11)", since="11"),
+    Column("hose_band_spacing_m", _F64, "distance between the hose's marker bands, m (version 11)", since="11",
+           unit="m"),
+    Column("hose_band_width_m", _F64, "length of each marker band along the hose, m (version 11)", since="11",
+           unit="m"),
     Column("other_aircraft", pa.string(),
            "another aircraft flying in formation with the tanker in the camera's field of view: "
            "`none`, `receiver` or `tanker`; drawn, never labeled (version 11; null: traffic off)", since="11"),
-    Column("other_aircraft_tanker_m", _vec(3), "its place in the tanker frame, m (null: none)", since="11"),
-    Column("other_aircraft_heading_deg", _F64, "its heading off the tanker's, degrees (null: none)", since="11"),
+    Column("other_aircraft_tanker_m", _vec(3), "its place in the tanker frame, m (null: none)", since="11", unit="m"),
+    Column("other_aircraft_heading_deg", _F64, "its heading off the tanker's, degrees (null: none)", since="11",
+           unit="deg"),
     Column("window_dirt", _F64,
            "strength of the dirt on the camera's window, 0-1 (version 11; null: window off)", since="11"),
     Column("window_droplets", pa.int32(),
@@ -304,12 +312,12 @@ MANIFEST_COLUMNS: Final[tuple[Column, ...]] = (
     Column("window_seed", pa.int64(),
            "seed of the window's dirt and reflection fields and its droplets (version 11)", since="11"),
     Column("sensor_lens_blur_px", _F64,
-           "standard deviation of the lens's Gaussian blur, px (version 11; null: lens off)", since="11"),
+           "standard deviation of the lens's Gaussian blur, px (version 11; null: lens off)", since="11", unit="px"),
     Column("sensor_chromatic_aberration_px", _F64,
-           "red-blue separation at the image's farthest corner, px (version 11)", since="11"),
+           "red-blue separation at the image's farthest corner, px (version 11)", since="11", unit="px"),
     Column("sensor_white_balance_k", _F64,
            "the daylight temperature the camera is white-balanced for (the scene's white is D65), K "
-           "(version 11; null: colour off)", since="11"),
+           "(version 11; null: colour off)", since="11", unit="K"),
     Column("sensor_tint", _F64, "the white balance's green gain offset (version 11)", since="11"),
     Column("sensor_tone_gamma", _F64, "exponent of the tone curve on display-linear values (version 11)", since="11"),
     Column("sensor_tone_shoulder", _F64,
@@ -319,9 +327,10 @@ MANIFEST_COLUMNS: Final[tuple[Column, ...]] = (
            "(null: none; version 11)", since="11"),
     Column("sensor_readout_s", _F64,
            "a rolling shutter's top-to-bottom readout, seconds: row v was exposed (v / height - 1/2) "
-           "times it after the frame's time (null: a global shutter; version 11)", since="11"),
-    Column("auto_exposure_ev", _F64, "measured: the auto-exposure's correction against the fixed exposure, stops"),
-    Column("motion_blur_px", _F64, "measured: the longest image motion over the exposure, px"),
+           "times it after the frame's time (null: a global shutter; version 11)", since="11", unit="s"),
+    Column("auto_exposure_ev", _F64, "measured: the auto-exposure's correction against the fixed exposure, stops",
+           unit="EV"),
+    Column("motion_blur_px", _F64, "measured: the longest image motion over the exposure, px", unit="px"),
     Column("sun_in_view", pa.bool_(), "measured: the sun's direction projects inside the image"),
     Column("image_mean_luminance", _F64,
            "measured: mean Rec. 709 luma of the final 8-bit image, 0-1", group="image statistics"),
@@ -342,19 +351,20 @@ MANIFEST_COLUMNS: Final[tuple[Column, ...]] = (
     Column("world_texel_px", _F64,
            "measured: the largest on-screen size of a world texture's texel the frame shows (0: the "
            "sea and the clouds are procedural, no texels), px; the audit fails a frame over 1.5 px; "
-           "null where no sea or cloud is seen", group="texels"),
+           "null where no sea or cloud is seen", group="texels", unit="px"),
     Column("livery_texel_px", _F64,
            "measured: the same for the aircraft's liveries, px (0 from version 12: procedural, "
-           "band-limited to the pixel); null where no livery is seen", group="texels"),
+           "band-limited to the pixel); null where no livery is seen", group="texels", unit="px"),
     Column("n_labeled", pa.int32(), "labeled features: the lines of the detection label file", required=True),
     Column("features", pa.list_(FEATURE_RECORD), "one record per class, in class-id order (below)", required=True),
     Column("objects", pa.list_(OBJECT_RECORD),
            "one record per labeled object, in pose-class order (below)", required=True),
-    Column("render_s", _F64, "seconds inside `mi.render` (null: not rendered by this run)", group="run"),
-    Column("denoise_s", _F64, "seconds in the denoiser (null: not denoised by this run)", group="run"),
-    Column("frame_s", _F64, "seconds for the whole frame in its worker", filled=True, group="run"),
+    Column("render_s", _F64, "seconds inside `mi.render` (null: not rendered by this run)", group="run", unit="s"),
+    Column("denoise_s", _F64, "seconds in the denoiser (null: not denoised by this run)", group="run", unit="s"),
+    Column("frame_s", _F64, "seconds for the whole frame in its worker", filled=True, group="run", unit="s"),
     Column("worker", pa.string(), "the process that wrote the frame, `host:pid`", filled=True, group="run"),
-    Column("worker_rss_mib", _F64, "resident memory of the worker after the frame, MiB", filled=True, group="run"),
+    Column("worker_rss_mib", _F64, "resident memory of the worker after the frame, MiB", filled=True, group="run",
+           unit="MiB"),
 )
 
 
@@ -546,8 +556,9 @@ def manifest_table() -> str:
             rows.append([c])
         else:
             rows[-1].append(c)
-    lines = ["| column | type | meaning |", "|---|---|---|"]
-    lines += [f"| {', '.join(f'`{c.name}`' for c in row)} | {row[0].type_text} | {row[0].meaning} |" for row in rows]
+    lines = ["| column | type | unit | meaning |", "|---|---|---|---|"]
+    lines += [f"| {', '.join(f'`{c.name}`' for c in row)} | {row[0].type_text} | {row[0].unit} | {row[0].meaning} |"
+              for row in rows]
     return "\n".join(lines) + "\n"
 
 
