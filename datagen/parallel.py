@@ -49,8 +49,9 @@ def map_in_order(fn: Callable, tasks: list[tuple], workers: int) -> Iterator:
         pending = deque(pool.submit(fn, *task) for task in itertools.islice(todo, IN_FLIGHT_PER_WORKER * workers))
         while pending:
             result = pending.popleft().result()
-            for task in itertools.islice(todo, 1):
-                pending.append(pool.submit(fn, *task))
+            following = next(todo, None)
+            if following is not None:
+                pending.append(pool.submit(fn, *following))
             yield result
             del result
 

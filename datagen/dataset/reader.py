@@ -24,7 +24,6 @@ from numpy.typing import NDArray
 
 from datagen.config.inputs import parse_yaml, read_json, read_text
 from datagen.core.camera import FOCAL_BOUNDS_PX, MAX_IMAGE_PX, MAX_READOUT_S, Intrinsics, RollingShutter
-from datagen.core.conventions import RIGID_OBJECTS
 from datagen.core.errors import DatagenError, shown
 from datagen.core.features import FeatureTable
 from datagen.core.label_boxes import FrameLabels
@@ -163,10 +162,11 @@ class DatasetMeta(Labelled):
             yield held[key][1], row_of[positions[start:end]]
 
 
+@dataclass(frozen=True, eq=False)
 class _FrameRows:
-    """The per-frame manifest columns every reader of a dataset's rows has, in frame order
-    (its ``columns``: :class:`~datagen.dataset.columns.ManifestColumns`), each under its
-    column's name (:class:`~datagen.dataset.columns.ManifestColumn`)."""
+    """The per-frame manifest columns every reader of a dataset's rows has (its ``columns``:
+    :class:`~datagen.dataset.columns.ManifestColumns`), each under its column's name
+    (:class:`~datagen.dataset.columns.ManifestColumn`)."""
 
     columns: ManifestColumns
     frame_id = ManifestColumn[NDArray[np.int64]]()
@@ -191,17 +191,11 @@ class _FrameRows:
 
 
 @dataclass(frozen=True, eq=False)
-class _Rows(_FrameRows):
-    columns: ManifestColumns
-
-
-@dataclass(frozen=True, eq=False)
 class DatasetView(_FrameRows, DatasetMeta):
     """A dataset's metadata and manifest rows (all of them, or one shard's), per-feature
     columns as ``(B, F)`` arrays (rows sorted by frame id); every other manifest column is
     in ``columns``."""
 
-    columns: ManifestColumns
     manifest_file: list[str]  # per row: the manifest it came from (relative to root)
     row_intrinsics: NDArray[np.float64]  # (B, 6): width, height, fx, fy, cx, cy
     world_from: dict[str, NDArray[np.float64]]  # object -> (B, 4, 4)
@@ -278,7 +272,6 @@ class DatasetIndex(_FrameRows):
     doc: dict
     label_format: str
     manifest_file: list[str]
-    columns: ManifestColumns
     rank: dict[str, NDArray[np.int64]]  # manifest -> each of its rows' position in frame order (its rows sorted)
     limits: ReadLimits  # the dataset's (DatasetMeta.limits)
 
@@ -384,7 +377,7 @@ class DatasetSource(DatasetMeta):
         names them)."""
         tables = self.read_manifests(INDEX_COLUMNS)
         names = [name for name, t in zip(self.manifests, tables, strict=True) for _ in range(t.num_rows)]
-        stored = _Rows(ManifestColumns(pa.concat_tables(tables)))
+        stored = _FrameRows(ManifestColumns(pa.concat_tables(tables)))
         frame_ids = stored.frame_id
         _check_splits(self.root, stored.split, names, frame_ids)
         order = np.argsort(frame_ids, kind="stable")
@@ -395,8 +388,9 @@ class DatasetSource(DatasetMeta):
             mine = rank[start:start + t.num_rows]
             ranks[name] = mine[np.argsort(frame_ids[start:start + t.num_rows], kind="stable")]
             start += t.num_rows
-        return DatasetIndex(self.root, self.doc, self.label_format, [names[i] for i in order],
-                            ManifestColumns(stored.columns.table.take(pa.array(order))), ranks, self.limits)
+        return DatasetIndex(columns=ManifestColumns(stored.columns.table.take(pa.array(order))), root=self.root,
+                            doc=self.doc, label_format=self.label_format, manifest_file=[names[i] for i in order],
+                            rank=ranks, limits=self.limits)
 
 
 def _read_json(path: Path) -> dict:
@@ -644,7 +638,7 @@ def _check_values(table: pa.Table, path: Path, limits: ReadLimits) -> None:
         bad = ~np.all(np.isfinite(v) & (np.abs(v) <= MAX_DISTANCE_M), axis=1)
         if bad.any():
             refuse("ptd_receiver_m", bad, v.tolist(), f"a vector of finite metres within {MAX_DISTANCE_M:g}")
-    for column in ("cam_from_world", *(f"world_from_{o}" for o in RIGID_OBJECTS)):
+    for column in ("cam_from_world", *POSE_COLUMNS.values()):
         if column in names:
             m = _floats(table.column(column).combine_chunks(), (table.num_rows, 4, 4))
             bad = ~_rigid(m)
@@ -656,7 +650,7 @@ def _check_values(table: pa.Table, path: Path, limits: ReadLimits) -> None:
         bad = ~(np.isnan(r) | ((r >= 0.0) & (r <= MAX_READOUT_S)))
         if bad.any():
             refuse("sensor_readout_s", bad, r.tolist(), f"null or a readout from 0 to {MAX_READOUT_S:g} s")
-    for column in (f"cam_from_{o}_per_s" for o in RIGID_OBJECTS):
+    for column in RATE_COLUMNS.values():
         if column in names:
             arr = table.column(column).combine_chunks()
             m = _floats(arr, (table.num_rows, 4, 4))
@@ -702,13 +696,13 @@ def _view(meta: DatasetMeta, tables: list[pa.Table], manifests: list[str], *, al
     root, features = meta.root, meta.features
     names = [name for name, t in zip(manifests, tables, strict=True) for _ in range(t.num_rows)]
     try:
-        stored = _Rows(ManifestColumns(pa.concat_tables(tables)))
+        stored = _FrameRows(ManifestColumns(pa.concat_tables(tables)))
     except pa.ArrowException as exc:
         raise DatagenError(f"{root / 'manifests'}: manifests with different schemas ({exc})") from None
     if not allow_duplicates:
         _refuse_duplicates(root, stored.frame_id, names)
     order = np.argsort(stored.frame_id, kind="stable")
-    rows = _Rows(ManifestColumns(stored.columns.table.take(pa.array(order))))
+    rows = _FrameRows(ManifestColumns(stored.columns.table.take(pa.array(order))))
     table = rows.columns.table
     names = [names[i] for i in order]
     b, f = table.num_rows, len(features)

@@ -120,8 +120,8 @@ class FrameRecord:
 
 @dataclass
 class _ShardTotals:
-    """A shard's frames summed as they are written (:meth:`add`), and the renderer's counts
-    of kernels and recordings after each frame (:meth:`compiled_and_recorded`)."""
+    """A shard's frames summed as they are written (:meth:`add`); ``compiled`` and
+    ``recorded`` are the renderer's new kernels and recordings, which the writer adds."""
 
     classes: int
     rows: list[dict] = field(default_factory=list)

@@ -77,15 +77,12 @@ def _tone_table(gamma: float, shoulder: float) -> NDArray[np.uint8]:
     levels = np.arange(1, 256)
     lo, hi = np.zeros(255, dtype=np.int64), np.full(255, n, dtype=np.int64)  # first entry >= level in [lo, hi]
     while np.any(lo < hi):
-        mid = (lo + hi) // 2
-        rising = _tone_value(np.minimum(mid, n - 1), gamma, shoulder) >= levels
+        mid = (lo + hi) // 2  # below hi <= n: an entry
+        rising = _tone_value(mid, gamma, shoulder) >= levels
         lo, hi = np.where(rising, lo, mid + 1), np.where(rising, mid, hi)
-    first = _tone_value(np.zeros(1, dtype=np.int64), gamma, shoulder)[0]  # the level of entry 0
+    # Entry i holds the highest level that begins at or before it (levels up to entry 0's begin at 0).
     starts = np.concatenate([[0], lo])  # where each level from 0 to 255 begins (n: never reached)
-    counts = np.diff(np.concatenate([starts, [n]]))
-    table = np.repeat(np.arange(256, dtype=np.uint8), counts)
-    table[: starts[first + 1] if first < 255 else n] = first
-    return table
+    return np.repeat(np.arange(256, dtype=np.uint8), np.diff(np.concatenate([starts, [n]])))
 
 
 def to_srgb8(linear: NDArray[np.floating], tone: tuple[float, float] | None = None) -> NDArray[np.uint8]:
