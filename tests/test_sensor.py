@@ -168,3 +168,74 @@ def test_the_tone_table_found_by_bisection_equals_evaluating_every_entry(gamma: 
     every = tonemap._encoded(tonemap.tone_curve(np.linspace(0.0, tonemap.TONE_RANGE, tonemap._TONE_ENTRIES),
                                                 gamma, shoulder))
     np.testing.assert_array_equal(tonemap._tone_table(gamma, shoulder), every)
+
+
+def _development(draw, h: int, w: int):
+    """A frame's last steps as a build draws them, each one present or not."""
+    from datagen.render.sensor import Development, white_balance_gains
+
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    glare = rng.random((h, w, 3), dtype=np.float32) * np.float32(draw(st.floats(0.0, 3.0))) \
+        if draw(st.booleans()) else None
+    return Development(
+        vignetting=draw(st.one_of(st.just(0.0), st.floats(0.05, 0.6))),
+        glare=glare,
+        gain=float(np.float32(draw(st.floats(0.05, 8.0)))),
+        noise=draw(st.one_of(st.none(), st.tuples(st.floats(100.0, 3200.0), st.integers(0, 2**63 - 1)))),
+        white_balance=draw(st.one_of(st.none(), st.builds(white_balance_gains, st.floats(4000.0, 9000.0),
+                                                          st.floats(-0.1, 0.1)))),
+        tone=draw(st.one_of(st.none(), st.tuples(st.floats(0.5, 2.0), st.floats(0.0, 1.0)))),
+    )
+
+
+@pytest.mark.render
+@settings(max_examples=30, deadline=None)
+@given(data=st.data(), h=st.integers(1, 40), w=st.integers(1, 70))
+def test_developing_on_the_device_gives_the_numpy_steps_image_and_its_8_bit_encoding_exactly(data, h, w) -> None:
+    """One kernel for vignetting, glare, exposure, noise, clip, white balance and the 8-bit
+    table against the same steps in numpy (the noise the device's own, :func:`sensor_noise`)
+    and :func:`to_srgb8`: the same display-linear values and the same bytes, whatever steps
+    a frame has, over linear values from black past the tone table's top."""
+    from datagen.render.sensor import develop_on_device, sensor_noise, vignette
+    from datagen.render.tonemap import to_srgb8
+
+    _llvm()
+    steps = _development(data.draw, h, w)
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1)))
+    rgb = (rng.random((h, w, 3), dtype=np.float32) * np.float32(12.0)) ** 2 / np.float32(12.0)
+    rgb[rng.random((h, w)) < 0.1] = 0.0
+    expected = vignette(rgb, steps.vignetting) if steps.vignetting else rgb
+    expected = expected if steps.glare is None else expected + steps.glare
+    expected = expected * np.float32(steps.gain)
+    if steps.noise is not None:
+        expected = sensor_noise(expected, *steps.noise, device=True)
+    expected = np.maximum(expected, np.float32(0.0))
+    expected = expected if steps.white_balance is None else expected * steps.white_balance
+    linear, srgb8 = develop_on_device(rgb, steps)
+    assert srgb8.dtype == np.uint8 and srgb8.shape == (h, w, 3)
+    assert np.array_equal(linear(), expected)
+    assert np.array_equal(srgb8, to_srgb8(expected, steps.tone))
+
+
+@pytest.mark.render
+def test_developing_on_the_device_runs_one_kernel_whatever_steps_a_frame_has() -> None:
+    """Frames with and without each step (vignetting, glare, noise, white balance, a tone
+    curve) and of other sizes launch the kernel the first frame compiled, and no other."""
+    from datagen.render.runtime import KernelCensus
+    from datagen.render.sensor import Development, develop_on_device
+
+    _llvm()
+    rng = np.random.default_rng(3)
+    census = KernelCensus()
+    plain = Development(0.0, None, 1.0, None, None, None)
+    frames = [((34, 64), plain), ((34, 64), Development(0.3, None, 1.0, None, None, None)),
+              ((34, 64), Development(0.0, rng.random((34, 64, 3), dtype=np.float32), 1.0, None, None, None)),
+              ((17, 30), Development(0.0, None, 0.5, (800.0, 11), None, None)),
+              ((34, 64), Development(0.0, None, 1.0, None, np.float32([1.1, 1.0, 0.9]), None)),
+              ((9, 5), Development(0.2, rng.random((9, 5, 3), dtype=np.float32), 2.0, (100.0, 3),
+                                   np.float32([0.9, 1.0, 1.2]), (0.8, 0.4)))]
+    with census.recording():
+        for n, (shape, steps) in enumerate(frames):
+            develop_on_device(rng.random((*shape, 3), dtype=np.float32), steps)
+            compiled = census.new_kernels()
+            assert compiled == (1 if n == 0 else 0), (n, compiled)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from typing import Final
+from typing import Any, Final, cast
 
 import numpy as np
 
@@ -84,7 +84,10 @@ def _training_dataset(root: Path, split: str, task: str = "detect"):
     data = check_det_dataset(str(folder.file("data.yaml")))
     hyp = parse_yaml(read_text(folder.file("hyp.yaml"), "hyp.yaml", max_bytes=HYP_YAML_BYTES), Path(root) / "hyp.yaml")
     cfg = get_cfg(overrides={**hyp, "task": task, "mode": "train", "cache": False, "workers": 0})
-    return build_yolo_dataset(cfg, data[split], batch=1, data=data, mode="train", stride=max(ANCHOR_STRIDES)), cfg
+    # (get_cfg is annotated as returning a SimpleNamespace; it returns the IterableSimpleNamespace this takes)
+    dataset = build_yolo_dataset(cast(Any, cfg), data[split], batch=1, data=data, mode="train",
+                                 stride=max(ANCHOR_STRIDES))
+    return dataset, cfg
 
 
 def dataloader_learnability(root: str | Path, split: str = "train") -> dict:
@@ -123,8 +126,8 @@ def dataloader_learnability(root: str | Path, split: str = "train") -> dict:
         classes.append(item["cls"].view(-1).numpy().astype(np.int64))
         boxes.append(xyxy.numpy())
         images.append(np.full(len(xyxy), i, dtype=np.int64))
-    xyxy = np.concatenate(boxes) if boxes else np.zeros((0, 4))
-    gt = torch.from_numpy(xyxy).float()
+    every = np.concatenate(boxes) if boxes else np.zeros((0, 4))
+    gt = torch.from_numpy(every).float()
     inside = ((centres[None, :, 0] > gt[:, None, 0]) & (centres[None, :, 1] > gt[:, None, 1])
               & (centres[None, :, 0] < gt[:, None, 2]) & (centres[None, :, 1] < gt[:, None, 3]))
     candidates = assigner.select_candidates_in_gts(centres, gt[None], torch.ones(1, len(gt), 1))[0]

@@ -104,11 +104,10 @@ def training_image(result: RenderResult, look: FrameLook) -> tuple[np.ndarray, d
     (through the camera's tone curve and the sensor's JPEG or video round trip where the look has
     them) and what the render measured, the image statistics included
     (:data:`datagen.dataset.columns.MEASURED_COLUMNS`)."""
-    from datagen.render.sensor import jpeg_round_trip, video_round_trip
+    from datagen.render.sensor import jpeg_round_trip, tone_of, video_round_trip
     from datagen.render.tonemap import image_statistics, to_srgb8
 
-    tone = None if look.sensor_tone_gamma is None else (look.sensor_tone_gamma, look.sensor_tone_shoulder or 0.0)
-    srgb = to_srgb8(result.rgb, tone)
+    srgb = result.srgb8 if result.srgb8 is not None else to_srgb8(result.rgb, tone_of(look))
     if look.sensor_jpeg_quality is not None:
         srgb = jpeg_round_trip(srgb, look.sensor_jpeg_quality)
     if look.sensor_video_crf is not None:

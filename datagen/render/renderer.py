@@ -21,7 +21,9 @@ aerial perspective (:mod:`datagen.render.atmosphere`).
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Final, Protocol
 
@@ -93,7 +95,7 @@ SUN_CONE_DEG: Final = 1.0
 class RenderResult:
     """One rendered frame: linear RGB, z-depth and object ids at pixel centres."""
 
-    rgb: NDArray[np.float32]  # (H, W, 3) linear radiance, exposure applied
+    linear: NDArray[np.float32] | Callable[[], NDArray[np.float32]]  # rgb, or where the device holds it its copy
     depth: NDArray[np.float32] | None  # (H, W) camera z-depth, metres, +inf where nothing is hit
     object_id: NDArray[np.uint32] | None  # (H, W); both None unless the geometry pass ran
     render_s: float  # seconds inside mi.render
@@ -101,6 +103,12 @@ class RenderResult:
     surface: NDArray[np.uint8] | None = None  # (H, W) datagen.render.world.SURFACES codes (geometry pass)
     measured: dict | None = None  # what the camera model measured (datagen.render.sensor.apply_sensor)
     stages: dict[str, float] | None = None  # wall seconds per stage (datagen.render.timing.StageClock)
+    srgb8: NDArray[np.uint8] | None = None  # the 8-bit image, tone curve included, where the camera model made it
+
+    @functools.cached_property
+    def rgb(self) -> NDArray[np.float32]:
+        """(H, W, 3) linear radiance, exposure applied (copied from the device when first asked)."""
+        return self.linear() if callable(self.linear) else self.linear
 
 
 class FrameRenderer(Protocol):
@@ -606,8 +614,8 @@ class Renderer(RayCasting):
                            sun_transmittance=float(not np.isfinite(t_sun)),
                            auto_exposure=self.sensor.auto_exposure, clock=clock,
                            device=not self.variant.startswith("scalar"))
-        return RenderResult(out.rgb, out.depth, out.object_id, render_s, denoise_s, out.surface,
-                            {**out.measured, **texels}, clock.seconds)
+        return RenderResult(out.linear, out.depth, out.object_id, render_s, denoise_s, out.surface,
+                            {**out.measured, **texels}, clock.seconds, out.srgb8)
 
     def _light_rays(self, state: FrameState, look: FrameLook) -> _LightRays | None:
         """The aircraft's lit lights (:meth:`Paintwork.light_spots`) in front of the camera

@@ -1,6 +1,8 @@
 """The camera after the render: what a real camera does to the light the path tracer
-computed, in the light's order: image arithmetic on numpy arrays, and the motion blur
-and the noise as Dr.Jit kernels on the render's device where a vectorized variant renders.
+computed, in the light's order: image arithmetic on numpy arrays, and where a vectorized
+variant renders, the motion blur and steps 4-8 with the 8-bit encoding (one kernel,
+:func:`develop_on_device`: one copy back, of the 8-bit image) as Dr.Jit kernels on the
+render's device.
 
 1. motion blur: each pixel averaged along its true image motion over the exposure,
    centred on the frame's time (:func:`image_motion`, :func:`motion_blur`); then a
@@ -26,7 +28,9 @@ Each step is skipped where its draw is None (its switch off).
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Final
 
@@ -47,7 +51,7 @@ from datagen.core.conventions import (
 )
 from datagen.core.transforms import invert_rigid
 from datagen.render.timing import StageClock
-from datagen.render.tonemap import WHITE_RADIANCE, exposure_scale
+from datagen.render.tonemap import SRGB_LEVELS, WHITE_RADIANCE, encoding_table, exposure_scale
 
 if TYPE_CHECKING:
     from datagen.scene.approach import FrameState
@@ -58,11 +62,14 @@ __all__ = [
     "FULL_WELL_E",
     "MOTION_STRIDE",
     "READ_NOISE_E",
+    "Development",
     "SensorResult",
     "apply_sensor",
     "auto_exposure_scale",
     "chromatic_aberration",
     "daylight_white",
+    "develop",
+    "develop_on_device",
     "distort_image",
     "distortion_margin_px",
     "image_motion",
@@ -73,6 +80,7 @@ __all__ = [
     "rolling_shutter",
     "sensor_noise",
     "sun_glare",
+    "tone_of",
     "video_round_trip",
     "warm_up_on_device",
     "white_balance_gains",
@@ -106,11 +114,13 @@ MAX_BLUR_SAMPLES: Final = 24
 class SensorResult:
     """The sensor's output and what it measured on the way."""
 
-    rgb: NDArray[np.float32]  # display-linear RGB (1 = white), noise included
+    # display-linear RGB (1 = white), noise included; where the device holds it, a function that copies it back
+    linear: NDArray[np.float32] | Callable[[], NDArray[np.float32]]
     depth: NDArray[np.float32] | None
     object_id: NDArray[np.uint32] | None
     surface: NDArray[np.uint8] | None
     measured: dict = field(default_factory=dict)  # auto_exposure_ev, motion_blur_px, sun_in_view, sun_glare
+    srgb8: NDArray[np.uint8] | None = None  # its 8-bit encoding (tone curve included) where the device made it
 
 
 # --- motion -----------------------------------------------------------------------
@@ -330,11 +340,22 @@ def distort_image(images: dict[str, NDArray], output: Intrinsics, margin_px: int
 # --- lens -----------------------------------------------------------------------------
 def vignette(rgb: NDArray[np.float32], strength: float) -> NDArray[np.float32]:
     """``1 - strength r^2`` with ``r`` the distance from the centre, 1 at the corners."""
-    h, w = rgb.shape[:2]
+    return rgb * _falloff(np.float32(strength), _radius2(*rgb.shape[:2]))[..., None]
+
+
+@functools.lru_cache(maxsize=4)
+def _radius2(h: int, w: int) -> NDArray[np.float32]:
+    """(h, w): each pixel centre's squared distance from the image's centre, 1 at the corners."""
     x = pixel_centre(np.arange(w, dtype=np.float32)) / w * 2 - 1
     y = pixel_centre(np.arange(h, dtype=np.float32)) / h * 2 - 1
     r2 = (x[None, :] ** 2 * w * w + y[:, None] ** 2 * h * h) / np.float32(w * w + h * h)
-    return rgb * (1.0 - np.float32(strength) * r2)[..., None]
+    r2.flags.writeable = False
+    return r2
+
+
+def _falloff(strength, r2):
+    """The vignetting's factor at squared radius ``r2`` (numpy or Dr.Jit)."""
+    return 1.0 - strength * r2
 
 
 def lens_blur(rgb: NDArray[np.float32], sigma_px: float) -> NDArray[np.float32]:
@@ -432,9 +453,17 @@ def auto_exposure_scale(rgb: NDArray[np.float32]) -> float:
     """The factor that maps the centre-weighted log-average luminance of linear ``rgb``
     to :data:`AUTO_EXPOSURE_KEY`, within :data:`AUTO_EXPOSURE_STOPS` of the fixed
     exposure's (``1 / WHITE_RADIANCE``)."""
-    h, w = rgb.shape[:2]
-    step = max(1, min(h, w) // 128)  # metering needs no more than ~128 x 240 samples
-    sub = rgb[::step, ::step]
+    step = metering_step(*rgb.shape[:2])
+    return metered_scale(rgb[::step, ::step])
+
+
+def metering_step(h: int, w: int) -> int:
+    """Auto-exposure meters every ``step``-th pixel of every ``step``-th row: no more than ~128 x 240 samples."""
+    return max(1, min(h, w) // 128)
+
+
+def metered_scale(sub: NDArray[np.float32]) -> float:
+    """:func:`auto_exposure_scale` of the metered pixels ``sub`` (every :func:`metering_step`-th)."""
     lum = sub @ REC709_LUMA
     y = (np.arange(sub.shape[0]) + 0.5) / sub.shape[0] - 0.5
     x = (np.arange(sub.shape[1]) + 0.5) / sub.shape[1] - 0.5
@@ -451,7 +480,7 @@ def sensor_noise(rgb: NDArray[np.float32], iso: float, seed: int, *, device: boo
     The draws come from ``seed``: Dr.Jit's PCG32 on the render's device when ``device``
     (a vectorized Mitsuba variant is set; one stream per value, Box-Muller), else numpy's
     generator (:func:`datagen.core.conventions.texture_rng`)."""
-    electrons = FULL_WELL_E * 100.0 / float(iso)
+    electrons = full_well_e(iso)
     if not device:
         normal = texture_rng(seed).standard_normal(rgb.shape, dtype=np.float32)
         return rgb + noise_sigma(np.clip(rgb, 0.0, 1.0), np.float32(electrons), np.sqrt) * normal
@@ -460,15 +489,30 @@ def sensor_noise(rgb: NDArray[np.float32], iso: float, seed: int, *, device: boo
 
     from datagen.render.mitsuba import jit_array
 
-    x = jit_array(mi.Float, rgb.reshape(-1))
-    state = seed % 2**64
-    pcg32: Any = mi.PCG32  # (a class of the variant)
-    pcg = pcg32(rgb.size, dr.opaque(mi.UInt64, state), dr.opaque(mi.UInt64, state ^ NOISE_STREAM))
-    u1, u2 = pcg.next_float32(), pcg.next_float32()
-    normal = dr.sqrt(-2.0 * dr.log(1.0 - u1)) * dr.cos(2.0 * dr.pi * u2)
-    noisy = x + noise_sigma(dr.clip(x, 0.0, 1.0), dr.opaque(mi.Float, electrons), dr.sqrt) * normal
+    noisy = _noise_on_device(jit_array(mi.Float, rgb.reshape(-1)), seed, dr.opaque(mi.Float, electrons))
     dr.eval(noisy)
     return np.asarray(noisy, dtype=np.float32).reshape(rgb.shape)
+
+
+def full_well_e(iso: float) -> float:
+    """Electrons a full pixel holds at ``iso``."""
+    return FULL_WELL_E * 100.0 / float(iso)
+
+
+def _noise_on_device(x, seed: int, electrons, on=None):
+    """:func:`sensor_noise` of the Dr.Jit array ``x`` (one value per lane, a stream per lane:
+    Dr.Jit's PCG32, Box-Muller); ``on``, an opaque 0 or 1, scales the noise (a kernel the
+    same with it or without)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    state = seed % 2**64
+    pcg32: Any = mi.PCG32  # (a class of the variant)
+    pcg = pcg32(dr.width(x), dr.opaque(mi.UInt64, state), dr.opaque(mi.UInt64, state ^ NOISE_STREAM))
+    u1, u2 = pcg.next_float32(), pcg.next_float32()
+    normal = dr.sqrt(-2.0 * dr.log(1.0 - u1)) * dr.cos(2.0 * dr.pi * u2)
+    noise = noise_sigma(dr.clip(x, 0.0, 1.0), electrons, dr.sqrt) * normal
+    return x + (noise if on is None else noise * on)
 
 
 def noise_sigma(signal, electrons, sqrt):
@@ -591,23 +635,128 @@ def apply_sensor(rgb: NDArray[np.float32], look: FrameLook, state: FrameState, *
             rgb = chromatic_aberration(lens_blur(rgb, look.sensor_lens_blur_px), output,
                                        look.sensor_chromatic_aberration_px or 0.0)
     with clock.stage("vignetting, glare, exposure"):
-        if look.sensor_vignetting:
-            rgb = vignette(rgb, look.sensor_vignetting)
+        glare = None
         if look.sensor_glare is not None:
             sun_radiance = 2.0 * WHITE_RADIANCE * look.sun_scale * sun_transmittance
             glare, inside = sun_glare(rgb.shape[:2], output, sun_cam, look.sensor_glare, sun_radiance)
             measured["sun_in_view"] = inside
-            if glare is not None:
-                rgb = rgb + glare
         fixed = float(exposure_scale(0.0))
-        scale = auto_exposure_scale(rgb) if auto_exposure else fixed
+        vignetting = look.sensor_vignetting or 0.0
+        scale = metered_scale(_lit_sample(rgb, vignetting, glare)) if auto_exposure else fixed
         measured["auto_exposure_ev"] = math.log2(scale / fixed) if auto_exposure else None
-        rgb = rgb * np.float32(scale * 2.0**look.exposure_ev)
+        steps = Development(vignetting, glare, float(np.float32(scale * 2.0**look.exposure_ev)),
+                            None if look.sensor_iso is None or look.sensor_seed is None  # (drawn together)
+                            else (look.sensor_iso, look.sensor_seed),
+                            None if look.sensor_white_balance_k is None
+                            else white_balance_gains(look.sensor_white_balance_k, look.sensor_tint or 0.0),
+                            tone_of(look))
+    if device:
+        with clock.stage("exposure to 8 bits on the device"):
+            linear, srgb8 = develop_on_device(rgb, steps)
+        return SensorResult(linear, depth, ids, surface, measured, srgb8)
+    return SensorResult(develop(rgb, steps, clock), depth, ids, surface, measured)
+
+
+def _lit_sample(rgb: NDArray[np.float32], vignetting: float, glare: NDArray[np.float32] | None) -> NDArray[np.float32]:
+    """What auto-exposure meters: the pixels it samples (:func:`metering_step`) vignetted and
+    glared, as :func:`develop` makes them before its exposure."""
+    step = metering_step(*rgb.shape[:2])
+    sub = rgb[::step, ::step]
+    if vignetting:
+        sub = sub * _falloff(np.float32(vignetting), _radius2(*rgb.shape[:2])[::step, ::step])[..., None]
+    return sub if glare is None else sub + glare[::step, ::step]
+
+
+def tone_of(look: FrameLook) -> tuple[float, float] | None:
+    """The frame's tone curve (gamma, shoulder) for :func:`~datagen.render.tonemap.encoding_table`, or None."""
+    return None if look.sensor_tone_gamma is None else (look.sensor_tone_gamma, look.sensor_tone_shoulder or 0.0)
+
+
+@dataclass(frozen=True)
+class Development:
+    """A frame's last steps from the lens's image to its 8-bit encoding, as drawn and metered."""
+
+    vignetting: float  # the falloff's strength (0: none)
+    glare: NDArray[np.float32] | None  # (H, W, 3) linear radiance the sun's glare adds
+    gain: float  # the exposure's factor (a float32 value)
+    noise: tuple[float, int] | None  # (ISO, seed) of the sensor's noise
+    white_balance: NDArray[np.float32] | None  # per-channel gains
+    tone: tuple[float, float] | None  # the tone curve, in the encoding's table
+
+
+def develop(rgb: NDArray[np.float32], steps: Development, clock: StageClock | None = None) -> NDArray[np.float32]:
+    """The display-linear image of ``rgb`` (the lens's, linear radiance) in numpy: vignetted,
+    glared, exposed, noisy (numpy's generator), clipped at 0 and white-balanced; its 8-bit
+    encoding is :func:`~datagen.render.tonemap.to_srgb8` of it with ``steps.tone``."""
+    clock = clock or StageClock()
+    with clock.stage("vignetting, glare, exposure"):
+        if steps.vignetting:
+            rgb = vignette(rgb, steps.vignetting)
+        if steps.glare is not None:
+            rgb = rgb + steps.glare
+        rgb = rgb * np.float32(steps.gain)
     with clock.stage("sensor noise"):
-        if look.sensor_iso is not None and look.sensor_seed is not None:  # (drawn together)
-            rgb = sensor_noise(rgb, look.sensor_iso, look.sensor_seed, device=device)
+        if steps.noise is not None:
+            rgb = sensor_noise(rgb, *steps.noise)
         rgb = np.maximum(rgb, np.float32(0.0)).astype(np.float32)
-    if look.sensor_white_balance_k is not None:  # the tone curve: in the sRGB encoding's table (to_srgb8)
+    if steps.white_balance is not None:
         with clock.stage("white balance"):
-            rgb *= white_balance_gains(look.sensor_white_balance_k, look.sensor_tint or 0.0)
-    return SensorResult(rgb, depth, ids, surface, measured)
+            rgb *= steps.white_balance
+    return rgb
+
+
+def develop_on_device(rgb: NDArray[np.float32], steps: Development
+                      ) -> tuple[Callable[[], NDArray[np.float32]], NDArray[np.uint8]]:
+    """:func:`develop` and the 8-bit encoding as one Dr.Jit kernel on the render's device (a
+    vectorized Mitsuba variant is set; the noise Dr.Jit's, :func:`sensor_noise`'s device
+    path): the 8-bit image, copied back, and a function that copies back the display-linear
+    one, left on the device until asked for. The same kernel for every frame: every step
+    runs, a missing one as its identity (no falloff, a glare of 0, noise scaled by 0, gains
+    of 1), and each frame's values are opaque."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from datagen.render.mitsuba import jit_array
+
+    h, w = rgb.shape[:2]
+    x = jit_array(mi.Float, rgb.reshape(-1))  # (H, W, 3) flattened: a lane per value
+    index = dr.arange(mi.UInt32, h * w * 3)
+    r2 = _radius2_on_device(h, w)
+    x = x * _falloff(dr.opaque(mi.Float, steps.vignetting), dr.gather(mi.Float, r2, index // 3))
+    # (No glare: two zeros; one value would be read as a scalar, another kernel.)
+    glare = jit_array(mi.Float, np.zeros(2, np.float32) if steps.glare is None else steps.glare.reshape(-1))
+    x = x + dr.gather(mi.Float, glare, index * dr.opaque(mi.UInt32, int(steps.glare is not None)))
+    x = x * dr.opaque(mi.Float, steps.gain)
+    iso, seed = steps.noise if steps.noise is not None else (100.0, 0)
+    x = _noise_on_device(x, seed, dr.opaque(mi.Float, full_well_e(iso)),
+                         dr.opaque(mi.Float, float(steps.noise is not None)))
+    x = dr.maximum(x, 0.0)
+    gains = jit_array(mi.Float, np.ones(3, np.float32) if steps.white_balance is None else steps.white_balance)
+    x = x * dr.gather(mi.Float, gains, index % 3)
+    table, top = encoding_table(steps.tone)
+    uint8: Any = dr.uint8_array_t(mi.Float)  # (a class of the variant)
+    codes = uint8(np.ascontiguousarray(table))
+    entry = mi.UInt32(dr.round(dr.minimum(x, dr.opaque(mi.Float, top)) * float(SRGB_LEVELS - 1)))
+    srgb8 = dr.gather(uint8, codes, entry)
+    dr.eval(x, srgb8)
+    return (lambda: np.asarray(x, dtype=np.float32).reshape(h, w, 3)), np.asarray(srgb8).reshape(h, w, 3)
+
+
+_DEVICE_RADIUS2: dict[tuple[str, int, int], Any] = {}
+
+
+def _radius2_on_device(h: int, w: int):
+    """:func:`_radius2` on the render's device, uploaded once per variant and size."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from datagen.render.mitsuba import jit_array
+
+    key = (mi.variant() or "", h, w)
+    if key not in _DEVICE_RADIUS2:
+        if len(_DEVICE_RADIUS2) >= 4:
+            _DEVICE_RADIUS2.clear()
+        r2 = jit_array(mi.Float, _radius2(h, w).reshape(-1))
+        dr.make_opaque(r2)
+        _DEVICE_RADIUS2[key] = r2
+    return _DEVICE_RADIUS2[key]

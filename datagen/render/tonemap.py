@@ -13,8 +13,8 @@ from numpy.typing import NDArray
 
 from datagen.core.conventions import REC709_LUMA
 
-__all__ = ["MIN_OBJECT_PX", "TONE_RANGE", "WHITE_RADIANCE", "drogue_statistics", "exposure_scale", "image_statistics",
-           "to_srgb8", "tone_curve"]
+__all__ = ["MIN_OBJECT_PX", "SRGB_LEVELS", "TONE_RANGE", "WHITE_RADIANCE", "drogue_statistics", "encoding_table",
+           "exposure_scale", "image_statistics", "to_srgb8", "tone_curve"]
 
 #: Linear radiance that maps to sRGB white at 0 EV (sunsky radiance is in W/(m^2 sr nm)-like units).
 WHITE_RADIANCE: Final = 0.7
@@ -22,7 +22,7 @@ WHITE_RADIANCE: Final = 0.7
 
 #: Linear values are quantized to 16 bits before the sRGB table: finer than one 8-bit
 #: step everywhere (the steepest part, near black, moves by 0.05 of a step).
-_SRGB_LEVELS: Final = 65536
+SRGB_LEVELS: Final = 65536
 
 
 #: With a tone curve, the table spans linear values up to this (beyond it every shoulder is
@@ -50,12 +50,12 @@ def _encoded(x: NDArray[np.float64]) -> NDArray[np.uint8]:
 
 @functools.cache
 def _srgb_table() -> NDArray[np.uint8]:
-    return _encoded(np.linspace(0.0, 1.0, _SRGB_LEVELS))
+    return _encoded(np.linspace(0.0, 1.0, SRGB_LEVELS))
 
 
 #: Entries of the table with a tone curve: the linear values 0 to :data:`TONE_RANGE` in steps
-#: of 1 / (:data:`_SRGB_LEVELS` - 1).
-_TONE_ENTRIES: Final = TONE_RANGE * (_SRGB_LEVELS - 1) + 1
+#: of 1 / (:data:`SRGB_LEVELS` - 1).
+_TONE_ENTRIES: Final = TONE_RANGE * (SRGB_LEVELS - 1) + 1
 
 
 def _tone_value(i: NDArray[np.int64], gamma: float, shoulder: float) -> NDArray[np.uint8]:
@@ -85,13 +85,22 @@ def _tone_table(gamma: float, shoulder: float) -> NDArray[np.uint8]:
     return np.repeat(np.arange(256, dtype=np.uint8), np.diff(np.concatenate([starts, [n]])))
 
 
+def encoding_table(tone: tuple[float, float] | None = None) -> tuple[NDArray[np.uint8], int]:
+    """The 8-bit encoding as a table and the linear value its last entry stands for: entry
+    ``i`` holds the code of the linear value ``i / (SRGB_LEVELS - 1)``, from 0 to that top
+    (1, or :data:`TONE_RANGE` with a tone curve); :func:`to_srgb8` indexes it."""
+    if tone is None:
+        return _srgb_table(), 1
+    return _tone_table(float(tone[0]), float(tone[1])), TONE_RANGE
+
+
 def to_srgb8(linear: NDArray[np.floating], tone: tuple[float, float] | None = None) -> NDArray[np.uint8]:
     """8-bit sRGB from linear RGB in [0, 1] (clipped), the IEC 61966-2-1 transfer; with
-    ``tone`` = (gamma, shoulder), through :func:`tone_curve` first (one table for both)."""
-    top = 1 if tone is None else TONE_RANGE
+    ``tone`` = (gamma, shoulder), through :func:`tone_curve` first (one table for both):
+    the linear value clipped to the table's top and rounded (half to even) to its entry."""
+    table, top = encoding_table(tone)
     x = np.clip(np.asarray(linear, dtype=np.float32), 0.0, np.float32(top))
-    table = _srgb_table() if tone is None else _tone_table(float(tone[0]), float(tone[1]))
-    return table[np.rint(x * np.float32(_SRGB_LEVELS - 1)).astype(np.int32)]
+    return table[np.rint(x * np.float32(SRGB_LEVELS - 1)).astype(np.int32)]
 
 
 def exposure_scale(exposure_ev: float) -> np.float32:
