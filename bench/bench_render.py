@@ -25,7 +25,9 @@ frame for the whole frame (approach state, material draws, posing through
 ``mi.traverse``, render, denoise, geometry pass, feature visibility, 8-bit PNG
 encoding); the host work per frame (everything outside ``mi.render`` and the
 denoiser) and its share of the frame; the kernels the counted frames compiled (launched,
-and launched by no earlier frame: 0 once warm); and the process's peak RSS. The first
+and launched by no earlier frame: 0 once warm); and the process's peak RSS; and what
+Dr.Jit launched a frame: kernels, memory copies (those of one value are values read back
+one at a time, each a wait for the device on a GPU) and fills (each opaque constant is one). The first
 frame of each spp is a warm-up (kernel compilation) and is not counted.
 """
 
@@ -93,6 +95,7 @@ def main() -> None:
             stages: dict[str, float] = {}
             total_s = 0.0
             compiles = 0  # kernels launched by a counted frame that no frame before it launched
+            launched: dict[str, int] = {}  # Dr.Jit's launches of the counted frames, by kind
             with census.recording():
                 for n, i in enumerate(range(0, (args.frames + 1) * args.every, args.every)):
                     # The build's frame pipeline (datagen.pipeline.frame), timed whole and by stage.
@@ -100,6 +103,8 @@ def main() -> None:
                     new = census.new_kernels()
                     if n > 0:
                         compiles += new
+                        for kind, count in census.launched.items():
+                            launched[kind] = launched.get(kind, 0) + count
                         total_s += elapsed
                         for name, seconds in clock.items():
                             stages[name] = stages.get(name, 0.0) + seconds
@@ -114,6 +119,7 @@ def main() -> None:
                   f"kernels compiled after warm-up {compiles}, render recordings {renderer.recordings}, "
                   f"ray-cast recordings {renderer.cast_recordings} ({renderer.refused_recordings} refused, "
                   f"those traced), peak RSS {peak:,.0f} MiB")
+            print("    Dr.Jit a frame: " + ", ".join(f"{count / k:.0f} {kind}" for kind, count in launched.items()))
             rest = rest_of_frame(stages)
             print("    stages: " + ", ".join(f"{name} {t / k:.3f} s" for name, t in rest)
                   + f" ({sum(t for _, t in rest) / total_s:.0%} of the frame)")

@@ -122,6 +122,9 @@ class KernelCensus:
 
     def __init__(self) -> None:
         self._seen: set[str] = set()
+        #: What the last :meth:`new_kernels` found launched since the call before: JIT kernels,
+        #: memory copies (those of one value: a value read back, a wait on a GPU) and fills.
+        self.launched = {"kernels": 0, "copies": 0, "one-value copies": 0, "fills": 0}
 
     @contextlib.contextmanager
     def recording(self) -> Iterator[None]:
@@ -138,7 +141,12 @@ class KernelCensus:
         earlier call saw; the history is cleared."""
         import drjit as dr
 
-        hashes = {k["hash"] for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT}
+        history = dr.kernel_history()
+        copies = [k for k in history if k["type"] == dr.KernelType.Memcpy]
+        self.launched = {"kernels": sum(k["type"] == dr.KernelType.JIT for k in history), "copies": len(copies),
+                         "one-value copies": sum(k.get("size", 0) <= 8 for k in copies),
+                         "fills": sum(k["type"] == dr.KernelType.Memset for k in history)}
+        hashes = {k["hash"] for k in history if k["type"] == dr.KernelType.JIT}
         new = len(hashes - self._seen)
         self._seen |= hashes
         return new
