@@ -279,6 +279,38 @@ def test_a_frame_renders_the_same_first_in_its_process_or_after_another(one_thre
     np.testing.assert_array_equal(render(later, 5), first)
 
 
+def test_posing_the_next_frame_of_an_approach_sets_the_drogues_and_hoses_materials_no_more(monkeypatch) -> None:
+    """The drogue's and the hose's materials are drawn once an approach (the aircraft's every
+    frame): the frame after an approach's first sets none of theirs again, and the next
+    approach sets them."""
+    from mitsuba import SceneParameters
+
+    renderer, config = renderer_for("wingcam55.yaml", spp=1)
+    assert config.approach.frames_per_approach > 2
+    seed = config.dataset.seed
+    set_keys: list[str] = []
+    original = SceneParameters.__setitem__
+
+    def counting(self, key, value):
+        set_keys.append(key)
+        original(self, key, value)
+
+    def materials_set(i: int) -> dict[str, set[str]]:
+        state = frame_state(config, i)
+        set_keys.clear()
+        renderer.render(state, frame_look(config, state), render_seed(seed, i))
+        keys = {k for k in set_keys if ".bsdf." in k}
+        return {obj: {k for k in keys if k.startswith(prefix)}
+                for obj, prefix in (("drogue", "drogue_group."), ("hose", "hose.bsdf."), ("tanker", "tanker_group."))}
+
+    monkeypatch.setattr(SceneParameters, "__setitem__", counting)
+    first = materials_set(0)
+    assert all(first.values())  # a fresh scene: every material
+    second = materials_set(1)
+    assert second["drogue"] == second["hose"] == set() and second["tanker"]
+    assert all(materials_set(config.approach.frames_per_approach).values())  # the next approach's
+
+
 def test_depth_is_camera_z_on_the_tanker_and_the_sea_and_infinite_on_the_sky() -> None:
     renderer, config = renderer_for("wingcam55.yaml")
     state = frame_state(config, 2)

@@ -298,6 +298,7 @@ class Renderer(RayCasting):
         hose = mitsuba_mesh("hose", placeholder, hose_faces(hose_points), mi.load_dict(hose_bsdf),
                             texcoords=np.zeros((len(placeholder), 2), np.float32) if banded else None)
         self._hose_key: tuple | None = None
+        self._assigned: dict[str, Any] = {}  # what _assign last set each key to
         self.scene = mi.load_dict(dict(description, hose=hose), optimize=False)
         self.params = mi.traverse(self.scene)
         self._unsettled = True  # the frozen render's first pose settles the scene (_apply)
@@ -350,6 +351,8 @@ class Renderer(RayCasting):
         if fresh:
             self._build(len(state.hose_points_world))
         for _ in range(2 if fresh else 1):
+            if fresh:
+                self._assigned.clear()  # each of the two poses sets every parameter
             self._apply(state, look, clock or StageClock())
 
     def _apply(self, state: FrameState, look: FrameLook, clock: StageClock) -> None:
@@ -373,7 +376,7 @@ class Renderer(RayCasting):
                     self._set_livery(self.paintwork.material_prefix(f"{key}.bsdf", cls), look, obj)
                 elif cls == "markings":
                     self._set_paint(f"{key}.bsdf", look.materials[obj][cls])
-                    p[f"{key}.bsdf.roughness.value"] = look.materials[obj][cls].roughness
+                    self._assign(f"{key}.bsdf.roughness.value", look.materials[obj][cls].roughness)
                 elif cls != "shared":
                     self._set_material(f"{key}.bsdf", look.materials[obj][cls])
         render_from_twin = {}
@@ -463,9 +466,17 @@ class Renderer(RayCasting):
 
     def _set_paint(self, prefix: str, m: Material) -> None:
         """A principled BSDF's scalar draws (its colour and roughness being textures)."""
-        p = self.params
-        p[f"{prefix}.metallic.value"] = m.metallic
-        p[f"{prefix}.specular"] = m.specular
+        self._assign(f"{prefix}.metallic.value", m.metallic)
+        self._assign(f"{prefix}.specular", m.specular)
+
+    def _assign(self, key: str, value: float | tuple[float, ...], make: Callable[..., Any] | None = None) -> None:
+        """Set the scene's parameter ``key`` to ``value`` (through ``make``: a Mitsuba type
+        from its values), unless what it holds is the value this set last: a parameter drawn
+        once an approach, and the object it belongs to, are not touched again every frame."""
+        if key in self._assigned and self._assigned[key] == value:
+            return
+        self.params[key] = value if make is None else make(*value)  # type: ignore[misc]  # (a tuple with make)
+        self._assigned[key] = value
 
     @property
     def _hose_banded(self) -> bool:
@@ -486,17 +497,16 @@ class Renderer(RayCasting):
                                         look.hose_band_width_m)
             p["hose.bsdf.base_color.data"] = scene_array(self._mi.TensorXf, texture)
             self._hose_key = key
-        p["hose.bsdf.roughness.value"] = rubber.roughness
-        p["hose.bsdf.metallic.value"] = rubber.metallic
-        p["hose.bsdf.specular"] = rubber.specular
+        self._assign("hose.bsdf.roughness.value", rubber.roughness)
+        self._assign("hose.bsdf.metallic.value", rubber.metallic)
+        self._assign("hose.bsdf.specular", rubber.specular)
         set_buffer(p, "hose.vertex_texcoords", hose_texcoords(points, HOSE_TEXELS * HOSE_TEXEL_M))
 
     def _set_material(self, prefix: str, m: Material) -> None:
-        p = self.params
-        p[f"{prefix}.base_color.value"] = self._mi.Color3f(*m.base_color)
-        p[f"{prefix}.roughness.value"] = m.roughness
-        p[f"{prefix}.metallic.value"] = m.metallic
-        p[f"{prefix}.specular"] = m.specular
+        self._assign(f"{prefix}.base_color.value", tuple(m.base_color), self._mi.Color3f)
+        self._assign(f"{prefix}.roughness.value", m.roughness)
+        self._assign(f"{prefix}.metallic.value", m.metallic)
+        self._assign(f"{prefix}.specular", m.specular)
 
     def path_trace(self, seed: int, window: TargetWindow | None = None):
         """The posed scene path traced with sampler seed ``seed``, and over ``window`` by the
