@@ -469,13 +469,13 @@ class Renderer(RayCasting):
         self._assign(f"{prefix}.metallic.value", m.metallic)
         self._assign(f"{prefix}.specular", m.specular)
 
-    def _assign(self, key: str, value: float | tuple[float, ...], make: Callable[..., Any] | None = None) -> None:
-        """Set the scene's parameter ``key`` to ``value`` (through ``make``: a Mitsuba type
-        from its values), unless what it holds is the value this set last: a parameter drawn
+    def _assign(self, key: str, value: float | tuple[float, ...], make: Callable[[], Any] | None = None) -> None:
+        """Set the scene's parameter ``key`` to ``value`` (or to what ``make`` makes of it: a
+        Mitsuba type), unless what it holds is the value this set last: a parameter drawn
         once an approach, and the object it belongs to, are not touched again every frame."""
         if key in self._assigned and self._assigned[key] == value:
             return
-        self.params[key] = value if make is None else make(*value)  # type: ignore[misc]  # (a tuple with make)
+        self.params[key] = value if make is None else make()
         self._assigned[key] = value
 
     @property
@@ -503,7 +503,7 @@ class Renderer(RayCasting):
         set_buffer(p, "hose.vertex_texcoords", hose_texcoords(points, HOSE_TEXELS * HOSE_TEXEL_M))
 
     def _set_material(self, prefix: str, m: Material) -> None:
-        self._assign(f"{prefix}.base_color.value", tuple(m.base_color), self._mi.Color3f)
+        self._assign(f"{prefix}.base_color.value", tuple(m.base_color), lambda: self._mi.Color3f(*m.base_color))
         self._assign(f"{prefix}.roughness.value", m.roughness)
         self._assign(f"{prefix}.metallic.value", m.metallic)
         self._assign(f"{prefix}.specular", m.specular)

@@ -651,7 +651,7 @@ def apply_sensor(rgb: NDArray[np.float32], look: FrameLook, state: FrameState, *
                             else white_balance_gains(look.sensor_white_balance_k, look.sensor_tint or 0.0),
                             tone_of(look))
     if device:
-        with clock.stage("exposure to 8 bits on the device"):
+        with clock.stage("vignetting to 8 bits on the device"):
             linear, srgb8 = develop_on_device(rgb, steps)
         return SensorResult(linear, depth, ids, surface, measured, srgb8)
     return SensorResult(develop(rgb, steps, clock), depth, ids, surface, measured)
