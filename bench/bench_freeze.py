@@ -49,7 +49,7 @@ def child(config_name: str, overrides: dict, frames: list[int], size: str, varia
     scene = Scene.resolve(config)
     states, renderer = FrameStates(config), Renderer(scene)
 
-    def render(s, seed):
+    def render(s, seed, textures=()):  # textures: their device values, the frozen render's inputs (Renderer.trace)
         return mi.render(s, seed=seed, spp=1)
 
     frozen = dr.freeze(render)
@@ -64,7 +64,8 @@ def child(config_name: str, overrides: dict, frames: list[int], size: str, varia
         traced_s = time.perf_counter() - start
         recordings = frozen.n_recordings
         start = time.perf_counter()
-        replayed = np.array(frozen(renderer.scene, seed))
+        textures = tuple(t.inputs() for t in (*renderer.world.textures(), *renderer.paintwork.textures()))
+        replayed = np.array(frozen(renderer.scene, seed, textures))
         frozen_s = time.perf_counter() - start
         print(json.dumps({"frame": i, "equal": bool(np.array_equal(traced, replayed)),
                           "diff": float(np.abs(traced - replayed).max()), "traced_s": traced_s,

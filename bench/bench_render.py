@@ -112,9 +112,9 @@ def main() -> None:
             render_s, denoise_s = stages.get(PATH_TRACING, 0.0), stages.get(DENOISE, 0.0)
             peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
             print(f"{renderer.variant} spp {spp:3d}, denoise {renderer.denoise}: "
-                  f"mi.render {render_s / k:6.2f} s/frame, "
-                  f"denoise {denoise_s / k:5.2f} s/frame, whole frame {total_s / k:6.2f} s/frame, "
-                  f"host work (outside mi.render and the denoiser) {(total_s - render_s - denoise_s) / k:5.2f} s/frame "
+                  f"mi.render {render_s / k:6.3f} s/frame, "
+                  f"denoise {denoise_s / k:5.2f} s/frame, whole frame {total_s / k:6.3f} s/frame, "
+                  f"host work (outside mi.render and the denoiser) {(total_s - render_s - denoise_s) / k:5.3f} s/frame "
                   f"= {100 * (1 - (render_s + denoise_s) / total_s):4.1f}%, "
                   f"kernels compiled after warm-up {compiles}, render recordings {renderer.recordings}, "
                   f"ray-cast recordings {renderer.cast_recordings} ({renderer.refused_recordings} refused, "

@@ -92,6 +92,35 @@ def test_a_texture_notes_its_values_again_only_when_its_shade_computes_something
     assert texture._book is not notes
 
 
+def test_a_texture_shows_a_frozen_functions_walk_nothing_and_gives_its_device_values_as_inputs() -> None:
+    """A frozen render walks a texture once for every object holding it, at every call: the
+    texture holds its attributes where that walk passes at once, and hands its device values
+    (the camera's three, each noted value) over in :meth:`inputs`, which the renderer passes
+    to its frozen functions."""
+    import functools
+
+    import drjit as dr
+    import mitsuba as mi
+
+    from datagen.render.procedural import texture_class
+    from datagen.render.runtime import use_variant
+
+    use_variant("llvm_ad_rgb")
+
+    def shade(gains, x, y, footprint_m, ops):
+        total = x * 0.0
+        for g in gains:
+            total = total + ops.param_f32(g)
+        return total
+
+    texture = texture_class(mi.variant())()
+    texture.shade = functools.partial(shade, [float(i) for i in range(300)])
+    texture.prepare()
+    assert set(vars(texture)) == {"_host"} and dr.detail.collect_indices(texture) == []
+    assert len(dr.detail.collect_indices(texture.inputs())) == 3 + 300
+    assert texture.pixel_rad > 0.0 and not texture.colour  # (its attributes, where they are held)
+
+
 def test_a_texture_whose_kernel_reads_other_values_than_it_noted_is_refused() -> None:
     import drjit as dr
     import mitsuba as mi
@@ -167,12 +196,13 @@ def test_a_refused_recording_traces_its_frame_and_a_new_frozen_render_replaces_t
     made = iter([Refusing(), fresh])
     traced = []
 
-    def trace(scene, seed, target_seed, offsets):
+    def trace(scene, seed, target_seed, offsets, textures=()):
         traced.append((scene, seed, offsets))
         return "image"
 
+    none = types.SimpleNamespace(textures=lambda: ())
     r = types.SimpleNamespace(
-        _frozen=Frozen(lambda: next(made)), scene="scene", trace=trace,
+        _frozen=Frozen(lambda: next(made)), scene="scene", trace=trace, world=none, paintwork=none,
         _dr=types.SimpleNamespace(opaque=lambda cls, v: v), _mi=types.SimpleNamespace(UInt32=int))
     assert renderer_module.Renderer.path_trace(r, 7) == "image" and traced == [("scene", 7, None)]
     assert r._frozen.refused == 1 and r._frozen.function is fresh

@@ -257,7 +257,8 @@ class RayCasting:
         # a change of any of it records anew.
         key = (present, self._traffic_ids, dr.width(self._id_table), dr.width(self._background_codes),
                float(self.world.pixel_rad), n)
-        args = (self.scene, d, start, self._id_table, self._background_codes, textures, key)
+        args = (self.scene, d, start, self._id_table, self._background_codes, textures, key,
+                tuple(t.inputs() for t in textures))
         frozen = getattr(self, "_frozen_cast", None)
         return cast_kernel(*args) if frozen is None else frozen(cast_kernel, *args)  # traced where refused
 
@@ -280,7 +281,7 @@ class RayCasting:
         return fraction, seen[:, p]
 
 
-def cast_kernel(scene, d, start: dict, id_table, codes, textures: tuple, key: tuple):
+def cast_kernel(scene, d, start: dict, id_table, codes, textures: tuple, key: tuple, inputs: tuple = ()):
     """The rays ``d`` (render frame) cast from ``start["o"]`` through ``scene``, passing each
     cloud layer where its opacity is below :data:`CLOUD_PASS_OPACITY`, up to
     ``len(CLOUD_LAYERS) + 1`` times: (t, object id, surface code, and per cloud layer its
@@ -289,7 +290,8 @@ def cast_kernel(scene, d, start: dict, id_table, codes, textures: tuple, key: tu
     ``codes`` a shape's index + 1 to its background code (0 sea, c the c-th cloud layer);
     ``textures`` are the opacity textures of the layers ``key[0]`` names (their codes);
     ``key`` also holds the other aircraft's instance ids, the tables' widths, the pixel's
-    angle and the rays' count.
+    angle and the rays' count; ``inputs``, the textures' device values (their ``inputs``:
+    a frozen cast finds its inputs among its arguments, not inside the textures).
 
     Everything a frame changes comes in as device data and every pass runs whatever the rays
     met, so that a recording (``dr.freeze``, :func:`datagen.render.frozen.frozen_cast`)

@@ -519,13 +519,17 @@ class Renderer(RayCasting):
             offsets = window_offsets(mi, dr, window)
         if self._frozen is None:
             return self.trace(self.scene, seed, target_render_seed(seed), offsets)
-        args = (self.scene, dr.opaque(mi.UInt32, seed), dr.opaque(mi.UInt32, target_render_seed(seed)), offsets)
+        args = (self.scene, dr.opaque(mi.UInt32, seed), dr.opaque(mi.UInt32, target_render_seed(seed)), offsets,
+                tuple(t.inputs() for t in (*self.world.textures(), *self.paintwork.textures())))
         return self._frozen(self.trace, *args)  # traced where refused
 
-    def trace(self, scene, seed, target_seed, offsets):
+    def trace(self, scene, seed, target_seed, offsets, textures: tuple = ()):
         """What the frozen render records: the frame's path tracing with sampler seed
         ``seed`` and, with ``offsets`` (:func:`~datagen.render.target.window_offsets`), the
-        target pass's with ``target_seed`` merged into it (:func:`~datagen.render.target.merge_target`)."""
+        target pass's with ``target_seed`` merged into it (:func:`~datagen.render.target.merge_target`).
+        ``textures``: the procedural textures' device values (their ``inputs``), which the
+        render reads through the scene; a frozen function finds its inputs among its
+        arguments, and the textures hold theirs where its walk over the scene passes by."""
         mi = self._mi
         image = mi.render(scene, seed=seed, spp=self.spp)
         if offsets is not None:
