@@ -13,8 +13,7 @@ frame's values must all be device values set before the call:
   (:meth:`~datagen.render.procedural.texture_class` ``prepare``), never made inside it, and
   reach the frozen function as an argument of their own (each texture's ``inputs``): the
   walk over the scene meets a texture once for every object that holds it (each of an
-  aircraft's parts), so the textures keep their attributes where that walk passes at once
-  (16 ms a call to 2 ms, wingcam55 on one core);
+  aircraft's parts), so the textures keep their attributes where that walk passes at once;
 - the per-frame values (camera, body frames, sky, air) are opaque device values made when
   set;
 - every array the scene holds comes from Dr.Jit's own memory

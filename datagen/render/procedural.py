@@ -302,7 +302,7 @@ def _shaded_texture(variant: str):
         # aircraft's parts' BSDFs), at every call, and the noted values alone are hundreds: a
         # texture keeps its attributes, its device values among them, where that walk passes at
         # once (a _HostState), and its device values reach a frozen function once, as an
-        # argument of their own (:meth:`inputs`). Measured on wingcam55: 16 to 3 ms a call.
+        # argument of their own (:meth:`inputs`; the performance page has the walk's time).
         def __setattr__(self, name: str, value) -> None:
             if hasattr(type(self), name):  # a property: its setter
                 super().__setattr__(name, value)
