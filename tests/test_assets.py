@@ -226,6 +226,32 @@ def test_hose_is_a_closed_tube_of_fixed_topology() -> None:
     assert 0.06 <= 2 * HOSE_RADIUS_M <= 0.08
 
 
+@given(a=arrays(np.float64, (5, 3), elements=st.floats(-1e3, 1e3, **finite)),
+       b=arrays(np.float64, (5, 3), elements=st.floats(-1e3, 1e3, **finite)))
+def test_the_lofts_cross_product_is_numpys_bit_for_bit(a, b) -> None:
+    from datagen.assets.models.loft import _cross
+
+    assert np.array_equal(_cross(a, b), np.cross(a, b))
+
+
+@given(steps=arrays(np.float64, (12, 3), elements=st.floats(-3.0, 3.0, **finite)),
+       radius=st.floats(0.01, 2.0))
+def test_a_tubes_rings_are_circles_of_its_radius_square_to_the_path(steps, radius) -> None:
+    """Each ring of ``tube_rings`` lies at the radius from its path point, in the plane square
+    to the path's tangent there, its points evenly around it."""
+    from datagen.assets.models.loft import tube_rings
+
+    path = np.cumsum(steps + np.array([1.0, 0.0, 0.0]) * 4.0, axis=0)  # moving on along x
+    rings = tube_rings(path, radius, 8)
+    tangents = np.gradient(path, axis=0)
+    tangents /= np.linalg.norm(tangents, axis=1, keepdims=True)
+    offsets = rings - path[:, None, :]
+    np.testing.assert_allclose(np.linalg.norm(offsets, axis=2), radius, rtol=1e-9)
+    np.testing.assert_allclose(np.einsum("rpk,rk->rp", offsets, tangents), 0.0, atol=1e-9 * radius)
+    np.testing.assert_allclose(np.linalg.norm(offsets[:, 1] - offsets[:, 0], axis=1),
+                               2 * radius * np.sin(np.pi / 8), rtol=1e-9)
+
+
 # --- convex hull test ---------------------------------------------------------------
 @given(
     points=arrays(np.float64, (6, 3), elements=st.floats(-5, 5, **finite)),

@@ -119,14 +119,22 @@ def tube_rings(path: ArrayLike, radius: float | ArrayLike, n: int) -> NDArray[np
     tangents = np.gradient(p, axis=0)
     tangents /= np.linalg.norm(tangents, axis=1, keepdims=True)
     e1, _, _ = _basis(tangents[0])
-    rings = np.empty((len(p), n, 3))
-    t = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
-    for i, (point, tangent) in enumerate(zip(p, tangents, strict=True)):
-        e1 = e1 - tangent * (e1 @ tangent)  # parallel transport of the first basis vector
+    first = np.empty((len(p), 3))  # each ring's basis: the first vector transported along the path
+    for i, tangent in enumerate(tangents):
+        e1 = e1 - tangent * (e1 @ tangent)
         e1 /= np.linalg.norm(e1)
-        e2 = np.cross(tangent, e1)
-        rings[i] = point + radii[i] * (np.outer(np.cos(t), e1) - np.outer(np.sin(t), e2))
-    return rings
+        first[i] = e1
+    second = _cross(tangents, first)
+    t = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+    return p[:, None, :] + radii[:, None, None] * (np.cos(t)[None, :, None] * first[:, None, :]
+                                                   - np.sin(t)[None, :, None] * second[:, None, :])
+
+
+def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Row-wise cross products of ``(N, 3)`` arrays, as ``np.cross`` computes them (each
+    component a product less a product), without its per-call cost."""
+    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
 
 
 def airfoil_ring(n: int, thickness: float) -> NDArray[np.float64]:
