@@ -64,7 +64,7 @@ def child(config_name: str, overrides: dict, frames: list[int], size: str, varia
         traced_s = time.perf_counter() - start
         recordings = frozen.n_recordings
         start = time.perf_counter()
-        textures = tuple(t.inputs() for t in (*renderer.world.textures(), *renderer.paintwork.textures()))
+        textures = tuple(t.inputs() for t in renderer._textures())
         replayed = np.array(frozen(renderer.scene, seed, textures))
         frozen_s = time.perf_counter() - start
         print(json.dumps({"frame": i, "equal": bool(np.array_equal(traced, replayed)),

@@ -200,9 +200,8 @@ def test_a_refused_recording_traces_its_frame_and_a_new_frozen_render_replaces_t
         traced.append((scene, seed, offsets))
         return "image"
 
-    none = types.SimpleNamespace(textures=lambda: ())
     r = types.SimpleNamespace(
-        _frozen=Frozen(lambda: next(made)), scene="scene", trace=trace, world=none, paintwork=none,
+        _frozen=Frozen(lambda: next(made)), scene="scene", trace=trace, _textures=lambda: (),
         _dr=types.SimpleNamespace(opaque=lambda cls, v: v), _mi=types.SimpleNamespace(UInt32=int))
     assert renderer_module.Renderer.path_trace(r, 7) == "image" and traced == [("scene", 7, None)]
     assert r._frozen.refused == 1 and r._frozen.function is fresh

@@ -403,13 +403,17 @@ class Renderer(RayCasting):
         self.world.apply(p, look, float(origin[2]), irradiance, camera_render=self._camera_render, sun_direction=sun)
         p.update()
         with clock.stage("texture values"):  # outside the render: a recording of it reads them as data
-            for texture in (*self.world.textures(), *self.paintwork.textures()):
+            for texture in self._textures():
                 texture.prepare()
         if self._frozen is not None:  # nothing left pending for the frozen render (frozen.settle)
             settle(self.sky)  # every frame: the sun's angles
             if self._unsettled:  # once a scene: what loading it left (the hose's buffers)
                 settle(self.scene)
                 self._unsettled = False
+
+    def _textures(self) -> tuple:
+        """Every procedural texture of the scene: the world's and the paintwork's."""
+        return (*self.world.textures(), *self.paintwork.textures())
 
     @property
     def camera_render(self) -> NDArray[np.float64]:
@@ -520,7 +524,7 @@ class Renderer(RayCasting):
         if self._frozen is None:
             return self.trace(self.scene, seed, target_render_seed(seed), offsets)
         args = (self.scene, dr.opaque(mi.UInt32, seed), dr.opaque(mi.UInt32, target_render_seed(seed)), offsets,
-                tuple(t.inputs() for t in (*self.world.textures(), *self.paintwork.textures())))
+                tuple(t.inputs() for t in self._textures()))
         return self._frozen(self.trace, *args)  # traced where refused
 
     def trace(self, scene, seed, target_seed, offsets, textures: tuple = ()):

@@ -449,21 +449,20 @@ def sun_glare(shape: tuple[int, int], intrinsics: Intrinsics, sun_cam: NDArray, 
 
 
 # --- exposure and noise ------------------------------------------------------------------
-def auto_exposure_scale(rgb: NDArray[np.float32]) -> float:
-    """The factor that maps the centre-weighted log-average luminance of linear ``rgb``
-    to :data:`AUTO_EXPOSURE_KEY`, within :data:`AUTO_EXPOSURE_STOPS` of the fixed
-    exposure's (``1 / WHITE_RADIANCE``)."""
-    step = metering_step(*rgb.shape[:2])
-    return metered_scale(rgb[::step, ::step])
-
-
-def metering_step(h: int, w: int) -> int:
-    """Auto-exposure meters every ``step``-th pixel of every ``step``-th row: no more than ~128 x 240 samples."""
-    return max(1, min(h, w) // 128)
-
-
-def metered_scale(sub: NDArray[np.float32]) -> float:
-    """:func:`auto_exposure_scale` of the metered pixels ``sub`` (every :func:`metering_step`-th)."""
+def auto_exposure_scale(rgb: NDArray[np.float32], vignetting: float = 0.0,
+                        glare: NDArray[np.float32] | None = None) -> float:
+    """The factor that maps the centre-weighted log-average luminance of linear ``rgb``, as
+    :func:`develop` lights it before its exposure (``vignetting``, ``glare``), to
+    :data:`AUTO_EXPOSURE_KEY`, within :data:`AUTO_EXPOSURE_STOPS` of the fixed exposure's
+    (``1 / WHITE_RADIANCE``). Metered on every ``step``-th pixel of every ``step``-th row (no
+    more than ~128 x 240 samples), vignetted and glared there only."""
+    h, w = rgb.shape[:2]
+    step = max(1, min(h, w) // 128)
+    sub = rgb[::step, ::step]
+    if vignetting:
+        sub = sub * _falloff(np.float32(vignetting), _radius2(h, w)[::step, ::step])[..., None]
+    if glare is not None:
+        sub = sub + glare[::step, ::step]
     lum = sub @ REC709_LUMA
     y = (np.arange(sub.shape[0]) + 0.5) / sub.shape[0] - 0.5
     x = (np.arange(sub.shape[1]) + 0.5) / sub.shape[1] - 0.5
@@ -642,7 +641,7 @@ def apply_sensor(rgb: NDArray[np.float32], look: FrameLook, state: FrameState, *
             measured["sun_in_view"] = inside
         fixed = float(exposure_scale(0.0))
         vignetting = look.sensor_vignetting or 0.0
-        scale = metered_scale(_lit_sample(rgb, vignetting, glare)) if auto_exposure else fixed
+        scale = auto_exposure_scale(rgb, vignetting, glare) if auto_exposure else fixed
         measured["auto_exposure_ev"] = math.log2(scale / fixed) if auto_exposure else None
         steps = Development(vignetting, glare, float(np.float32(scale * 2.0**look.exposure_ev)),
                             None if look.sensor_iso is None or look.sensor_seed is None  # (drawn together)
@@ -655,16 +654,6 @@ def apply_sensor(rgb: NDArray[np.float32], look: FrameLook, state: FrameState, *
             linear, srgb8 = develop_on_device(rgb, steps)
         return SensorResult(linear, depth, ids, surface, measured, srgb8)
     return SensorResult(develop(rgb, steps, clock), depth, ids, surface, measured)
-
-
-def _lit_sample(rgb: NDArray[np.float32], vignetting: float, glare: NDArray[np.float32] | None) -> NDArray[np.float32]:
-    """What auto-exposure meters: the pixels it samples (:func:`metering_step`) vignetted and
-    glared, as :func:`develop` makes them before its exposure."""
-    step = metering_step(*rgb.shape[:2])
-    sub = rgb[::step, ::step]
-    if vignetting:
-        sub = sub * _falloff(np.float32(vignetting), _radius2(*rgb.shape[:2])[::step, ::step])[..., None]
-    return sub if glare is None else sub + glare[::step, ::step]
 
 
 def tone_of(look: FrameLook) -> tuple[float, float] | None:
@@ -721,7 +710,7 @@ def develop_on_device(rgb: NDArray[np.float32], steps: Development
     h, w = rgb.shape[:2]
     x = jit_array(mi.Float, rgb.reshape(-1))  # (H, W, 3) flattened: a lane per value
     index = dr.arange(mi.UInt32, h * w * 3)
-    r2 = _radius2_on_device(h, w)
+    r2 = _radius2_on_device(mi.variant() or "", h, w)
     x = x * _falloff(dr.opaque(mi.Float, steps.vignetting), dr.gather(mi.Float, r2, index // 3))
     # (No glare: two zeros; one value would be read as a scalar, another kernel.)
     glare = jit_array(mi.Float, np.zeros(2, np.float32) if steps.glare is None else steps.glare.reshape(-1))
@@ -742,21 +731,11 @@ def develop_on_device(rgb: NDArray[np.float32], steps: Development
     return (lambda: np.asarray(x, dtype=np.float32).reshape(h, w, 3)), np.asarray(srgb8).reshape(h, w, 3)
 
 
-_DEVICE_RADIUS2: dict[tuple[str, int, int], Any] = {}
-
-
-def _radius2_on_device(h: int, w: int):
-    """:func:`_radius2` on the render's device, uploaded once per variant and size."""
-    import drjit as dr
+@functools.lru_cache(maxsize=4)
+def _radius2_on_device(variant: str, h: int, w: int):
+    """:func:`_radius2` on the render's device (``variant``, the current one), uploaded once."""
     import mitsuba as mi
 
     from datagen.render.mitsuba import jit_array
 
-    key = (mi.variant() or "", h, w)
-    if key not in _DEVICE_RADIUS2:
-        if len(_DEVICE_RADIUS2) >= 4:
-            _DEVICE_RADIUS2.clear()
-        r2 = jit_array(mi.Float, _radius2(h, w).reshape(-1))
-        dr.make_opaque(r2)
-        _DEVICE_RADIUS2[key] = r2
-    return _DEVICE_RADIUS2[key]
+    return jit_array(mi.Float, _radius2(h, w).reshape(-1))
