@@ -26,8 +26,9 @@ frame for the whole frame (approach state, material draws, posing through
 encoding); the host work per frame (everything outside ``mi.render`` and the
 denoiser) and its share of the frame; the kernels the counted frames compiled (launched,
 and launched by no earlier frame: 0 once warm); and the process's peak RSS; and what
-Dr.Jit launched a frame: kernels, memory copies (those of one value are values read back
-one at a time, each a wait for the device on a GPU) and fills (each opaque constant is one). The first
+Dr.Jit launched a frame: kernels, memory copies (one of one value is a value read back to the
+host, a wait for the device on a GPU, or a one-element gather made an asynchronous device copy:
+:attr:`~datagen.render.runtime.KernelCensus.launched`) and fills (each opaque constant is one). The first
 frame of each spp is a warm-up (kernel compilation) and is not counted.
 """
 

@@ -311,6 +311,41 @@ def test_posing_the_next_frame_of_an_approach_sets_the_drogues_and_hoses_materia
     assert all(materials_set(config.approach.frames_per_approach).values())  # the next approach's
 
 
+def test_a_frame_reads_no_value_back_one_at_a_time_but_in_the_sky_models_update(monkeypatch) -> None:
+    """Dr.Jit's one-value copies in a frame (after the first) are all the sky model's: sunsky's
+    update gathers one known element of its tables at a time, which Dr.Jit makes copies on the
+    device (no wait). The two sensors' poses (:func:`~datagen.render.mitsuba.place_sensor`),
+    the scene's update, the render and the camera model read nothing back value by value (on
+    a GPU each such read waits for it): through ``mi.traverse`` each sensor read 32 a frame."""
+    import drjit as dr
+
+    renderer, config = renderer_for("wingcam55.yaml", spp=1)
+    assert renderer.target_spp and renderer.sensor is not None  # both sensors and the camera model
+    seed = config.dataset.seed
+    renderer.render(frame_state(config, 0), frame_look(config, frame_state(config, 0)), render_seed(seed, 0))
+    copies = {"sky": 0, "rest": 0}
+
+    def count(where: str) -> None:
+        copies[where] += sum(k["type"] == dr.KernelType.Memcpy and k.get("size", 0) <= 8 for k in dr.kernel_history())
+
+    sky_set = renderer.sky.set
+
+    def counted(*args) -> None:
+        count("rest")
+        sky_set(*args)
+        count("sky")
+
+    monkeypatch.setattr(renderer.sky, "set", counted)
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        dr.kernel_history()
+        for i in (1, 2):
+            state = frame_state(config, i)
+            renderer.render(state, frame_look(config, state), render_seed(seed, i))
+        count("rest")
+    assert copies["sky"] > 0  # what is counted is counted
+    assert copies["rest"] == 0, copies
+
+
 def test_depth_is_camera_z_on_the_tanker_and_the_sea_and_infinite_on_the_sky() -> None:
     renderer, config = renderer_for("wingcam55.yaml")
     state = frame_state(config, 2)

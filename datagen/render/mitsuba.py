@@ -163,6 +163,21 @@ def sensor_dict(intrinsics: Intrinsics, world_from_cam: ArrayLike, spp: int, *,
     }
 
 
+def place_sensor(sensor, to_world: ArrayLike) -> None:
+    """Pose a :func:`sensor_dict` sensor at ``to_world`` (4 x 4, its Mitsuba to_world), its
+    values device arrays (opaque) under a JIT variant, without reading anything back.
+
+    Through ``mi.traverse`` the sensor's ``parameters_changed`` makes the matrix and its
+    inverse opaque and then copies them to its host-side twin value by value: 32 reads,
+    each a wait for a GPU, every frame. Assigned as literals, the twin reads them for free;
+    made opaque then (the sensor's own, in place), they become arrays by fills, which do not
+    wait. Nothing else of a perspective sensor follows its pose."""
+    import drjit as dr
+
+    sensor.m_to_world = type(sensor.m_to_world)(np.asarray(to_world, dtype=np.float64).tolist())
+    dr.make_opaque(sensor.m_to_world)  # (a no-op under a scalar variant)
+
+
 def visible(scene, origin: ArrayLike, points: ArrayLike, tolerance_m: float | ArrayLike = 0.01) -> NDArray[np.bool_]:
     """Which ``points`` ``(N, 3)`` are seen from ``origin``: nothing is hit on the way
     to them, up to ``tolerance_m`` (one value, or one per point) before them (the

@@ -44,6 +44,7 @@ from datagen.render.frozen import Frozen, frozen_cast, frozen_render, settle
 from datagen.render.mitsuba import (
     jit_array,
     mitsuba_mesh,
+    place_sensor,
     scene_array,
     sensor_dict,
     set_buffer,
@@ -187,7 +188,6 @@ class Renderer(RayCasting):
         self._meshes_loaded = {obj: load_mesh(scene.mesh_path(obj), obj) for obj in RIGID_OBJECTS}
         self._mi, self._dr = mi, dr
         self._camera_render = np.zeros(3)
-        self._sensor_to_world = np.eye(4)  # the posed camera's Mitsuba to_world (render frame)
         self._irradiance: Any = None  # the frame's sun and sky irradiance (where the clouds or the lights need it)
 
     # -- scene construction (deferred until the hose's point count is known) --------------
@@ -396,8 +396,8 @@ class Renderer(RayCasting):
         if self._windscreen:
             p["windscreen_frame.to_world"] = mi.Transform4f((render_from_world @ state.world_from("receiver")).tolist())
         sensor = world_from_micam(render_from_world @ state.world_from_cam)
-        p["sensor.to_world"] = mi.Transform4f(sensor.tolist())
-        self._sensor_to_world = sensor  # the target pass's sensor takes it with its window (aim_target)
+        for camera in self.scene.sensors():  # the frame's and the target pass's (its window: aim_target)
+            place_sensor(camera, sensor)
         # The earth's top under the camera (the render frame's origin is over the camera's nadir).
         p["earth.to_world"] = mi.Transform4f(make_transform(np.eye(3), [0.0, 0.0, -origin[2]]).tolist())
         self.world.apply(p, look, float(origin[2]), irradiance, camera_render=self._camera_render, sun_direction=sun)
@@ -549,9 +549,6 @@ class Renderer(RayCasting):
         if self._target_params is None:  # the sensor's own: an update walks its keys, not the scene's
             self._target_params = mi.traverse(sensor)
         x, y = window.principal_point_offset
-        # The frame's pose and the window in one update: the sensor's parameters_changed reads
-        # its matrix back value by value (forced waits on a GPU), once a frame, not twice.
-        self._target_params["to_world"] = mi.Transform4f(self._sensor_to_world.tolist())
         self._target_params["principal_point_offset_x"] = dr.opaque(mi.Float, x)
         self._target_params["principal_point_offset_y"] = dr.opaque(mi.Float, y)
         self._target_params.update()
