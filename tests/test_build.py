@@ -150,6 +150,35 @@ def test_a_workers_thread_count_sizes_opencvs_pool_as_well_as_drjits() -> None:
         set_threads(before)
 
 
+_FAULTS_SCRIPT = """
+import resource, sys
+import numpy as np
+if sys.argv[1] == "keep":
+    from datagen.render.runtime import keep_freed_memory
+    assert keep_freed_memory()
+faults = []
+for _ in range(4):  # three 2048x1080 float32 RGB images at once, as a frame's camera model holds them
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    images = [np.ones((1080, 2048, 3), np.float32) for _ in range(3)]
+    del images
+    faults.append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
+print(faults[-1])
+"""
+
+
+@pytest.mark.skipif(sys.platform != "linux" or platform.libc_ver()[0] != "glibc", reason="glibc's malloc")
+def test_a_rendering_process_reuses_the_memory_a_frame_freed_where_by_default_each_frame_faults_in_new_pages() -> None:
+    """:func:`~datagen.render.runtime.keep_freed_memory` (which set_threads calls): a frame's
+    full-size images, freed and made again, take no new page; in a process without it the
+    same frames fault pages in every time (glibc's default, which the test shows it fixes)."""
+    def faults(mode: str) -> int:
+        run = subprocess.run([sys.executable, "-c", _FAULTS_SCRIPT, mode], capture_output=True, text=True, check=True)
+        return int(run.stdout.split()[-1])
+
+    assert faults("default") > 100
+    assert faults("keep") == 0
+
+
 def test_a_worker_sends_its_frames_in_few_messages_and_all_of_them_at_each_shards_end(tmp_path: Path) -> None:
     config = override_config(load_config(ROOT / "scenes/wingcam55.yaml"),
                              {"dataset.frames": 600, "dataset.shard_size": 80})
@@ -493,6 +522,27 @@ def test_the_estimate_knows_the_device_a_gpu_frame_bounded_by_its_kernels_or_its
     heavy = override_config(shipped, {"render.spp": 1024})  # the GPU's own time bounds it
     mpx = shipped.camera.width * shipped.camera.height / 1e6
     assert frame_cost(heavy, 16, variant="cuda_ad_rgb").seconds >= 1024 * mpx * GPU_TRACE_S
+
+
+def test_a_running_cuda_mps_daemon_is_found_by_its_control_pipe_and_said_in_a_gpu_builds_estimate(
+        tmp_path, monkeypatch) -> None:
+    import os
+
+    from datagen.pipeline.estimate import frame_cost
+    from datagen.render.runtime import cuda_mps_pipe
+
+    monkeypatch.setenv("CUDA_MPS_PIPE_DIRECTORY", str(tmp_path))
+    assert cuda_mps_pipe() is None  # no daemon: no control pipe
+    (tmp_path / "control").write_text("")
+    assert cuda_mps_pipe() is None  # a file of that name is not the daemon's pipe
+    (tmp_path / "control").unlink()
+    os.mkfifo(tmp_path / "control")
+    assert cuda_mps_pipe() == str(tmp_path)
+    shipped = load_config("wingcam55")
+    assert f"CUDA MPS ({tmp_path})" in frame_cost(shipped, 16, variant="cuda_ad_rgb", mps=str(tmp_path)).setting
+    assert "no CUDA MPS" in frame_cost(shipped, 16, variant="cuda_ad_rgb", mps="").setting
+    assert "MPS" not in frame_cost(shipped, 16, variant="cuda_ad_rgb").setting  # not known (a cluster's nodes)
+    assert "MPS" not in frame_cost(shipped, 16, mps=str(tmp_path)).setting  # the CPU's build shares no GPU
 
 
 @pytest.mark.parametrize(("variant", "cores", "render", "expected"), [

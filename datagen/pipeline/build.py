@@ -28,7 +28,7 @@ from datagen.pipeline.image_lists import write_image_lists
 from datagen.pipeline.metadata import write_dataset_files
 from datagen.pipeline.plan import dataset_layout, plan_shards
 from datagen.pipeline.progress import BuildReport, ShardSummary
-from datagen.render.runtime import resolve_variant
+from datagen.render.runtime import cuda_mps_pipe, resolve_variant
 from datagen.scene.resolved import Scene
 
 __all__ = ["build_dataset"]
@@ -102,7 +102,7 @@ def build_dataset(config: Config, out: Path, *, workers: int | str | None = None
 
             progress.start(report.frames, report.frames - sum(len(j.frames) for j in todo),
                            frame_cost(scene.config, kind.cores(workers, len(todo), threads), render=render,
-                                      variant=variant))
+                                      variant=variant, mps=(cuda_mps_pipe() or "") if executor == "local" else None))
             try:
                 if todo:
                     kind.run(ShardRun(scene, layout, todo, workers, render, progress.advance, shard_done, threads))

@@ -74,9 +74,12 @@ class FrameCost:
         return 3600.0 / self.seconds
 
 
-def frame_cost(config: Config, cores: int, *, render: bool = True, variant: str = "llvm_ad_rgb") -> FrameCost:
+def frame_cost(config: Config, cores: int, *, render: bool = True, variant: str = "llvm_ad_rgb",
+               mps: str | None = None) -> FrameCost:
     """The model's seconds per frame of ``config`` on ``cores`` cores, rendered with
-    Mitsuba ``variant`` (``cuda_ad_rgb``: on a GPU)."""
+    Mitsuba ``variant`` (``cuda_ad_rgb``: on a GPU, where the setting says whether the workers
+    share it through CUDA MPS: ``mps`` the daemon's pipe directory, :func:`~datagen.render.runtime.cuda_mps_pipe`,
+    ``""`` none runs, None not known)."""
     cores = max(1, cores)
     if not render:
         return FrameCost(LABELS_ONLY_S / cores, cores, "labels only")
@@ -97,6 +100,9 @@ def frame_cost(config: Config, cores: int, *, render: bool = True, variant: str 
     target = f" (+{r.target_spp} over the objects)" if r.target_spp and not variant.startswith("scalar") else ""
     setting = f"{cam.width}x{cam.height}, {r.spp} spp{target}, {denoiser}, {world_text}, {variant}"
     if variant.startswith("cuda"):
+        if mps is not None:
+            setting += (f", CUDA MPS ({mps})" if mps else
+                        ", no CUDA MPS (the workers take turns on the GPU; `nvidia-cuda-mps-control -d` starts it)")
         gpu_s = mpx * spp * GPU_TRACE_S * tracing + (mpx * GPU_DENOISE_S if denoised else 0.0)
         host_s = (GPU_HOST_CORE_S + mpx * GPU_HOST_CORE_S_PER_MPX) / cores
         return FrameCost(max(gpu_s, host_s), cores, setting, disk)

@@ -27,8 +27,9 @@ from typing import Final, Protocol
 
 from datagen.core.errors import DatagenError
 
-__all__ = ["LLVM_HINT", "VARIANTS", "KernelCensus", "SceneHolder", "has_backend", "hold_scene", "resolve_variant",
-           "set_threads", "thread_count", "use_variant"]
+__all__ = ["HEAP_REQUEST_MAX", "LLVM_HINT", "MPS_PIPE_DIRECTORY", "VARIANTS", "KernelCensus", "SceneHolder",
+           "cuda_mps_pipe", "has_backend", "hold_scene", "keep_freed_memory", "resolve_variant", "set_threads",
+           "thread_count", "use_variant"]
 
 VARIANTS: Final = ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
 
@@ -77,12 +78,65 @@ def use_variant(requested: str = "auto") -> str:
 def set_threads(threads: int) -> None:
     """Size Dr.Jit's thread pool (one thread gives byte-identical renders) and OpenCV's (the
     camera model's blurs and remaps), so that workers sharing a machine each keep to their
-    share of its cores."""
+    share of its cores; and keep the memory a frame frees for the next (:func:`keep_freed_memory`):
+    what a process that renders frames sets before its first."""
     import cv2
     import drjit as dr
 
     dr.set_thread_count(max(1, int(threads)))
     cv2.setNumThreads(max(1, int(threads)))
+    keep_freed_memory()
+
+
+#: glibc's ``mallopt`` parameters (``malloc.h``) that :func:`keep_freed_memory` sets.
+_M_TRIM_THRESHOLD: Final = -1
+_M_MMAP_THRESHOLD: Final = -3
+#: The largest request glibc's malloc serves from its heap once :func:`keep_freed_memory` ran:
+#: the most glibc allows on 64-bit, above a 2048x1080 float32 RGB image (27 MB).
+HEAP_REQUEST_MAX: Final = 32 * 2**20
+
+
+@functools.cache
+def keep_freed_memory() -> bool:
+    """Have glibc's malloc serve requests of up to :data:`HEAP_REQUEST_MAX` from its heap and
+    keep the heap's free top instead of handing it back, so that the camera model's
+    full-size arrays (numpy's and OpenCV's, a few a step) reuse the memory the frame before
+    freed. By default glibc maps a request over 128 KiB anew (its threshold adapts upwards
+    as such blocks are freed) and unmaps it when freed, and returns the heap's free top past
+    a threshold: a frame's images were fresh pages that the kernel faulted in and zeroed,
+    every frame (the performance page has what it cost). The process keeps its largest
+    frame's working set instead. Whether the options were set: False where the C library
+    is not glibc (nothing changes there)."""
+    import ctypes
+    import platform
+
+    if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
+        return False
+    try:
+        mallopt = ctypes.CDLL("libc.so.6").mallopt
+    except (OSError, AttributeError):
+        return False
+    return bool(mallopt(_M_MMAP_THRESHOLD, HEAP_REQUEST_MAX)) and bool(mallopt(_M_TRIM_THRESHOLD, 2**31 - 1))
+
+
+#: Where a CUDA MPS control daemon keeps its pipes unless ``CUDA_MPS_PIPE_DIRECTORY`` says otherwise.
+MPS_PIPE_DIRECTORY: Final = "/tmp/nvidia-mps"
+
+
+def cuda_mps_pipe() -> str | None:
+    """The pipe directory of the running CUDA MPS control daemon this process's CUDA contexts
+    would join (``CUDA_MPS_PIPE_DIRECTORY``, else :data:`MPS_PIPE_DIRECTORY`, holding the
+    daemon's ``control`` FIFO), or None where none runs. CUDA joins one by itself, nothing
+    to set: with it, the kernels of the workers sharing a GPU run side by side; without it
+    the GPU runs one worker's context at a time (time-sliced)."""
+    import os
+    import stat
+
+    pipes = os.environ.get("CUDA_MPS_PIPE_DIRECTORY") or MPS_PIPE_DIRECTORY
+    try:
+        return pipes if stat.S_ISFIFO(os.stat(os.path.join(pipes, "control")).st_mode) else None
+    except OSError:
+        return None
 
 
 def thread_count() -> int:
@@ -123,7 +177,9 @@ class KernelCensus:
     def __init__(self) -> None:
         self._seen: set[str] = set()
         #: What the last :meth:`new_kernels` found launched since the call before: JIT kernels,
-        #: memory copies (those of one value: a value read back, a wait on a GPU) and fills.
+        #: memory copies and fills. A copy of one value is either a value read back to the host
+        #: (``jit_var_read``: a wait on a GPU) or a gather of one known element, which Dr.Jit
+        #: makes an asynchronous copy on the device (no wait); the history does not say which.
         self.launched = {"kernels": 0, "copies": 0, "one-value copies": 0, "fills": 0}
 
     @contextlib.contextmanager
