@@ -6,7 +6,8 @@ is a ``shapegroup`` of its parts (one principled BSDF per part) placed by an
 (:mod:`datagen.render.sky`) light the sea far below, the earth's round surface
 (:func:`~datagen.render.world.earth_cap`, a shape group an instance places under the
 camera). Per frame only parameters
-change, as kernel inputs (``mi.traverse``, opaque values): instance transforms, hose
+change, as kernel inputs (``mi.traverse``, opaque values; the sensors' pose assigned
+without reading it back, :func:`~datagen.render.mitsuba.place_sensor`): instance transforms, hose
 vertices, sensor pose, sun and sky, sea height and the materials of the frame's
 :class:`~datagen.scene.look.FrameLook`. The scene is rendered in a camera-centred
 frame (world translated so the camera is at the origin), because world coordinates
