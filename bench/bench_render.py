@@ -16,6 +16,9 @@ the kernel, posing, the camera model's fixed costs). ``--threads`` sizes Dr.Jit'
 (one, with ``taskset -c 0``, for the one-core figures). ``--traced`` turns the frozen render
 off (:mod:`datagen.render.frozen`; on by default): the path tracing traced again every frame.
 
+``--cast K`` also times the geometry pass's ray cast alone, K times on the last frame's pose
+(the frame's cast: half resolution, the target pass's grid, three extra rays): its median.
+
 ``--variant cuda_ad_rgb`` renders and denoises on the GPU where one is (nothing else
 changes: the denoiser takes the render's Dr.Jit tensors on their device).
 
@@ -65,6 +68,8 @@ def main() -> None:
     parser.add_argument("--randomizers", action="store_true", help="time each world randomizer and all of them")
     parser.add_argument("--size", default=None, help="WxH: render at this resolution instead of the config's")
     parser.add_argument("--threads", type=int, default=None, help="Dr.Jit threads (default: every core)")
+    parser.add_argument("--cast", type=int, default=0, help="time the geometry pass's ray cast alone this many "
+                        "times on the last frame's pose")
     parser.add_argument("--traced", action="store_true", help="render.frozen off: the path tracing traced again "
                         "every frame (datagen.render.frozen)")
     args = parser.parse_args()
@@ -124,6 +129,29 @@ def main() -> None:
             rest = rest_of_frame(stages)
             print("    stages: " + ", ".join(f"{name} {t / k:.3f} s" for name, t in rest)
                   + f" ({sum(t for _, t in rest) / total_s:.0%} of the frame)")
+            if args.cast:
+                print(f"    the geometry pass's ray cast alone: {cast_seconds(renderer, args.cast):.4f} s "
+                      f"(median of {args.cast})")
+
+
+def cast_seconds(renderer: Renderer, times: int) -> float:
+    """The median seconds of the frame's geometry pass cast (as :meth:`Renderer.render` makes
+    it, on the pose the renderer holds), after one call not counted."""
+    import time
+
+    import numpy as np
+
+    from datagen.render.target import PLACEMENT_STRIDE_PX
+
+    directions = np.tile(np.float32([0.0, 0.0, 1.0]), (3, 1))  # the sun's and two lights' rays
+    grid = PLACEMENT_STRIDE_PX if renderer.target_spp else 0
+    seconds = []
+    for n in range(times + 1):
+        start = time.perf_counter()
+        renderer.geometry_and_cast(2, directions, grid=grid)
+        if n > 0:
+            seconds.append(time.perf_counter() - start)
+    return float(np.median(seconds))
 
 
 #: Every world randomizer's switch, off (today's images) and on.

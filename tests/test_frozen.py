@@ -242,7 +242,7 @@ def test_a_refused_recording_of_the_ray_cast_traces_it_and_a_new_frozen_cast_rep
     traced = []
     monkeypatch.setattr(raycast, "cast_kernel", lambda *args: traced.append(args) or "cast")
     r = types.SimpleNamespace(
-        _mi=mi, _dr=dr, _camera_render=np.zeros(3), _traffic_ids=(), _id_table=mi.UInt32([0, 1]),
+        _mi=mi, _dr=dr, _camera_render=np.zeros(3), _id_table=mi.UInt32([0, 1]),
         _background_codes=mi.Int32([-1, 0, 1]), scene="scene", _frozen=None, _frozen_cast=Frozen(lambda: next(made)),
         world=types.SimpleNamespace(cloud_layer=lambda name: None, cloud_opacities=lambda: (), pixel_rad=1e-3))
     d = mi.Vector3f(dr.zeros(mi.Float, 4), dr.zeros(mi.Float, 4), dr.ones(mi.Float, 4))

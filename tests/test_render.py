@@ -694,6 +694,31 @@ def test_scalar_fallback_agrees_with_the_vectorized_variant() -> None:
     np.testing.assert_allclose(f_s, f_v)
 
 
+def test_a_casts_hit_is_keyed_by_the_instance_met_or_else_the_top_level_shape() -> None:
+    """The geometry pass's tables are keyed by :func:`~datagen.render.raycast.hit_key`: an
+    instanced mesh's hit names its instance (each of two instances of one group its own),
+    a top-level shape's names the shape, a miss 0 (Embree's preliminary intersection
+    leaves the shape null on an instance's hit; keyed by the shape, all three instanced
+    hits would be 0)."""
+    import drjit as dr
+
+    from datagen.render.raycast import hit_key
+
+    if mi.variant().startswith("scalar"):
+        pytest.skip("a vectorized variant's cast")
+    rect = {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate([0.0, 0.0, 5.0])}
+    scene = mi.load_dict({"type": "scene", "top": dict(rect), "group": {"type": "shapegroup", "part": dict(rect)},
+                          **{name: {"type": "instance", "shapegroup": {"type": "ref", "id": "group"},
+                                    "to_world": mi.ScalarTransform4f().translate([x, 0.0, 0.0])}
+                             for name, x in (("left", -3.0), ("right", 3.0))}}, optimize=False)
+    registry = {s.id(): int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(s))[0]) for s in scene.shapes()}
+    xs = [0.0, -3.0, 3.0, 8.0]  # the top-level shape, each instance, nothing
+    si = scene.ray_intersect_preliminary(mi.Ray3f(mi.Point3f(mi.Float(xs), 0.0, 0.0), mi.Vector3f(0.0, 0.0, 1.0)))
+    keys = np.asarray(hit_key(mi, dr, si)).tolist()
+    assert keys == [registry["top"], registry["left"], registry["right"], 0]
+    assert len({*keys[:3]}) == 3 and 0 not in keys[:3]
+
+
 def test_denoise_off_leaves_the_path_tracers_image_unchanged(one_thread) -> None:
     """With render.denoise off a frame is Mitsuba's own render times the exposure, bit for
     bit (what every build wrote before denoising existed); the aircraft's lights, which are

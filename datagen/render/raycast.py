@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     from datagen.render.frozen import Frozen
     from datagen.scene.approach import FrameState
 
-__all__ = ["CLOUD_PASS_OPACITY", "RayCasting", "cast_kernel", "visibility_tolerance_m"]
+__all__ = ["CLOUD_PASS_OPACITY", "RayCasting", "cast_kernel", "hit_key", "visibility_tolerance_m"]
 
 #: The geometry pass's cast carries a frame's other rays from the camera (the sun's, the lights')
 #: in blocks of this many.
@@ -69,10 +69,9 @@ def _past(t, maximum):
 class RayCasting:
     """The renderer's ray casts, after it is posed: its Mitsuba ``scene``, ``world``,
     ``variant``, ``intrinsics``, the posed camera (``_world_from_cam``, ``_camera_render``),
-    the device tables its build made (``_id_table``, ``_background_codes``), the registry ids
-    of its other aircraft's instances (``_traffic_ids``), its Mitsuba and Dr.Jit modules
-    (``_mi``, ``_dr``), and the frozen cast (``_frozen_cast``, a :class:`~datagen.render.frozen.Frozen`
-    of :func:`cast_kernel`; None: traced)."""
+    the device tables its build made (``_id_table``, ``_background_codes``, keyed by
+    :func:`hit_key`), its Mitsuba and Dr.Jit modules (``_mi``, ``_dr``), and the frozen cast
+    (``_frozen_cast``, a :class:`~datagen.render.frozen.Frozen` of :func:`cast_kernel`; None: traced)."""
 
     intrinsics: Intrinsics
     variant: str
@@ -82,7 +81,6 @@ class RayCasting:
     _camera_render: NDArray[np.float64]
     _id_table: Any
     _background_codes: Any
-    _traffic_ids: tuple[int, ...]
     _mi: Any
     _dr: Any
     _frozen_cast: Frozen | None
@@ -255,7 +253,7 @@ class RayCasting:
         textures = tuple(opacities[c - 1] for c in present)
         # What the kernel bakes in (the rays' count too: loops size their state by it), so that
         # a change of any of it records anew.
-        key = (present, self._traffic_ids, dr.width(self._id_table), dr.width(self._background_codes),
+        key = (present, dr.width(self._id_table), dr.width(self._background_codes),
                float(self.world.pixel_rad), n)
         args = (self.scene, d, start, self._id_table, self._background_codes, textures, key,
                 tuple(t.inputs() for t in textures))
@@ -281,17 +279,27 @@ class RayCasting:
         return fraction, seen[:, p]
 
 
+def hit_key(mi, dr, si):
+    """What a preliminary intersection ``si`` met, as the registry id its tables are keyed by:
+    the instance's where the hit is on one (an object, the earth, another aircraft), else the
+    shape's (the hose, a cloud layer). (Embree leaves ``si.shape`` null on an instance's hit,
+    OptiX names the instanced mesh: the instance decides on both.)"""
+    instance = dr.reinterpret_array(mi.UInt32, si.instance)
+    return dr.select(instance != 0, instance, dr.reinterpret_array(mi.UInt32, si.shape))
+
+
 def cast_kernel(scene, d, start: dict, id_table, codes, textures: tuple, key: tuple, inputs: tuple = ()):
     """The rays ``d`` (render frame) cast from ``start["o"]`` through ``scene``, passing each
     cloud layer where its opacity is below :data:`CLOUD_PASS_OPACITY`, up to
     ``len(CLOUD_LAYERS) + 1`` times: (t, object id, surface code, and per cloud layer its
     opacity where the ray meets it, -1 where it does not). ``start`` holds the state's first
-    values (all ``d``'s width); ``id_table`` maps a shape's index to its object id,
-    ``codes`` a shape's index + 1 to its background code (0 sea, c the c-th cloud layer);
+    values (all ``d``'s width); ``id_table`` maps a hit's :func:`hit_key` to its object id
+    (:data:`~datagen.core.conventions.OTHER_AIRCRAFT_ID` for another aircraft's instance),
+    ``codes`` a hit's key + 1 to its background code (0 sea, c the c-th cloud layer);
     ``textures`` are the opacity textures of the layers ``key[0]`` names (their codes);
-    ``key`` also holds the other aircraft's instance ids, the tables' widths, the pixel's
-    angle and the rays' count; ``inputs``, the textures' device values (their ``inputs``:
-    a frozen cast finds its inputs among its arguments, not inside the textures).
+    ``key`` also holds the tables' widths, the pixel's angle and the rays' count; ``inputs``,
+    the textures' device values (their ``inputs``: a frozen cast finds its inputs among its
+    arguments, not inside the textures).
 
     Everything a frame changes comes in as device data and every pass runs whatever the rays
     met, so that a recording (``dr.freeze``, :func:`datagen.render.frozen.frozen_cast`)
@@ -301,24 +309,20 @@ def cast_kernel(scene, d, start: dict, id_table, codes, textures: tuple, key: tu
     import drjit as dr
     import mitsuba as mi
 
-    present, traffic, _, _, pixel_rad, _ = key
+    present, _, _, pixel_rad, _ = key
     o = start["o"]
     travelled, t_out, ids_out, surface_out = start["travelled"], start["t"], start["ids"], start["surface"]
     alpha_out, active = list(start["alpha"]), start["active"]
     # Each step is evaluated on its own, so that every kernel is the same whichever
     # layers a frame's rays meet, and how many passes they take.
     for _ in range(len(CLOUD_LAYERS) + 1):
-        si = scene.ray_intersect(mi.Ray3f(o, d), ray_flags=mi.RayFlags.Minimal, coherent=True, active=active)
-        shape: Any = dr.reinterpret_array(mi.UInt32, si.shape)  # (the variant's UInt32)
+        # The preliminary intersection: the distance and what was met, without the surface
+        # interaction, whose call per shape runs over every lane, the inactive ones too.
+        si = scene.ray_intersect_preliminary(mi.Ray3f(o, d), coherent=True, active=active)
+        shape: Any = hit_key(mi, dr, si)
         valid = active & si.is_valid()
         known = valid & (shape + 1 < dr.width(codes))
         ids = dr.gather(mi.UInt32, id_table, shape, valid & (shape < dr.width(id_table)))
-        if traffic:  # another aircraft: an instance of an object's meshes (datagen.scene.traffic)
-            instance = dr.reinterpret_array(mi.UInt32, si.instance)
-            other = instance == dr.opaque(mi.UInt32, traffic[0])
-            for registry in traffic[1:]:
-                other |= instance == dr.opaque(mi.UInt32, registry)
-            ids = dr.select(valid & other, OTHER_AIRCRAFT_ID, ids)
         code = dr.select(known, dr.gather(mi.Int32, codes, shape + 1, known), -1)
         surface = mi.UInt32(dr.select(valid, SURFACES.index("object"), SURFACES.index("sky")))
         surface = dr.select(code == 0, SURFACES.index("sea"), surface)

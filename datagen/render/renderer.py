@@ -37,7 +37,7 @@ from datagen.assets.models import material_class
 from datagen.assets.models.drogue import hose_faces, hose_placeholder, hose_texcoords, hose_vertices
 from datagen.assets.rig import MOUNTS
 from datagen.core.camera import Intrinsics, distortion_margin_px
-from datagen.core.conventions import RIGID_OBJECTS, object_id, target_render_seed
+from datagen.core.conventions import OTHER_AIRCRAFT_ID, RIGID_OBJECTS, object_id, target_render_seed
 from datagen.core.transforms import make_transform
 from datagen.render.aerial import AIRLIGHT_STEP_PX
 from datagen.render.atmosphere import Atmosphere
@@ -205,7 +205,6 @@ class Renderer(RayCasting):
         self._meshes: dict = {}
         self._parts: dict[str, list[tuple[str, str]]] = {}  # object -> [(param key prefix, material class)]
         self._sky_probe_inputs: tuple[Any, Any] | None = None
-        self._traffic_ids: tuple[int, ...] = ()
         self._hose_points: int | None = None  # the hose's point count
         randomization = self.config.randomization
         self.world = World(randomization, pixel_rad=1.0 / self.output_intrinsics.fx)
@@ -315,19 +314,18 @@ class Renderer(RayCasting):
         def registry_id(shape) -> int:
             return int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0])
 
-        # Per shape registry id: its object id; per id + 1 (0: no hit): its index in
-        # ("sea", *CLOUD_LAYERS), -1 for the other shapes. Tables on the device (_cast_on_device).
-        objects = {registry_id(shape): object_id(obj) for (obj, _), shape in self._meshes.items()}
+        # Per registry id of what a ray meets (raycast.hit_key: an instance, else a top-level
+        # shape): its object id; per id + 1 (0: no hit): its index in ("sea", *CLOUD_LAYERS), -1
+        # for the rest (the sea's mesh too: the air's cast keys by shape). Tables on the device.
+        top = {shape.id(): shape for shape in self.scene.shapes()}
+        objects = {registry_id(top[obj]): object_id(obj) for obj in self._meshes_loaded}
         objects[registry_id(hose)] = object_id("hose")
-        if self._windscreen:
-            objects[registry_id(self._frame)] = 0  # not an object of the labels: background
-        layers = ("sea", *CLOUD_LAYERS)
-        backgrounds = {registry_id(shape): layers.index(name)
-                       for name, shape in (("sea", self._sea), *self.world.cloud_meshes.items())}
-        twins = {shape.id()[len("other_"):]: registry_id(shape) for shape in self.scene.shapes()
-                 if shape.id() in {f"other_{kind}" for kind in TRAFFIC_KINDS}}
-        self._traffic_ids = tuple(twins.values())
+        twins = {kind: registry_id(top[f"other_{kind}"]) for kind in TRAFFIC_KINDS if f"other_{kind}" in top}
+        objects.update(dict.fromkeys(twins.values(), OTHER_AIRCRAFT_ID))  # another aircraft (scene.traffic)
         self.paintwork.bind_twins(twins)
+        layers = ("sea", *CLOUD_LAYERS)
+        backgrounds = {registry_id(shape): layers.index(name) for name, shape in
+                       (("sea", top["earth"]), ("sea", self._sea), *self.world.cloud_meshes.items())}
         ids = np.zeros(max(objects) + 1, dtype=np.uint32)
         ids[list(objects)] = list(objects.values())
         codes = np.full(max(backgrounds) + 2, -1, dtype=np.int32)
