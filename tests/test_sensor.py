@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from datagen.core.camera import Intrinsics
@@ -161,6 +161,7 @@ def test_the_warm_up_compiles_the_kernel_a_frames_motion_blur_runs() -> None:
 
 @settings(max_examples=40, deadline=None)
 @given(gamma=st.floats(0.5, 2.0), shoulder=st.one_of(st.just(0.0), st.floats(0.0, 1.0)))
+@example(gamma=0.5, shoulder=1.0)  # white never reached (254 at the table's top): a level whose search ended
 def test_the_tone_table_found_by_bisection_equals_evaluating_every_entry(gamma: float, shoulder: float) -> None:
     from datagen.render import tonemap
 

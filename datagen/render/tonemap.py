@@ -76,10 +76,12 @@ def _tone_table(gamma: float, shoulder: float) -> NDArray[np.uint8]:
     n = _TONE_ENTRIES
     levels = np.arange(1, 256)
     lo, hi = np.zeros(255, dtype=np.int64), np.full(255, n, dtype=np.int64)  # first entry >= level in [lo, hi]
-    while np.any(lo < hi):
-        mid = (lo + hi) // 2  # below hi <= n: an entry
+    while np.any(searching := lo < hi):
+        mid = np.minimum((lo + hi) // 2, n - 1)  # an entry (below hi <= n where the level is still searched)
         rising = _tone_value(mid, gamma, shoulder) >= levels
-        lo, hi = np.where(rising, lo, mid + 1), np.where(rising, mid, hi)
+        # Only the levels still searched move: one whose search has ended stays where it is
+        # (at n if the curve never reaches it).
+        lo, hi = np.where(searching & ~rising, mid + 1, lo), np.where(searching & rising, mid, hi)
     # Entry i holds the highest level that begins at or before it (levels up to entry 0's begin at 0).
     starts = np.concatenate([[0], lo])  # where each level from 0 to 255 begins (n: never reached)
     return np.repeat(np.arange(256, dtype=np.uint8), np.diff(np.concatenate([starts, [n]])))
