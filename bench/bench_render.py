@@ -141,14 +141,11 @@ def cast_seconds(renderer: Renderer, times: int) -> float:
 
     import numpy as np
 
-    from datagen.render.target import PLACEMENT_STRIDE_PX
-
     directions = np.tile(np.float32([0.0, 0.0, 1.0]), (3, 1))  # the sun's and two lights' rays
-    grid = PLACEMENT_STRIDE_PX if renderer.target_spp else 0
     seconds = []
     for n in range(times + 1):
         start = time.perf_counter()
-        renderer.geometry_and_cast(2, directions, grid=grid)
+        renderer.frame_cast(directions)
         if n > 0:
             seconds.append(time.perf_counter() - start)
     return float(np.median(seconds))

@@ -42,6 +42,7 @@ from datagen.render.atmosphere import (
     through_air,
     transmittance_table,
 )
+from datagen.render.raycast import hit_key
 
 __all__ = ["AIRLIGHT_STEP_PX", "aerial_class", "airlight_grid"]
 
@@ -90,8 +91,8 @@ def aerial_class(variant: str):
         def set_frame(self, *, air: Atmosphere, grid: NDArray[np.float32], intrinsics: Intrinsics,
                       cam_from_render: NDArray[np.float64], codes, opacities: tuple = ()) -> None:
             """The frame's air (``grid``: :func:`airlight_grid`; ``cam_from_render``: the
-            camera's rotation; ``codes``: per shape registry id + 1 its index in
-            ``("sea", *CLOUD_LAYERS)``; ``opacities``: the layers' opacity textures, in that
+            camera's rotation; ``codes``: per :func:`~datagen.render.raycast.hit_key` + 1 its
+            index in ``("sea", *CLOUD_LAYERS)``; ``opacities``: the layers' opacity textures, in that
             order, asked where a sample meets a layer)."""
             k = intrinsics
             gh, gw = grid.shape[:2]
@@ -119,11 +120,12 @@ def aerial_class(variant: str):
             def cast(origin, active):
                 """(distance, 0 where nothing is met; the cloud layer met: its index in
                 ``("sea", *CLOUD_LAYERS)``, 0 or -1 for anything else) along ``d``."""
-                # The preliminary intersection: the distance and the shape met, without the
-                # surface interaction (a call per shape a frozen render cannot record).
+                # The preliminary intersection: the distance and what was met (keyed as the
+                # geometry pass keys it), without the surface interaction (a call per shape a
+                # frozen render cannot record).
                 si = scene.ray_intersect_preliminary(mi.Ray3f(origin, d), coherent=True, active=active)
                 hit = active & si.is_valid()
-                shape = dr.reinterpret_array(mi.UInt32, si.shape)
+                shape = hit_key(mi, dr, si)
                 known = hit & (shape + 1 < dr.width(codes))
                 return dr.select(hit, si.t, 0.0), dr.select(known, dr.gather(mi.Int32, codes, shape + 1, known), -1)
 

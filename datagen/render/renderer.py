@@ -200,7 +200,6 @@ class Renderer(RayCasting):
         self.params: Any = None
         self.sky: Any = None
         self.aerial: Any = None
-        self._sea: Any = None
         self._target_params: Any = None
         self._meshes: dict = {}
         self._parts: dict[str, list[tuple[str, str]]] = {}  # object -> [(param key prefix, material class)]
@@ -266,9 +265,8 @@ class Renderer(RayCasting):
             from datagen.assets.models.windscreen import windscreen_frame
 
             frame = windscreen_frame(MOUNTS[config.camera.mount])
-            self._frame = mitsuba_mesh("windscreen_frame", frame.vertices, frame.faces,
-                                       mi.load_dict(_principled(WINDSCREEN_FRAME)))
-            description["windscreen_group"] = {"type": "shapegroup", "frame": self._frame}
+            description["windscreen_group"] = {"type": "shapegroup", "frame": mitsuba_mesh(
+                "windscreen_frame", frame.vertices, frame.faces, mi.load_dict(_principled(WINDSCREEN_FRAME)))}
             description["windscreen_frame"] = {"type": "instance",
                                                "shapegroup": {"type": "ref", "id": "windscreen_group"}}
         return description
@@ -281,8 +279,7 @@ class Renderer(RayCasting):
     def _sea_mesh(self, bsdf: dict):
         """The sea: the earth's cap (:func:`~datagen.render.world.earth_cap`) under ``bsdf``."""
         vertices, faces, uv, normals = earth_cap()
-        self._sea = mitsuba_mesh("sea", vertices, faces, self._mi.load_dict(bsdf), texcoords=uv, normals=normals)
-        return self._sea
+        return mitsuba_mesh("sea", vertices, faces, self._mi.load_dict(bsdf), texcoords=uv, normals=normals)
 
     def _build(self, hose_points: int) -> None:
         mi, dr = self._mi, self._dr
@@ -316,7 +313,7 @@ class Renderer(RayCasting):
 
         # Per registry id of what a ray meets (raycast.hit_key: an instance, else a top-level
         # shape): its object id; per id + 1 (0: no hit): its index in ("sea", *CLOUD_LAYERS), -1
-        # for the rest (the sea's mesh too: the air's cast keys by shape). Tables on the device.
+        # for the rest. Tables on the device (the geometry pass's cast, the air's).
         top = {shape.id(): shape for shape in self.scene.shapes()}
         objects = {registry_id(top[obj]): object_id(obj) for obj in self._meshes_loaded}
         objects[registry_id(hose)] = object_id("hose")
@@ -325,7 +322,7 @@ class Renderer(RayCasting):
         self.paintwork.bind_twins(twins)
         layers = ("sea", *CLOUD_LAYERS)
         backgrounds = {registry_id(shape): layers.index(name) for name, shape in
-                       (("sea", top["earth"]), ("sea", self._sea), *self.world.cloud_meshes.items())}
+                       (("sea", top["earth"]), *self.world.cloud_meshes.items())}
         ids = np.zeros(max(objects) + 1, dtype=np.uint32)
         ids[list(objects)] = list(objects.values())
         codes = np.full(max(backgrounds) + 2, -1, dtype=np.int32)
@@ -587,8 +584,7 @@ class Renderer(RayCasting):
             directions = np.concatenate([np.zeros((0, 3), np.float32) if sun_world is None else sun_world[None, :],
                                          np.zeros((0, 3)) if lights is None else lights.directions]).astype(np.float32)
             if geometry or self.always_geometry:  # the camera model and the statistics: half resolution will do
-                (depth, ids, surface), t, grid_ids = self.geometry_and_cast(
-                    1 if geometry else 2, directions, grid=PLACEMENT_STRIDE_PX if self.target_spp else 0)
+                (depth, ids, surface), t, grid_ids = self.frame_cast(directions, full=geometry)
             else:
                 depth = ids = surface = grid_ids = None  # type: ignore[assignment]  # (no geometry pass)
                 t = self.cast(self._camera_render, directions)[0] if len(directions) else np.zeros(0, np.float32)
@@ -630,6 +626,13 @@ class Renderer(RayCasting):
                            device=not self.variant.startswith("scalar"))
         return RenderResult(out.linear, out.depth, out.object_id, render_s, denoise_s, out.surface,
                             {**out.measured, **texels}, clock.seconds, out.srgb8)
+
+    def frame_cast(self, directions: NDArray[np.float32], *, full: bool = False
+                   ) -> tuple[tuple[NDArray, ...], NDArray, NDArray | None]:
+        """A frame's geometry pass with its other rays from the camera (``directions``, render
+        frame) in one cast, as :meth:`render` makes it: at half resolution (``full``: every
+        pixel), with the target pass's grid where there is one (:meth:`geometry_and_cast`)."""
+        return self.geometry_and_cast(1 if full else 2, directions, grid=PLACEMENT_STRIDE_PX if self.target_spp else 0)
 
     def _light_rays(self, state: FrameState, look: FrameLook) -> _LightRays | None:
         """The aircraft's lit lights (:meth:`Paintwork.light_spots`) in front of the camera
